@@ -1,0 +1,1 @@
+"""Agents that choose among structure options, training and evaluation, and the CLI."""

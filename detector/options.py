@@ -1,0 +1,100 @@
+"""The structure option: one way on past a detected (or true) pipe structure.
+
+Both the detector and the network's ground truth return this type, so estimates and truth can
+be compared field by field. Definitions follow DESIGN.md (SI units in the API):
+
+- ``kind``: ``straight``, ``reducer`` (diameter change), ``closure`` (the thesis's "reduction to
+  0 mm": an end wall or obstacle), ``bend`` or ``junction`` (two or more ways on).
+- ``distance``: along the current pipe axis, from the sensor origin to the structure's reference
+  point, metres. Reference point: where the incoming and outgoing centrelines meet (bends,
+  junctions); the start of the taper (reducer); the end wall (closure).
+- ``diameter``: inner diameter of the outgoing pipe, metres (0 for a closure).
+- ``angle``: deflection between the incoming and the outgoing axis, radians, 0 = straight on.
+- ``direction``: roll of the outgoing axis about the incoming axis, measured in the sensor frame
+  as atan2(z, y): 0 = left, +pi/2 = up, pi = right, -pi/2 = down. Wrapped to (-pi, pi].
+- ``confidence``: in [0, 1]; 1 for ground truth.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+KINDS: tuple[str, ...] = ("straight", "reducer", "closure", "bend", "junction")
+#: Kinds that are a structure (everything but a straight pipe).
+STRUCTURE_KINDS: tuple[str, ...] = KINDS[1:]
+
+
+def _wrap(a: float) -> float:
+    w = math.fmod(a + math.pi, 2.0 * math.pi)
+    if w <= 0.0:
+        w += 2.0 * math.pi
+    return w - math.pi
+
+
+@dataclass(frozen=True)
+class StructureOption:
+    """One way on past a structure ahead. Units: metres and radians (see module docstring)."""
+
+    kind: str
+    distance: float
+    diameter: float
+    direction: float = 0.0
+    angle: float = 0.0
+    confidence: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"StructureOption.kind must be one of {KINDS}, got {self.kind!r}")
+        for name in ("distance", "diameter", "direction", "angle", "confidence"):
+            value = getattr(self, name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ValueError(f"StructureOption.{name} must be a finite number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+        if self.diameter < 0.0:
+            raise ValueError(f"StructureOption.diameter must be >= 0 m, got {self.diameter}")
+        if not 0.0 <= self.angle <= math.pi + 1e-9:
+            raise ValueError(f"StructureOption.angle must be in [0, pi] rad, got {self.angle}")
+        if not 0.0 <= self.confidence <= 1.0:
+            raise ValueError(f"StructureOption.confidence must be in [0, 1], got {self.confidence}")
+        object.__setattr__(self, "direction", _wrap(self.direction))
+
+    @property
+    def is_straight_on(self) -> bool:
+        """True for a way on that continues (nearly) along the current axis (angle < 10 deg)."""
+        return self.angle < math.radians(10.0)
+
+    def with_confidence(self, confidence: float) -> StructureOption:
+        return replace(self, confidence=confidence)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> StructureOption:
+        return cls(**d)
+
+    def describe(self) -> str:
+        """Human-readable summary in operator units, e.g. 'bend 45 deg up in 18.0 cm, 100 mm'."""
+        where = f"in {self.distance * 100:.1f} cm"
+        if self.kind == "closure":
+            return f"closure {where}"
+        if self.kind == "straight":
+            return f"straight pipe, {self.diameter * 1000:.0f} mm"
+        if self.kind == "reducer":
+            return f"reducer to {self.diameter * 1000:.0f} mm {where}"
+        if self.is_straight_on:
+            return f"{self.kind}: straight on {where}, {self.diameter * 1000:.0f} mm"
+        return (
+            f"{self.kind}: {math.degrees(self.angle):.0f} deg {direction_name(self.direction)} "
+            f"{where}, {self.diameter * 1000:.0f} mm"
+        )
+
+
+def direction_name(direction: float) -> str:
+    """Nearest of eight compass-like names for a roll direction (0 = left, pi/2 = up)."""
+    names = ["left", "up-left", "up", "up-right", "right", "down-right", "down", "down-left"]
+    k = int(round(_wrap(direction) / (math.pi / 4.0))) % 8
+    deg = math.degrees(_wrap(direction))
+    return f"{names[k]} ({deg:+.0f} deg)"

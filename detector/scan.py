@@ -1,0 +1,219 @@
+"""The scan container shared by the simulator and the detector: plain arrays, npz on disk.
+
+A rotating 2D LiDAR measures ``P`` scan planes of ``B`` beams. Each plane contains the sensor's
+forward (x) axis and is rotated about it by its servo (plane) angle ``alpha``; a beam at angle
+``beta`` within the plane points along (sensor frame, x forward, y left, z up)::
+
+    d(alpha, beta) = (cos beta, sin beta cos alpha, sin beta sin alpha)
+
+so plane angle 0 is the horizontal plane (beta > 0 to the left) and plane angle pi/2 the
+vertical one (beta > 0 upwards). Units: metres, radians, seconds.
+
+"No return" (out of range, dropout, no surface) is ``inf`` in ``ranges`` and ``False`` in
+``valid``; no other value ever stands for a missing distance.
+
+This module lives in ``detector`` (not ``pipe_env``) so recorded scans can be loaded and
+detected without the simulator.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+SCAN_FORMAT_VERSION = 1
+
+
+def beam_directions(plane_angles: NDArray, beam_angles: NDArray) -> NDArray[np.float64]:
+    """(P, B, 3) unit beam directions in the sensor frame (see module docstring)."""
+    a = np.asarray(plane_angles, dtype=float)[:, None]
+    b = np.asarray(beam_angles, dtype=float)[None, :]
+    sb = np.sin(b)
+    return np.stack(np.broadcast_arrays(np.cos(b), sb * np.cos(a), sb * np.sin(a)), axis=-1).astype(
+        float
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class Scan:
+    """One LiDAR sweep: ``P`` planes x ``B`` beams.
+
+    Attributes:
+        ranges: (P, B) measured ranges, metres; ``inf`` where there is no return.
+        valid: (P, B) True where a return was measured.
+        beam_angles: (B,) beam angle within the plane, radians (0 = forward).
+        plane_angles: (P,) servo angle of each plane about the forward axis, radians.
+        timestamps: (P,) time each plane was measured, seconds.
+        positions: (P, 3) world position of the sensor origin at each plane (truth), metres.
+        rotations: (P, 3, 3) world-from-sensor rotation at each plane (truth). The sensor frame
+            is the mount frame before the servo rotation: x forward, y left, z up.
+        nominal_positions, nominal_rotations: the same as the robot believes them (odometry and
+            the nominal mount, without misalignment). The detector may use these; it never sees
+            the truth.
+        spec: the sensor description (a ``LidarSpec`` as a dict), for the detector's limits.
+        metadata: free-form extras (seed, mode, ...).
+    """
+
+    ranges: NDArray[np.float64]
+    valid: NDArray[np.bool_]
+    beam_angles: NDArray[np.float64]
+    plane_angles: NDArray[np.float64]
+    timestamps: NDArray[np.float64]
+    positions: NDArray[np.float64]
+    rotations: NDArray[np.float64]
+    nominal_positions: NDArray[np.float64]
+    nominal_rotations: NDArray[np.float64]
+    spec: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        r = np.asarray(self.ranges, dtype=float)
+        if r.ndim != 2:
+            raise ValueError(f"Scan.ranges must be (planes, beams), got shape {r.shape}")
+        p, b = r.shape
+        shapes = {
+            "valid": (p, b),
+            "beam_angles": (b,),
+            "plane_angles": (p,),
+            "timestamps": (p,),
+            "positions": (p, 3),
+            "rotations": (p, 3, 3),
+            "nominal_positions": (p, 3),
+            "nominal_rotations": (p, 3, 3),
+        }
+        for name, shape in shapes.items():
+            arr = np.asarray(getattr(self, name), dtype=bool if name == "valid" else float)
+            if arr.shape != shape:
+                raise ValueError(f"Scan.{name} must have shape {shape}, got {arr.shape}")
+            if name != "valid" and not np.all(np.isfinite(arr)):
+                raise ValueError(f"Scan.{name} must be finite")
+            object.__setattr__(self, name, arr)
+        valid = self.valid
+        if np.any(np.isnan(r)):
+            raise ValueError("Scan.ranges contains NaN; use inf with valid=False for no return")
+        if np.any(valid & ~np.isfinite(r)) or np.any(~valid & np.isfinite(r)):
+            raise ValueError("Scan.valid must be True exactly where ranges are finite")
+        if np.any(r[valid] < 0):
+            raise ValueError("Scan.ranges must be non-negative")
+        object.__setattr__(self, "ranges", r)
+
+    @property
+    def n_planes(self) -> int:
+        return int(self.ranges.shape[0])
+
+    @property
+    def n_beams(self) -> int:
+        return int(self.ranges.shape[1])
+
+    @property
+    def n_valid(self) -> int:
+        return int(self.valid.sum())
+
+    def directions(self) -> NDArray[np.float64]:
+        """(P, B, 3) nominal beam directions in the sensor frame."""
+        return beam_directions(self.plane_angles, self.beam_angles)
+
+    def points(self, frame: str = "sensor", valid_only: bool = True) -> NDArray[np.float64]:
+        """Measured points, metres.
+
+        Args:
+            frame: ``"sensor"``: each plane's points in the sensor frame at that plane's time;
+                ``"world"``: through the true per-plane poses; ``"nominal"``: all planes in the
+                sensor frame of the *last* plane using the believed (nominal) poses, which
+                compensates the robot's own motion during a continuous sweep.
+            valid_only: return (N, 3) valid points only; else (P, B, 3) with NaN where invalid.
+        """
+        local = self.directions() * np.where(self.valid, self.ranges, np.nan)[..., None]
+        if frame == "sensor":
+            out = local
+        elif frame == "world":
+            out = np.einsum("pij,pbj->pbi", self.rotations, local) + self.positions[:, None, :]
+        elif frame == "nominal":
+            world = (
+                np.einsum("pij,pbj->pbi", self.nominal_rotations, local)
+                + self.nominal_positions[:, None, :]
+            )
+            r_last, p_last = self.nominal_rotations[-1], self.nominal_positions[-1]
+            out = (world - p_last) @ r_last
+        else:
+            raise ValueError(f"frame must be 'sensor', 'world' or 'nominal', got {frame!r}")
+        return out[self.valid] if valid_only else out
+
+    def plane(self, index: int) -> Scan:
+        """A single-plane scan (for the 2D algorithm)."""
+        if not -self.n_planes <= index < self.n_planes:
+            raise ValueError(f"plane index {index} out of range for {self.n_planes} planes")
+        sl = slice(index, index + 1) if index != -1 else slice(-1, None)
+        return Scan(
+            self.ranges[sl],
+            self.valid[sl],
+            self.beam_angles,
+            self.plane_angles[sl],
+            self.timestamps[sl],
+            self.positions[sl],
+            self.rotations[sl],
+            self.nominal_positions[sl],
+            self.nominal_rotations[sl],
+            dict(self.spec),
+            dict(self.metadata),
+        )
+
+    # ---------------------------------------------------------------- storage
+    def save(self, path: str | Path) -> None:
+        """Write an ``.npz`` file (arrays plus the spec and metadata as JSON)."""
+        np.savez_compressed(
+            Path(path),
+            format_version=np.array(SCAN_FORMAT_VERSION),
+            ranges=self.ranges,
+            valid=self.valid,
+            beam_angles=self.beam_angles,
+            plane_angles=self.plane_angles,
+            timestamps=self.timestamps,
+            positions=self.positions,
+            rotations=self.rotations,
+            nominal_positions=self.nominal_positions,
+            nominal_rotations=self.nominal_rotations,
+            spec=np.array(json.dumps(self.spec)),
+            metadata=np.array(json.dumps(self.metadata, default=_json_default)),
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> Scan:
+        """Read a scan written by :meth:`save`."""
+        with np.load(Path(path), allow_pickle=False) as z:
+            version = int(z["format_version"])
+            if version != SCAN_FORMAT_VERSION:
+                raise ValueError(
+                    f"scan file {path} has format_version {version}; this reads "
+                    f"{SCAN_FORMAT_VERSION}"
+                )
+            arrays = {
+                k: z[k]
+                for k in (
+                    "ranges",
+                    "valid",
+                    "beam_angles",
+                    "plane_angles",
+                    "timestamps",
+                    "positions",
+                    "rotations",
+                    "nominal_positions",
+                    "nominal_rotations",
+                )
+            }
+            spec = json.loads(str(z["spec"]))
+            meta = json.loads(str(z["metadata"]))
+        return cls(**arrays, spec=spec, metadata=meta)
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"cannot store {type(value).__name__} in scan metadata")

@@ -1,0 +1,175 @@
+"""Routes a forward-driving robot can take through a network.
+
+The robot drives forward (sensor first) and can deflect by at most ``max_turn`` at a fitting
+(90 deg for the PIRATE: a wye entered from its branch offers 45 and 135 deg, only the first is
+drivable). A route is found by Dijkstra over directed run traversals: the state is "arrived at
+fitting n through run r". Distances are along the centreline, metres.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:
+    from pipe_env.centreline import CentrelinePoint
+    from pipe_env.geometry import Pose
+    from pipe_env.network import PipeNetwork
+
+#: Largest deflection the robot can drive through at one fitting, radians.
+MAX_TURN = math.radians(90.0) + 1e-6
+
+
+@dataclass(frozen=True)
+class EdgePosition:
+    """A point on a run's edge: ``s`` metres along the centreline from fitting ``run.a``."""
+
+    run_id: str
+    s: float
+    length: float
+
+
+@dataclass(frozen=True)
+class Route:
+    """A drivable route: the fittings passed and the run taken out of each, and its length (m)."""
+
+    nodes: tuple[str, ...]
+    runs: tuple[str, ...]
+    length: float
+
+    def next_run_after(self, node_id: str) -> str | None:
+        """The run the route leaves ``node_id`` by (None if the route does not pass it)."""
+        for n, r in zip(self.nodes, self.runs[1:]):
+            if n == node_id:
+                return r
+        return None
+
+
+def leg_length(network: PipeNetwork, node_id: str, run_id: str) -> float:
+    """Centreline length (m) from a fitting centre to its port (long bend: half its arc)."""
+    g = network.geometry[node_id]
+    if g.kind == "bend" and g.style == "long":
+        _, _, radius, angle = g.bend_arc()
+        return 0.5 * radius * angle
+    return g.port(run_id).leg
+
+
+def edge_length(network: PipeNetwork, run_id: str) -> float:
+    """Centreline length (m) between the two fittings of a run, fitting halves included."""
+    r = network.run_by_id[run_id]
+    return (
+        leg_length(network, r.a, run_id)
+        + network.straight_length(run_id)
+        + leg_length(network, r.b, run_id)
+    )
+
+
+def turn_angle(network: PipeNetwork, node_id: str, run_in: str, run_out: str) -> float:
+    """Deflection (rad) when entering ``node_id`` by ``run_in`` and leaving by ``run_out``."""
+    g = network.geometry[node_id]
+    a, b = g.port(run_in).axis, g.port(run_out).axis
+    return float(math.pi - math.acos(float(np.clip(a @ b, -1.0, 1.0))))
+
+
+def edge_position(network: PipeNetwork, cp: CentrelinePoint) -> EdgePosition:
+    """Where a centreline point lies on its run's edge (see :class:`EdgePosition`)."""
+    piece = cp.piece
+    if piece.run_id is None:  # inside a long bend: attribute to the nearer port's run
+        node = piece.node_id
+        assert node is not None
+        half = 0.5 * piece.length
+        run_id = piece.v0[2] if cp.s <= half else piece.v1[2]
+        from_node = cp.s if cp.s <= half else piece.length - cp.s
+        r = network.run_by_id[run_id]
+        total = edge_length(network, run_id)
+        return EdgePosition(run_id, from_node if node == r.a else total - from_node, total)
+    r = network.run_by_id[piece.run_id]
+    total = edge_length(network, r.id)
+    if piece.node_id is None:  # the run's straight pipe, from r.a's port
+        s = leg_length(network, r.a, r.id) + cp.s
+    elif piece.node_id == r.a:  # leg from a's centre
+        s = cp.s
+    else:
+        s = total - cp.s
+    return EdgePosition(r.id, s, total)
+
+
+def locate(network: PipeNetwork, pose: Pose) -> tuple[EdgePosition, str]:
+    """Edge position of ``pose`` and the fitting it is heading towards."""
+    cp = network.centreline.nearest(pose.position)
+    ep = edge_position(network, cp)
+    r = network.run_by_id[ep.run_id]
+    axis = network.position(r.b) - network.position(r.a)
+    towards = r.b if float(pose.forward @ axis) >= 0.0 else r.a
+    return ep, towards
+
+
+def route(
+    network: PipeNetwork, pose: Pose, goal: ArrayLike, max_turn: float = MAX_TURN
+) -> Route | None:
+    """Shortest drivable route from ``pose`` (driving forward) to the point nearest ``goal``.
+
+    Returns None when the goal cannot be reached without a deflection above ``max_turn``.
+    """
+    start, towards = locate(network, pose)
+    goal_pos = edge_position(network, network.centreline.nearest(np.asarray(goal, float)))
+    return route_between(network, start, towards, goal_pos, max_turn)
+
+
+def route_between(
+    network: PipeNetwork,
+    start: EdgePosition,
+    towards: str,
+    goal: EdgePosition,
+    max_turn: float = MAX_TURN,
+) -> Route | None:
+    """Dijkstra core of :func:`route` on edge positions."""
+    r0 = network.run_by_id[start.run_id]
+    best_len = math.inf
+    best: tuple[tuple[str, ...], tuple[str, ...]] | None = None
+    if goal.run_id == start.run_id:
+        ahead = goal.s - start.s if towards == r0.b else start.s - goal.s
+        if ahead >= 0.0:
+            best_len, best = ahead, ((), (start.run_id,))
+    first = start.length - start.s if towards == r0.b else start.s
+    heap: list[tuple[float, int, str, str, tuple[str, ...], tuple[str, ...]]] = [
+        (first, 0, towards, start.run_id, (), (start.run_id,))
+    ]
+    settled: set[tuple[str, str]] = set()
+    counter = 1
+    while heap:
+        cost, _, node, run_in, nodes, runs = heapq.heappop(heap)
+        if cost >= best_len or (node, run_in) in settled:
+            continue
+        settled.add((node, run_in))
+        for run_out in network.runs_at[node]:
+            if run_out.id == run_in:
+                continue
+            if turn_angle(network, node, run_in, run_out.id) > max_turn:
+                continue
+            if run_out.id == goal.run_id:
+                extra = goal.s if node == run_out.a else goal.length - goal.s
+                if cost + extra < best_len:
+                    best_len = cost + extra
+                    best = (nodes + (node,), runs + (run_out.id,))
+            nxt = run_out.other(node)
+            heapq.heappush(
+                heap,
+                (
+                    cost + edge_length(network, run_out.id),
+                    counter,
+                    nxt,
+                    run_out.id,
+                    nodes + (node,),
+                    runs + (run_out.id,),
+                ),
+            )
+            counter += 1
+    if best is None:
+        return None
+    return Route(best[0], best[1], float(best_len))

@@ -1,0 +1,1 @@
+"""Motion primitives, primitive sequences and the executor that runs them on the robot."""
