@@ -79,7 +79,7 @@ def run_panels(p0: NDArray, p1: NDArray, diameter: float) -> list[BoxPanel]:
     for j in range(SECTORS):
         phi = (j + 0.5) * delta
         normal = math.cos(phi) * u + math.sin(phi) * v
-        tangent = np.cross(axis, normal)
+        tangent = np.cross(normal, axis)
         rot = np.column_stack([axis, tangent, normal])
         centre = mid + normal * (face + 0.5 * THICKNESS)
         panels.append(BoxPanel(centre, rot, np.array([half_len, half_width, 0.5 * THICKNESS])))
