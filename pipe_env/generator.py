@@ -71,6 +71,7 @@ class NetworkConfig:
         taper_length_range: reducer taper length, m.
         min_diameter_change: smallest diameter change at a reducer, m.
         n_goals: goals to place (each before a reachable closure).
+        max_extent: largest side of the box holding all fitting centres, m (None: unbounded).
         max_retries: whole-network attempts before giving up.
     """
 
@@ -91,6 +92,7 @@ class NetworkConfig:
     taper_length_range: tuple[float, float] = (0.05, 0.2)
     min_diameter_change: float = 0.008
     n_goals: int = 1
+    max_extent: float | None = None
     max_retries: int = 50
 
     def __post_init__(self) -> None:
@@ -147,6 +149,10 @@ class NetworkConfig:
             )
         if not 0 <= self.n_goals <= 10:
             raise bad("n_goals", self.n_goals, "[0, 10]")
+        if self.max_extent is not None and not (
+            math.isfinite(self.max_extent) and self.first_run_length < self.max_extent <= 1000.0
+        ):
+            raise bad("max_extent", self.max_extent, "None or (first_run_length, 1000] m")
         if not 1 <= self.max_retries <= 10_000:
             raise bad("max_retries", self.max_retries, "[1, 10000]")
 
@@ -216,7 +222,12 @@ class _Builder:
         self.segments.append(_Segment(pa, pb, 0.5 * diameter + WALL_CLEARANCE, frozenset((a, b))))
 
     def _clear(self, a: NDArray, b: NDArray, radius: float, touching: set[str]) -> bool:
-        """True if segment a-b with ``radius`` keeps clearance from all placed pipes."""
+        """True if segment a-b with ``radius`` keeps clearance from all placed pipes and stays
+        within ``max_extent``."""
+        if self.cfg.max_extent is not None:
+            pts = np.array([f.position for f in self.fittings] + [a, b])
+            if np.any(np.ptp(pts, axis=0) > self.cfg.max_extent):
+                return False
         for s in self.segments:
             if s.nodes & touching:
                 continue

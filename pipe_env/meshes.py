@@ -42,10 +42,16 @@ class TriangleMesh:
 
 
 def circle_segments(radius: float, tol: float = TESSELLATION_TOL) -> int:
-    """Polygon sides so a circle of ``radius`` (m) is within +-``tol`` (m) of the true circle."""
+    """Polygon sides so a circle of ``radius`` (m) is within +-``tol`` (m) of the true circle.
+
+    Always odd: a regular polygon with an odd number of sides has no diagonal through its
+    centre, so a ray along a pipe axis never meets an end wall exactly on a triangle edge
+    (where ray-triangle tests may miss it).
+    """
     c = 1.0 - 4.0 * tol / max(radius, 1e-6)  # (1 - cos(pi/n)) / (1 + cos(pi/n)) ~ tol / r
     n = math.ceil(math.pi / math.acos(max(min(c, 1.0 - 1e-12), -1.0)))
-    return int(min(max(n, 24), 160))
+    n = int(min(max(n, 25), 161))
+    return n if n % 2 else n + 1
 
 
 def polygon_radius(radius: float, n: int) -> float:
@@ -53,39 +59,36 @@ def polygon_radius(radius: float, n: int) -> float:
     return 2.0 * radius / (1.0 + math.cos(math.pi / n))
 
 
-def _placement(origin: NDArray, axis: NDArray) -> NDArray[np.float64]:
-    """3x4 transform taking local +z to ``axis`` and the local origin to ``origin``."""
+def _placement(origin: NDArray, axis: NDArray, phase: float = 0.0) -> NDArray[np.float64]:
+    """3x4 transform taking local +z to ``axis``, the local origin to ``origin``, and local +x to
+    the roll-zero left axis turned by ``phase`` radians about ``axis``."""
     frame = frame_from_forward(axis)
-    rot = np.column_stack([frame[:, 1], frame[:, 2], frame[:, 0]])
+    c, s = math.cos(phase), math.sin(phase)
+    u = c * frame[:, 1] + s * frame[:, 2]
+    v = -s * frame[:, 1] + c * frame[:, 2]
+    rot = np.column_stack([u, v, frame[:, 0]])
     return np.column_stack([rot, origin])
-
-
-def _solid_of_revolution(
-    profile: list[tuple[float, float]], origin: NDArray, axis: NDArray, n: int
-) -> m3.Manifold:
-    """Revolve a (radius, axial) profile about ``axis`` through ``origin`` with ``n`` sides."""
-    cs = m3.CrossSection([[(r, z) for r, z in profile]])
-    solid = m3.Manifold.revolve(cs, n)
-    # revolve maps the profile's axial coordinate (its y) to z
-    return solid.transform(_placement(origin, axis))
 
 
 def _tube(
     p0: NDArray, p1: NDArray, r0: float, r1: float, n: int, ext0: float = 0.0, ext1: float = 0.0
 ) -> m3.Manifold:
-    """Solid cone/cylinder from p0 (radius r0) to p1 (radius r1), extended by ext0/ext1 metres
-    beyond its ends as cylinders of the end radius."""
+    """Solid cone/cylinder from p0 (radius r0) to p1 (radius r1), continued (radius extrapolated
+    linearly) ``ext0``/``ext1`` metres beyond its ends.
+
+    Built with ``Manifold.cylinder``, whose end caps have no vertex on the axis; the vertices
+    are turned by 0.3 of a facet so that no triangle edge lies in a horizontal or vertical plane
+    through the axis (the planes of symmetric scans) where ray-triangle tests can miss exactly.
+    """
     axis = p1 - p0
     length = float(np.linalg.norm(axis))
     axis = axis / length
     k = polygon_radius(1.0, n)
-    prof = [(0.0, -ext0), (r0 * k, -ext0)]
-    if ext0 > 0:
-        prof.append((r0 * k, 0.0))
-    if ext1 > 0:
-        prof.append((r1 * k, length))
-    prof += [(r1 * k, length + ext1), (0.0, length + ext1)]
-    return _solid_of_revolution(prof, p0, axis, n)
+    slope = (r1 - r0) / length
+    lo, hi = r0 - slope * ext0, r1 + slope * ext1
+    solid = m3.Manifold.cylinder(length + ext0 + ext1, lo * k, hi * k, n)
+    start = p0 - axis * ext0
+    return solid.transform(_placement(start, axis, 0.3 * 2.0 * math.pi / n))
 
 
 def _shell(outer: list[m3.Manifold], inner: list[m3.Manifold]) -> m3.Manifold:
