@@ -96,5 +96,5 @@ def direction_name(direction: float) -> str:
     """Nearest of eight compass-like names for a roll direction (0 = left, pi/2 = up)."""
     names = ["left", "up-left", "up", "up-right", "right", "down-right", "down", "down-left"]
     k = int(round(_wrap(direction) / (math.pi / 4.0))) % 8
-    deg = math.degrees(_wrap(direction))
-    return f"{names[k]} ({deg:+.0f} deg)"
+    deg = round(math.degrees(_wrap(direction)))
+    return f"{names[k]} ({deg + 0:+d} deg)"

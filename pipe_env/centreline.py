@@ -8,6 +8,7 @@ centreline point, local inner diameter, geodesic distance, and poses along a pat
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -16,7 +17,7 @@ from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
 
-from pipe_env.geometry import Pose, frame_from_forward, rotation_about
+from pipe_env.geometry import Pose, clamp, cross, frame_from_forward, rotation_about
 
 if TYPE_CHECKING:
     from pipe_env.network import PipeNetwork
@@ -50,7 +51,7 @@ class Piece:
 
     def point_tangent(self, s: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Point and unit tangent (from p0 towards p1) at arc length ``s`` from p0."""
-        s = float(np.clip(s, 0.0, self.length))
+        s = clamp(s, 0.0, self.length)
         if self.kind == "line":
             if self.length < 1e-12:
                 return self.p0.copy(), np.zeros(3)
@@ -61,7 +62,7 @@ class Piece:
         rot = rotation_about(self.arc_normal, phi)
         radial = rot @ (self.p0 - self.arc_centre)
         point = self.arc_centre + radial
-        tangent = np.cross(self.arc_normal, radial)
+        tangent = cross(self.arc_normal, radial)
         return point, tangent / np.linalg.norm(tangent)
 
     def project(self, point: NDArray[np.float64]) -> float:
@@ -70,11 +71,11 @@ class Piece:
             if self.length < 1e-12:
                 return 0.0
             t = (self.p1 - self.p0) / self.length
-            return float(np.clip((point - self.p0) @ t, 0.0, self.length))
+            return clamp((point - self.p0) @ t, 0.0, self.length)
         assert self.arc_centre is not None and self.arc_normal is not None
         u = self.p0 - self.arc_centre
         u /= np.linalg.norm(u)
-        w = np.cross(self.arc_normal, u)
+        w = cross(self.arc_normal, u)
         rel = point - self.arc_centre
         phi = float(np.arctan2(rel @ w, rel @ u))
         if phi < 0.0:  # outside the arc: snap to the angularly nearer end
@@ -84,7 +85,7 @@ class Piece:
     def diameter_at(self, s: float) -> float:
         if self.length < 1e-12:
             return self.d0
-        f = float(np.clip(s / self.length, 0.0, 1.0))
+        f = clamp(s / self.length, 0.0, 1.0)
         return self.d0 + (self.d1 - self.d0) * f
 
 
@@ -294,22 +295,34 @@ class CentrelinePath:
         self.segments = segments
         self.lengths = np.array([abs(b - a) for _, a, b in segments])
         self.cumulative = np.concatenate([[0.0], np.cumsum(self.lengths)])
+        self._starts = [float(c) for c in self.cumulative[:-1]]
+        self._length = float(self.cumulative[-1])
 
     @property
     def length(self) -> float:
-        return float(self.cumulative[-1])
+        return self._length
+
+    def _locate(self, s: float) -> tuple[Piece, float, bool]:
+        """(piece, arc length on the piece, walking the piece forwards) at path length ``s``."""
+        s = clamp(s, 0.0, self._length)
+        k = max(bisect_right(self._starts, s) - 1, 0)
+        piece, a, b = self.segments[k]
+        forwards = b >= a
+        offset = s - self._starts[k]
+        return piece, (a + offset if forwards else a - offset), forwards
 
     def point_tangent(self, s: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Point and travel-direction tangent at arc length ``s`` (m) along the path."""
-        s = float(np.clip(s, 0.0, self.length))
-        k = int(np.searchsorted(self.cumulative, s, side="right") - 1)
-        k = min(max(k, 0), len(self.segments) - 1)
-        piece, a, b = self.segments[k]
-        local = a + np.sign(b - a) * (s - self.cumulative[k])
+        piece, local, forwards = self._locate(s)
         p, t = piece.point_tangent(local)
-        return p, t if b >= a else -t
+        return p, t if forwards else -t
+
+    def diameter_at(self, s: float) -> float:
+        """Inner diameter (m) at arc length ``s`` along the path."""
+        piece, local, _ = self._locate(s)
+        return piece.diameter_at(local)
 
     def pose_at(self, s: float, up_hint: NDArray | None = None) -> Pose:
         """Pose on the path at arc length ``s``: x along the travel direction, roll zero."""
         p, t = self.point_tangent(s)
-        return Pose(p, frame_from_forward(t, up_hint))
+        return Pose.trusted(p, frame_from_forward(t, up_hint))

@@ -502,14 +502,7 @@ def generate_network(config: NetworkConfig, rng: np.random.Generator) -> PipeNet
         except (_PlacementFailed, ValueError) as exc:
             last = str(exc)
             continue
-        return PipeNetwork(
-            net.fittings,
-            net.runs,
-            net.start_pose,
-            net.goals,
-            "generated",
-            {"generator": config.to_dict()},
-        )
+        return net.derived(name="generated", metadata={"generator": config.to_dict()})
     raise NetworkGenerationError(
         f"could not generate a network with n_fittings={config.n_fittings} in "
         f"{config.max_retries} attempts (last problem: {last}); lower n_fittings, widen "

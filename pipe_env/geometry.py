@@ -7,6 +7,7 @@ REP-103 (x forward along the pipe, y left, z up when the robot's roll is zero).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,7 +23,7 @@ _VERTICAL_COS = 0.999
 def unit(v: ArrayLike, name: str = "vector") -> NDArray[np.float64]:
     """Return ``v`` normalised; raise ``ValueError`` naming ``name`` if it is zero or not finite."""
     a = np.asarray(v, dtype=float).reshape(3)
-    n = float(np.linalg.norm(a))
+    n = math.sqrt(float(a @ a))
     if not np.isfinite(n) or n < 1e-12:
         raise ValueError(f"{name} must be a finite non-zero 3-vector, got {a.tolist()}")
     return a / n
@@ -43,9 +44,24 @@ def frame_from_forward(forward: ArrayLike, up_hint: ArrayLike | None = None) -> 
             else (np.array([0.0, 1.0, 0.0]))
         )
     z = hint - (hint @ x) * x
-    z /= np.linalg.norm(z)
-    y = np.cross(z, x)
-    return np.column_stack([x, y, z])
+    z /= math.sqrt(float(z @ z))
+    y = cross(z, x)
+    out = np.empty((3, 3))
+    out[:, 0], out[:, 1], out[:, 2] = x, y, z
+    return out
+
+
+def clamp(value: float, lo: float, hi: float) -> float:
+    """``value`` limited to [lo, hi] as a Python float (``np.clip`` is slow on scalars)."""
+    v = float(value)
+    return lo if v < lo else hi if v > hi else v
+
+
+def cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Cross product of two 3-vectors (much faster than ``np.cross`` for single vectors)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
 
 
 def rotation_about(axis: ArrayLike, angle: float) -> NDArray[np.float64]:
@@ -157,6 +173,14 @@ class Pose:
         object.__setattr__(self, "rotation", r)
 
     @classmethod
+    def trusted(cls, position: NDArray[np.float64], rotation: NDArray[np.float64]) -> Pose:
+        """A pose from values already known to be valid (skips the checks; hot paths only)."""
+        pose = object.__new__(cls)
+        object.__setattr__(pose, "position", position)
+        object.__setattr__(pose, "rotation", rotation)
+        return pose
+
+    @classmethod
     def identity(cls) -> Pose:
         return cls(np.zeros(3), np.eye(3))
 
@@ -165,7 +189,10 @@ class Pose:
         cls, position: ArrayLike, forward: ArrayLike, up_hint: ArrayLike | None = None
     ) -> Pose:
         """Pose at ``position`` looking along ``forward`` with roll zero (z towards ``up_hint``)."""
-        return cls(np.asarray(position, dtype=float), frame_from_forward(forward, up_hint))
+        p = np.asarray(position, dtype=float)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            raise ValueError(f"Pose.position must be three finite numbers, got {position!r}")
+        return cls.trusted(p, frame_from_forward(forward, up_hint))
 
     @property
     def forward(self) -> NDArray[np.float64]:

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.options import StructureOption
-from pipe_env.geometry import Pose
+from pipe_env.geometry import Pose, clamp
 from pipe_env.routing import locate
 
 if TYPE_CHECKING:
@@ -42,7 +42,7 @@ def option_angles(
     """
     t = incoming / np.linalg.norm(incoming)
     o = outgoing / np.linalg.norm(outgoing)
-    angle = math.acos(float(np.clip(t @ o, -1.0, 1.0)))
+    angle = math.acos(clamp(t @ o, -1.0, 1.0))
     perp = o - (o @ t) * t
     if np.linalg.norm(perp) < 1e-9:
         return angle, 0.0

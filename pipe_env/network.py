@@ -549,18 +549,42 @@ class PipeNetwork:
             return cls.from_json(p.read_text(), validate=validate)
         raise ValueError(f"network file suffix {p.suffix!r} unknown; use .json, .yaml or .yml")
 
+    def derived(self, **changes: Any) -> PipeNetwork:
+        """A copy with ``start_pose``, ``goals``, ``name`` or ``metadata`` changed, keeping the
+        derived geometry already computed (it depends only on fittings and runs)."""
+        allowed = {"start_pose", "goals", "name", "metadata"}
+        unknown = sorted(set(changes) - allowed)
+        if unknown:
+            raise ValueError(f"derived() cannot change {unknown}; allowed: {sorted(allowed)}")
+        kwargs = {
+            "start_pose": self.start_pose,
+            "goals": self.goals,
+            "name": self.name,
+            "metadata": self.metadata,
+        }
+        kwargs.update(changes)
+        if "goals" in changes:
+            kwargs["goals"] = tuple(tuple(g) for g in changes["goals"])
+        net = PipeNetwork(self.fittings, self.runs, **kwargs)
+        for key in (
+            "fitting_by_id",
+            "run_by_id",
+            "runs_at",
+            "geometry",
+            "centreline",
+            "_routing_cache",
+            "_edge_paths",
+            "_goal_edges",
+        ):
+            if key in self.__dict__:
+                net.__dict__[key] = self.__dict__[key]
+        return net
+
     def with_start(self, pose: Pose | None) -> PipeNetwork:
-        return PipeNetwork(self.fittings, self.runs, pose, self.goals, self.name, self.metadata)
+        return self.derived(start_pose=pose)
 
     def with_goals(self, goals: Iterable[Sequence[float]]) -> PipeNetwork:
-        return PipeNetwork(
-            self.fittings,
-            self.runs,
-            self.start_pose,
-            tuple(tuple(g) for g in goals),
-            self.name,
-            self.metadata,
-        )
+        return self.derived(goals=goals)
 
     def __repr__(self) -> str:
         kinds: dict[str, int] = {}

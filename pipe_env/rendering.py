@@ -59,14 +59,32 @@ class WorldRenderer:
         cam.elevation, cam.azimuth = angles[view]
         return cam
 
-    def render(self, camera: mujoco.MjvCamera | str = "iso") -> NDArray[np.uint8]:
-        """An (height, width, 3) uint8 image of the current state."""
+    def render(
+        self,
+        camera: mujoco.MjvCamera | str = "iso",
+        markers: list[tuple[NDArray[np.float64], float]] = (),
+    ) -> NDArray[np.uint8]:
+        """An (height, width, 3) uint8 image of the current state, with optional red sphere
+        ``markers`` given as (position m, radius m)."""
         cam = self.camera(camera) if isinstance(camera, str) else camera
         r = self.renderer
         opt = mujoco.MjvOption()
         opt.geomgroup[:] = 1
         opt.geomgroup[self.world.contact_group] = 0
         r.update_scene(self.world.data, camera=cam, scene_option=opt)
+        scene = r.scene
+        for pos, radius in markers:
+            if scene.ngeom >= scene.maxgeom:
+                break
+            mujoco.mjv_initGeom(
+                scene.geoms[scene.ngeom],
+                mujoco.mjtGeom.mjGEOM_SPHERE,
+                np.array([radius, 0.0, 0.0]),
+                np.asarray(pos, dtype=float),
+                np.eye(3).ravel(),
+                np.array([0.9, 0.15, 0.1, 1.0], dtype=np.float32),
+            )
+            scene.ngeom += 1
         return r.render().copy()
 
     def close(self) -> None:

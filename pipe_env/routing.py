@@ -14,10 +14,12 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
+
+from pipe_env.geometry import clamp
 
 if TYPE_CHECKING:
-    from pipe_env.centreline import CentrelinePoint
+    from pipe_env.centreline import CentrelinePath, CentrelinePoint
     from pipe_env.geometry import Pose
     from pipe_env.network import PipeNetwork
 
@@ -59,21 +61,59 @@ def leg_length(network: PipeNetwork, node_id: str, run_id: str) -> float:
     return g.port(run_id).leg
 
 
+def _cache(network: PipeNetwork) -> dict:
+    """Per-network memo of derived routing data (networks are immutable)."""
+    return network.__dict__.setdefault("_routing_cache", {})
+
+
 def edge_length(network: PipeNetwork, run_id: str) -> float:
     """Centreline length (m) between the two fittings of a run, fitting halves included."""
-    r = network.run_by_id[run_id]
-    return (
-        leg_length(network, r.a, run_id)
-        + network.straight_length(run_id)
-        + leg_length(network, r.b, run_id)
-    )
+    lengths = _cache(network).get("edge_length")
+    if lengths is None:
+        lengths = {
+            r.id: leg_length(network, r.a, r.id)
+            + network.straight_length(r.id)
+            + leg_length(network, r.b, r.id)
+            for r in network.runs
+        }
+        _cache(network)["edge_length"] = lengths
+    return lengths[run_id]
+
+
+def node_distances(network: PipeNetwork) -> tuple[dict[str, int], NDArray[np.float64]]:
+    """All-pairs along-network distances (m) between fitting centres, and the id -> row map."""
+    cache = _cache(network)
+    if "node_distances" not in cache:
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import shortest_path
+
+        index = {f.id: i for i, f in enumerate(network.fittings)}
+        rows = [index[r.a] for r in network.runs]
+        cols = [index[r.b] for r in network.runs]
+        w = [max(edge_length(network, r.id), 1e-12) for r in network.runs]
+        graph = coo_matrix((w, (rows, cols)), shape=(len(index), len(index))).tocsr()
+        cache["node_distances"] = (index, shortest_path(graph, directed=False))
+    return cache["node_distances"]
+
+
+def edge_geodesic(network: PipeNetwork, a: EdgePosition, b: EdgePosition) -> float:
+    """Along-network distance (m) between two edge positions (no turn constraint)."""
+    if a.run_id == b.run_id:
+        return abs(a.s - b.s)
+    index, dist = node_distances(network)
+    ra, rb = network.run_by_id[a.run_id], network.run_by_id[b.run_id]
+    best = math.inf
+    for na, da in ((ra.a, a.s), (ra.b, a.length - a.s)):
+        for nb, db in ((rb.a, b.s), (rb.b, b.length - b.s)):
+            best = min(best, da + float(dist[index[na], index[nb]]) + db)
+    return best
 
 
 def turn_angle(network: PipeNetwork, node_id: str, run_in: str, run_out: str) -> float:
     """Deflection (rad) when entering ``node_id`` by ``run_in`` and leaving by ``run_out``."""
     g = network.geometry[node_id]
     a, b = g.port(run_in).axis, g.port(run_out).axis
-    return float(math.pi - math.acos(float(np.clip(a @ b, -1.0, 1.0))))
+    return float(math.pi - math.acos(clamp(a @ b, -1.0, 1.0)))
 
 
 def edge_position(network: PipeNetwork, cp: CentrelinePoint) -> EdgePosition:
@@ -173,3 +213,33 @@ def route_between(
     if best is None:
         return None
     return Route(best[0], best[1], float(best_len))
+
+
+def edge_path(network: PipeNetwork, run_id: str) -> CentrelinePath:
+    """The centreline of a run's edge from fitting ``run.a``'s centre to ``run.b``'s centre.
+
+    A long-radius bend contributes half its arc at that end (its centre is off the
+    centreline); other fittings contribute their straight leg.
+    """
+    from pipe_env.centreline import CentrelinePath
+
+    cache = network.__dict__.setdefault("_edge_paths", {})
+    if run_id in cache:
+        return cache[run_id]
+    r = network.run_by_id[run_id]
+    cl = network.centreline
+    segs = []
+    for node, at_start in ((r.a, True), (r.b, False)):
+        g = network.geometry[node]
+        if g.kind == "bend" and g.style == "long":
+            arc = next(p for p in cl.pieces if p.kind == "arc" and p.node_id == node)
+            port_end = 0.0 if arc.v0 == ("p", node, run_id) else arc.length
+            seg = (arc, 0.5 * arc.length, port_end)
+        else:
+            leg = next(p for p in cl.pieces if p.node_id == node and p.run_id == run_id)
+            seg = (leg, 0.0, leg.length)
+        segs.append(seg if at_start else (seg[0], seg[2], seg[1]))
+    run_piece = next(p for p in cl.pieces if p.run_id == run_id and p.node_id is None)
+    path = CentrelinePath([segs[0], (run_piece, 0.0, run_piece.length), segs[1]])
+    cache[run_id] = path
+    return path

@@ -1,0 +1,660 @@
+"""Gymnasium environments at the Decision Support level (thesis 3.1.1).
+
+The robot senses and proposes, the agent chooses, the robot acts. One ``step`` is one
+decision: the environment runs the closed loop (drive, scan, detect, fuse) until a structure is
+confirmed within the trigger distance (or the goal is reached), offers the options it found, and
+executes the motion-primitive sequence of the option the agent picks.
+
+``pipenav/PipeNav-v0`` (:class:`PipeNavEnv`): reach a goal in a generated network.
+``pipenav/PipeExplore-v0`` (:class:`PipeExploreEnv`): cover as much pipe as possible.
+
+Action: ``Discrete(K)``, an index into the options table. Rows ``0..K-2`` hold the detected ways
+on (straight on first, then by roll direction); row ``K-1`` is always "back out" (reverse to the
+last junction passed, or to the start, and decide again). :meth:`action_masks` marks the rows the
+robot would attempt: a detected way on inside the robot's 57-125 mm range turning at most 90 deg,
+and back out. **A masked action** is not executed: the robot stays where it is, the same decision
+is offered again, the reward is ``reward_invalid`` and ``info["invalid_action"]`` is True.
+
+Observation (a flat ``Dict``, fixed shapes, finite bounds):
+
+- ``options`` (K, 13): per row ``valid``, kind one-hot (straight, reducer, closure, bend,
+  junction, back out), ``distance`` (m), ``diameter`` (m), ``cos`` and ``sin`` of the direction,
+  ``angle`` (rad), ``confidence``;
+- ``goal`` (3,): the goal in the robot frame from noisy odometry (m, clipped to +-20; PipeNav);
+- ``proprio`` (3,): clamped diameter (m), cos and sin of the robot's roll;
+- ``scan`` (16, 32), optional (``scan_image=True``): a low-resolution range image of the last
+  scan (full fidelity), normalised by the sensor's maximum range; zeros in fast fidelity.
+
+Reward (PipeNav): ``progress`` (decrease of the along-network distance to the goal, m) +
+``goal`` bonus + ``jam`` penalty per jam + ``time`` cost per decision; each term is in
+``info["reward_terms"]``. PipeExplore rewards new pipe length covered by the scans (m).
+
+Options (keyword arguments of ``gymnasium.make``): ``detector`` in ``"improved"``,
+``"thesis"``, ``"ground_truth"``; ``fidelity`` ``"fast"`` (kinematic motion, modelled sensing;
+for RL iterations) or ``"full"`` (MuJoCo robot, rotating LiDAR, detector, executor); ``lidar``
+preset; ``network_config`` (a :class:`~pipe_env.generator.NetworkConfig` or its dict);
+``network`` (a fixed network, dict or file path, instead of generating one per episode);
+``misalignment`` (sensor offset m and tilt rad, full fidelity); ``network_pool`` (draw episodes
+from a fixed, reproducible pool of that many generated networks, seeded by ``pool_seed``; use
+another ``pool_seed`` for held-out evaluation).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from detector.options import KINDS, StructureOption
+from pipe_env.generator import NetworkConfig, generate_network
+from pipe_env.geometry import Pose, clamp
+from pipe_env.network import PipeNetwork
+from pipe_env.plant import (
+    BACK_OUT,
+    Decision,
+    KinematicPlant,
+    Outcome,
+    drivable,
+    goal_edge_position,
+    match_option,
+)
+from pipe_env.routing import MAX_TURN, edge_geodesic, edge_length, locate, route, turn_angle
+from pipe_env.sensing_model import DETECTOR_ERROR_MODELS
+
+K_OPTIONS = 6
+OPTION_FEATURES = (
+    "valid",
+    "straight",
+    "reducer",
+    "closure",
+    "bend",
+    "junction",
+    "back_out",
+    "distance",
+    "diameter",
+    "cos_direction",
+    "sin_direction",
+    "angle",
+    "confidence",
+)
+SCAN_SHAPE = (16, 32)
+FIDELITIES = ("fast", "full")
+GOAL_CLIP = 20.0
+MAX_AUTO_STRUCTURES = 64
+
+_LOW = np.array([0, 0, 0, 0, 0, 0, 0, -1.0, 0.0, -1, -1, 0.0, 0.0], dtype=np.float32)
+_HIGH = np.array([1, 1, 1, 1, 1, 1, 1, 5.0, 0.3, 1, 1, math.pi, 1.0], dtype=np.float32)
+
+
+def _as_network(value: PipeNetwork | dict | str | Path | None) -> PipeNetwork | None:
+    if value is None or isinstance(value, PipeNetwork):
+        return value
+    if isinstance(value, dict):
+        return PipeNetwork.from_dict(value)
+    if isinstance(value, (str, Path)):
+        return PipeNetwork.load(value)
+    raise ValueError(f"network must be a PipeNetwork, a dict or a file path, got {type(value)}")
+
+
+class _DecisionEnv(gym.Env):
+    """Shared machinery of the two environments (see module docstring)."""
+
+    metadata = {"render_modes": ["rgb_array", "ansi"], "render_fps": 2}
+
+    def __init__(
+        self,
+        network_config: NetworkConfig | dict | None = None,
+        network: PipeNetwork | dict | str | None = None,
+        detector: str = "improved",
+        fidelity: str = "fast",
+        lidar: str = "ideal",
+        misalignment: tuple[float, float] | None = None,
+        render_mode: str | None = None,
+        trigger_distance: float = 0.2,
+        auto_single: bool = True,
+        max_jams: int = 3,
+        scan_image: bool = False,
+        reward_invalid: float = -0.5,
+        reward_jam: float = -2.0,
+        reward_time: float = -0.05,
+        network_pool: int | None = None,
+        pool_seed: int = 0,
+    ) -> None:
+        if detector not in DETECTOR_ERROR_MODELS:
+            raise ValueError(
+                f"detector={detector!r} is not allowed; use one of {sorted(DETECTOR_ERROR_MODELS)}"
+            )
+        if fidelity not in FIDELITIES:
+            raise ValueError(f"fidelity={fidelity!r} is not allowed; use one of {FIDELITIES}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode={render_mode!r} is not allowed; use one of "
+                f"{self.metadata['render_modes']}"
+            )
+        if isinstance(network_config, dict):
+            network_config = NetworkConfig.from_dict(network_config)
+        self.network_config = network_config or NetworkConfig()
+        self.fixed_network = _as_network(network)
+        self.detector = detector
+        self.fidelity = fidelity
+        self.lidar = lidar
+        self.misalignment = misalignment
+        self.render_mode = render_mode
+        self.trigger_distance = float(trigger_distance)
+        self.auto_single = bool(auto_single)
+        self.max_jams = int(max_jams)
+        self.scan_image = bool(scan_image)
+        self.reward_invalid = float(reward_invalid)
+        self.reward_jam = float(reward_jam)
+        self.reward_time = float(reward_time)
+        if network_pool is not None and not (isinstance(network_pool, int) and network_pool > 0):
+            raise ValueError(
+                f"network_pool={network_pool!r} is not allowed; use None or an int > 0"
+            )
+        self.network_pool = network_pool
+        self.pool_seed = int(pool_seed)
+        self._pool: dict[int, PipeNetwork] = {}
+        obs = {
+            "options": spaces.Box(
+                np.tile(_LOW, (K_OPTIONS, 1)), np.tile(_HIGH, (K_OPTIONS, 1)), dtype=np.float32
+            ),
+            "goal": spaces.Box(-GOAL_CLIP, GOAL_CLIP, (3,), dtype=np.float32),
+            "proprio": spaces.Box(
+                np.array([0.0, -1, -1], np.float32),
+                np.array([0.3, 1, 1], np.float32),
+                dtype=np.float32,
+            ),
+        }
+        if self.scan_image:
+            obs["scan"] = spaces.Box(0.0, 1.0, SCAN_SHAPE, dtype=np.float32)
+        self.observation_space = spaces.Dict(obs)
+        self.action_space = spaces.Discrete(K_OPTIONS)
+        self.network: PipeNetwork | None = None
+        self.plant: Any = None
+        self.decision: Decision | None = None
+        self._renderer: Any = None
+        self._world_for_render: Any = None
+        self._mask_cache: tuple[Any, NDArray[np.bool_]] | None = None
+
+    # ----------------------------------------------------------------- episode
+    def _new_network(self) -> PipeNetwork:
+        if self.fixed_network is not None:
+            return self.fixed_network
+        if self.network_pool is None:
+            return generate_network(self.network_config, self.np_random)
+        # a pool of networks, network i generated from seed (pool_seed, i) on first use: episodes
+        # sample from a fixed, reproducible set (held-out sets use another pool_seed)
+        i = int(self.np_random.integers(self.network_pool))
+        if i not in self._pool:
+            self._pool[i] = pool_network(self.network_config, self.pool_seed, i)
+        return self._pool[i]
+
+    def _make_plant(self, network: PipeNetwork) -> Any:
+        if self.fidelity == "fast":
+            return KinematicPlant(network, self.detector, self.trigger_distance)
+        from pipe_env.plant_full import PhysicalPlant
+
+        return PhysicalPlant(
+            network,
+            self.detector,
+            self.trigger_distance,
+            lidar=self.lidar,
+            misalignment=self.misalignment,
+            scan_image=self.scan_image,
+        )
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        given = _as_network(options["network"]) if options and "network" in options else None
+        # a generated episode must start with a decision: redraw the rare network whose goal is
+        # reached before any (the first structures being single ways taken automatically)
+        for _ in range(10):
+            self._start_episode(given or self._new_network())
+            if self.decision is not None or given is not None or self.fixed_network is not None:
+                break
+        info = self._info(self._reset_events, {})
+        return self._observation(), info
+
+    def _start_episode(self, network: PipeNetwork) -> None:
+        self.network = network
+        if self._world_for_render is not None and self._world_for_render.network is not (
+            self.network
+        ):
+            self.close()
+        self.plant = self._make_plant(self.network)
+        self.plant.reset(np.random.default_rng(self.np_random.integers(2**63)))
+        self.jams = 0
+        self.decisions = 0
+        self.structures = 0
+        self.invalid_actions = 0
+        self.terminated = False
+        self.success = False
+        self._waypoints: list[Any] = [getattr(self.plant, "state", None)]
+        self.decision_points: list[NDArray[np.float64]] = []
+        self.detection_errors: list[dict[str, float]] = []
+        self._episode_reset()
+        self.decision, self._reset_events = self._advance()
+
+    def _episode_reset(self) -> None:
+        """Hook for subclasses (goal, coverage)."""
+
+    def step(self, action: int):
+        if self.plant is None:
+            raise RuntimeError("call reset() before step()")
+        action = int(action)
+        if self.terminated:  # e.g. a fixed network whose goal is reached before any decision
+            return self._finish_step({}, {"after_termination": True})
+        if not 0 <= action < K_OPTIONS:
+            raise ValueError(f"action {action} is outside Discrete({K_OPTIONS})")
+        mask = self.action_masks()
+        terms: dict[str, float] = {"time": self.reward_time}
+        events: dict[str, Any] = {"jammed": False, "blocked": False, "invalid_action": False}
+        if not mask[action]:
+            self.invalid_actions += 1
+            events["invalid_action"] = True
+            terms["invalid"] = self.reward_invalid
+            return self._finish_step(terms, events)
+        self.decisions += 1
+        assert self.decision is not None
+        before = self._progress_measure()
+        choice: StructureOption | str = (
+            BACK_OUT if action == K_OPTIONS - 1 else self.decision.options[action]
+        )
+        outcome = self.plant.execute(choice)
+        self._record(outcome)
+        events["outcome"] = outcome.status
+        if outcome.status == "jammed":
+            self.jams += 1
+            events["jammed"] = True
+            terms["jam"] = self.reward_jam
+            if self.jams >= self.max_jams:
+                self.terminated = True
+        elif outcome.status == "blocked":
+            events["blocked"] = True
+        else:
+            self.decision, adv = self._advance()
+            events.update(adv)
+        terms.update(self._progress_terms(before))
+        return self._finish_step(terms, events)
+
+    def _finish_step(self, terms: dict[str, float], events: dict[str, Any]):
+        reward = float(sum(terms.values()))
+        info = self._info(events, terms)
+        truncated = False
+        return self._observation(), reward, bool(self.terminated), truncated, info
+
+    def _record(self, outcome: Outcome) -> None:
+        self._waypoints.extend(outcome.path)
+
+    @property
+    def path(self) -> NDArray[np.float64]:
+        """The driven path so far as (N, 3) world positions, metres."""
+        return self.plant.positions([w for w in self._waypoints if w is not None])
+
+    def _advance(self) -> tuple[Decision | None, dict[str, Any]]:
+        """Drive to the next decision the agent must take (single ways auto-executed)."""
+        events: dict[str, Any] = {"auto_structures": 0}
+        for _ in range(MAX_AUTO_STRUCTURES):
+            dec, out = self.plant.advance(self._goal_point())
+            self._record(out)
+            if out.status == "goal":
+                self.terminated = True
+                self.success = True
+                events["goal_reached"] = True
+                return None, events
+            assert dec is not None
+            self.structures += 1
+            self._after_sensing(dec)
+            ways = [o for o in dec.options if drivable(o)]
+            single = (
+                self.auto_single
+                and len(ways) == 1
+                and len(dec.options) == 1
+                and dec.kind in ("bend", "reducer")
+            )
+            if not single:
+                self.decision_points.append(dec.pose.position)
+                return dec, events
+            outcome = self.plant.execute(ways[0])
+            self._record(outcome)
+            events["auto_structures"] += 1
+            if outcome.status != "done":
+                events["auto_" + outcome.status] = True
+                if outcome.status == "jammed":
+                    self.jams += 1
+                    events["jammed"] = True
+                    if self.jams >= self.max_jams:
+                        self.terminated = True
+                self.plant.decision = dec
+                self.decision_points.append(dec.pose.position)
+                return dec, events
+        self.terminated = True
+        events["truncated_auto"] = True
+        return None, events
+
+    def _after_sensing(self, dec: Decision) -> None:
+        """Record detection errors of a decision against ground truth."""
+        if not dec.options or not dec.truth:
+            return
+        kind_ok = dec.kind == dec.truth[0].kind
+        errs = {
+            "kind_correct": float(kind_ok),
+            "n_options": len(dec.options),
+            "n_true": len(dec.truth),
+        }
+        d_err, dia, ang, dirs = [], [], [], []
+        for o in dec.options:
+            k, _ = match_option(o, dec.truth)
+            t = dec.truth[k]
+            d_err.append(abs(o.distance - t.distance))
+            dia.append(abs(o.diameter - t.diameter))
+            ang.append(abs(o.angle - t.angle))
+            if t.angle > math.radians(10):
+                dirs.append(abs((o.direction - t.direction + math.pi) % (2 * math.pi) - math.pi))
+        errs.update(
+            distance=max(d_err),
+            diameter=max(dia),
+            angle=max(ang),
+            direction=max(dirs) if dirs else 0.0,
+        )
+        self.detection_errors.append(errs)
+
+    # ------------------------------------------------------------ observation
+    def action_masks(self) -> NDArray[np.bool_]:
+        """Which actions the robot would attempt now (MaskablePPO reads this on the env)."""
+        key = (id(self.decision), self.terminated)
+        if self._mask_cache is not None and self._mask_cache[0] == key:
+            return self._mask_cache[1].copy()
+        mask = self._compute_mask()
+        self._mask_cache = (key, mask)
+        return mask.copy()
+
+    def _compute_mask(self) -> NDArray[np.bool_]:
+        mask = np.zeros(K_OPTIONS, dtype=bool)
+        if self.decision is None or self.terminated:
+            mask[K_OPTIONS - 1] = True  # nothing to choose; backing out is always possible
+            return mask
+        for i, o in enumerate(self.decision.options[: K_OPTIONS - 1]):
+            mask[i] = drivable(o)
+        mask[K_OPTIONS - 1] = True
+        return mask
+
+    def _options_table(self) -> NDArray[np.float32]:
+        table = np.zeros((K_OPTIONS, len(OPTION_FEATURES)), dtype=np.float32)
+        mask = self.action_masks()
+        if self.decision is not None:
+            for i, o in enumerate(self.decision.options[: K_OPTIONS - 1]):
+                row = table[i]
+                row[0] = float(mask[i])
+                row[1 + KINDS.index(o.kind)] = 1.0
+                row[7] = clamp(o.distance, _LOW[7], _HIGH[7])
+                row[8] = clamp(o.diameter, 0.0, _HIGH[8])
+                row[9], row[10] = math.cos(o.direction), math.sin(o.direction)
+                row[11] = clamp(o.angle, 0.0, math.pi)
+                row[12] = clamp(o.confidence, 0.0, 1.0)
+        back = table[K_OPTIONS - 1]
+        back[0] = float(mask[K_OPTIONS - 1])
+        back[6] = 1.0
+        back[9] = 1.0
+        back[11] = math.pi
+        back[12] = 1.0
+        return table
+
+    def _goal_point(self) -> NDArray[np.float64] | None:
+        return None
+
+    def _observation(self) -> dict[str, NDArray[np.float32]]:
+        pose = self.plant.odometry_pose()
+        roll = _roll_of(pose)
+        obs = {
+            "options": self._options_table(),
+            "goal": np.zeros(3, dtype=np.float32),
+            "proprio": np.array(
+                [clamp(self.plant.clamped_diameter, 0.0, 0.3), math.cos(roll), math.sin(roll)],
+                dtype=np.float32,
+            ),
+        }
+        goal = self._goal_point()
+        if goal is not None:
+            rel = pose.rotation.T @ (goal - pose.position)
+            obs["goal"] = np.clip(rel, -GOAL_CLIP, GOAL_CLIP).astype(np.float32)
+        if self.scan_image:
+            img = getattr(self.plant, "scan_image", None)
+            obs["scan"] = (
+                np.zeros(SCAN_SHAPE, np.float32) if img is None else np.asarray(img, np.float32)
+            )
+        return obs
+
+    def _info(self, events: dict[str, Any], terms: dict[str, float]) -> dict[str, Any]:
+        info = {
+            "reward_terms": dict(terms),
+            "is_success": bool(self.success),
+            "jams": int(self.jams),
+            "decisions": int(self.decisions),
+            "structures": int(self.structures),
+            "invalid_actions": int(self.invalid_actions),
+            "travelled": float(self.plant.travelled),
+            "sim_time": float(self.plant.sim_time),
+            "fidelity": self.fidelity,
+            "detector": self.detector,
+            "detection_error": dict(self.detection_errors[-1]) if self.detection_errors else {},
+            "action_mask": self.action_masks(),
+            "odometry_position": self.plant.odometry_pose().position.copy(),
+        }
+        info.update({k: v for k, v in events.items()})
+        return info
+
+    def _progress_measure(self) -> float:
+        return 0.0
+
+    def _progress_terms(self, before: float) -> dict[str, float]:
+        return {}
+
+    # --------------------------------------------------------------- rendering
+    def render(self):
+        if self.render_mode == "ansi":
+            return self.options_text()
+        if self.render_mode == "rgb_array":
+            return self._render_rgb()
+        return None
+
+    def options_text(self) -> str:
+        """The options table as an operator would read it."""
+        lines = []
+        if self.decision is None:
+            state = "goal reached" if self.success else "no decision pending"
+            return f"[{self.fidelity}/{self.detector}] {state}\n"
+        dec = self.decision
+        lines.append(
+            f"[{self.fidelity}/{self.detector}] structure ahead: {dec.kind}"
+            f"   clamped {self.plant.clamped_diameter * 1000:.0f} mm   jams {self.jams}"
+        )
+        mask = self.action_masks()
+        for i, o in enumerate(dec.options[: K_OPTIONS - 1]):
+            mark = " " if mask[i] else "x"
+            lines.append(f"  [{i}]{mark} {o.describe()}  (confidence {o.confidence:.2f})")
+        lines.append(f"  [{K_OPTIONS - 1}]  back out to the last junction")
+        goal = self._goal_point()
+        if goal is not None:
+            rel = self.plant.odometry_pose().inverse_transform_points(goal)
+            lines.append(f"  goal: {rel[0]:+.2f} m ahead, {rel[1]:+.2f} m left, {rel[2]:+.2f} m up")
+        return "\n".join(lines) + "\n"
+
+    def _render_rgb(self) -> NDArray[np.uint8]:
+        from pipe_env.rendering import WorldRenderer
+
+        world = getattr(self.plant, "world", None)
+        if world is None:
+            if self._world_for_render is None or self._world_for_render.network is not (
+                self.network
+            ):
+                from pipe_env.world import build_world
+
+                self._world_for_render = build_world(self.network, contact_walls=False)
+                self._renderer = None
+            world = self._world_for_render
+        if self._renderer is None or self._renderer.world is not world:
+            self._renderer = WorldRenderer(world, 480, 360)
+        pose = self.plant.pose()
+        cam = self._renderer.camera("iso", target=pose.position, distance=1.2)
+        return self._renderer.render(cam, markers=[(pose.position, 0.03)])
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        self._world_for_render = None
+        if self.plant is not None and hasattr(self.plant, "close"):
+            self.plant.close()
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        state["_world_for_render"] = None
+        return state
+
+
+def pool_network(config: NetworkConfig, pool_seed: int, index: int) -> PipeNetwork:
+    """Network ``index`` of the pool ``pool_seed`` (the same for every process and run)."""
+    return generate_network(config, np.random.default_rng([pool_seed, index]))
+
+
+def _roll_of(pose: Pose) -> float:
+    """Roll of a pose about its forward axis relative to the roll-zero frame."""
+    from pipe_env.geometry import frame_from_forward
+
+    ref = frame_from_forward(pose.forward)
+    return math.atan2(float(pose.up @ ref[:, 1]) * -1.0, float(pose.up @ ref[:, 2]))
+
+
+class PipeNavEnv(_DecisionEnv):
+    """Reach a goal in a generated pipe network (see module docstring)."""
+
+    def __init__(
+        self, *args: Any, reward_goal: float = 10.0, goal_tolerance: float = 0.05, **kwargs: Any
+    ) -> None:
+        super().__init__(*args, **kwargs)
+        self.reward_goal = float(reward_goal)
+        self.goal_tolerance = float(goal_tolerance)
+
+    def _episode_reset(self) -> None:
+        assert self.network is not None
+        if not self.network.goals:
+            raise ValueError("PipeNav needs a network with at least one goal")
+        self.goal = np.asarray(self.network.goals[0], dtype=float)
+        start = self.network.start_pose
+        assert start is not None
+        r = route(self.network, start, self.goal)
+        self.shortest_route = float(r.length) if r is not None else float("nan")
+        self._last_distance = self._progress_measure()
+
+    def _goal_point(self) -> NDArray[np.float64] | None:
+        return getattr(self, "goal", None)
+
+    def _progress_measure(self) -> float:
+        return edge_geodesic(
+            self.network, self.plant.edge_position(), goal_edge_position(self.network, self.goal)
+        )
+
+    def _progress_terms(self, before: float) -> dict[str, float]:
+        now = self._progress_measure()
+        terms = {"progress": float(self._last_distance - now)}
+        self._last_distance = now
+        if self.success:
+            terms["goal"] = self.reward_goal
+        return terms
+
+    def _info(self, events: dict[str, Any], terms: dict[str, float]) -> dict[str, Any]:
+        info = super()._info(events, terms)
+        info["shortest_route"] = self.shortest_route
+        info["distance_to_goal"] = (
+            float(self._last_distance) if hasattr(self, "_last_distance") else float("nan")
+        )
+        return info
+
+
+class PipeExploreEnv(_DecisionEnv):
+    """Inspect as much of the network as possible; reward = new pipe length covered (m)."""
+
+    def __init__(self, *args: Any, coverage_done: float = 0.98, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.coverage_done = float(coverage_done)
+
+    def _episode_reset(self) -> None:
+        assert self.network is not None
+        self.covered: dict[str, list[tuple[float, float]]] = {}
+        self.reachable_length = reachable_length(self.network)
+        self._covered_total = 0.0
+        self._cover_from_here()
+        self._last_cover = self._covered_total
+
+    def _cover_from_here(self) -> None:
+        """Everything between the robot and the fitting ahead is seen by the scans."""
+        st = getattr(self.plant, "state", None)
+        if st is None:
+            return
+        r = self.network.run_by_id[st.run_id]
+        end = edge_length(self.network, r.id) if st.towards == r.b else 0.0
+        self._cover(r.id, min(st.s, end), max(st.s, end))
+
+    def _cover(self, run_id: str, a: float, b: float) -> None:
+        spans = self.covered.setdefault(run_id, [])
+        spans.append((a, b))
+        spans.sort()
+        merged: list[tuple[float, float]] = []
+        for lo, hi in spans:
+            if merged and lo <= merged[-1][1] + 1e-9:
+                merged[-1] = (merged[-1][0], max(merged[-1][1], hi))
+            else:
+                merged.append((lo, hi))
+        self.covered[run_id] = merged
+        self._covered_total = sum(hi - lo for s in self.covered.values() for lo, hi in s)
+
+    def _advance(self) -> tuple[Decision | None, dict[str, Any]]:
+        dec, events = super()._advance()
+        self._cover_from_here()
+        if self._covered_total >= self.coverage_done * self.reachable_length:
+            self.terminated = True
+            self.success = True
+        return dec, events
+
+    def _progress_measure(self) -> float:
+        return self._covered_total
+
+    def _progress_terms(self, before: float) -> dict[str, float]:
+        new = self._covered_total - self._last_cover
+        self._last_cover = self._covered_total
+        return {"coverage": float(new)}
+
+    def _info(self, events: dict[str, Any], terms: dict[str, float]) -> dict[str, Any]:
+        info = super()._info(events, terms)
+        total = getattr(self, "reachable_length", float("nan"))
+        info["covered"] = float(getattr(self, "_covered_total", 0.0))
+        info["coverage"] = info["covered"] / total if total else 0.0
+        return info
+
+
+def reachable_length(network: PipeNetwork, max_turn: float = MAX_TURN) -> float:
+    """Centreline length (m) of the runs a forward-driving robot can reach from the start."""
+    start = network.start_pose
+    assert start is not None
+    ep, towards = locate(network, start)
+    seen_runs = {ep.run_id}
+    frontier = [(towards, ep.run_id)]
+    seen = set(frontier)
+    while frontier:
+        node, run_in = frontier.pop()
+        for r in network.runs_at[node]:
+            if r.id == run_in or turn_angle(network, node, run_in, r.id) > max_turn:
+                continue
+            state = (r.other(node), r.id)
+            seen_runs.add(r.id)
+            if state not in seen:
+                seen.add(state)
+                frontier.append(state)
+    return float(sum(edge_length(network, r) for r in seen_runs))

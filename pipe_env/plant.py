@@ -1,0 +1,393 @@
+"""The plant behind the environments: where the robot is, how it moves, what it senses.
+
+An environment step is a decision. The plant answers two calls:
+
+- :meth:`Plant.advance`: drive forward (sensing) until a structure is confirmed within the
+  trigger distance, or the goal is reached; returns a :class:`Decision` (or None at the goal);
+- :meth:`Plant.execute`: carry out the chosen action at the current decision: take one of the
+  detected ways on, or back out to the last junction; returns an :class:`Outcome`.
+
+Two fidelities implement it. :class:`KinematicPlant` (``fidelity="fast"``, this module) moves the
+robot along the centreline graph and senses by perturbing the true options with a detector's
+measured error model (:mod:`pipe_env.sensing_model`); whether a primitive survives its option's
+errors follows the tolerances measured by the primitives' tolerance study. It runs thousands of
+decisions per second for RL iterations. The full fidelity (MuJoCo robot, rotating LiDAR, the
+detector and the primitives' executor) lives in :mod:`pipe_env.plant_full`.
+
+Edge positions: the robot is on a run's edge at ``s`` metres (centreline) from fitting
+``run.a``, heading towards fitting ``towards``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from detector.options import StructureOption
+from pipe_env.geometry import Pose, clamp, direction_from_angles, frame_from_forward
+from pipe_env.ground_truth import options_at
+from pipe_env.network import ROBOT_DIAMETER_RANGE, PipeNetwork
+from pipe_env.routing import (
+    MAX_TURN,
+    EdgePosition,
+    edge_geodesic,
+    edge_length,
+    edge_path,
+    edge_position,
+    locate,
+    turn_angle,
+)
+from pipe_env.sensing_model import DETECTOR_ERROR_MODELS, DetectionErrorModel
+
+BACK_OUT = "back_out"
+
+
+@dataclass(frozen=True)
+class ExecutionTolerance:
+    """Largest option errors a turn primitive survives (from benchmarks/bench_primitives.py).
+
+    Attributes:
+        distance_fraction: |distance error| as a fraction of the pipe diameter.
+        direction: |roll direction error| (weighted by sin(angle)), radians.
+        angle: |deflection error|, radians.
+        match: largest angle between a chosen option's outgoing axis and the true way on for
+            the option to be that way at all (else it is a phantom and the robot jams).
+    """
+
+    distance_fraction: float = 0.5
+    direction: float = math.radians(25.0)
+    angle: float = math.radians(20.0)
+    match: float = math.radians(40.0)
+
+
+@dataclass(frozen=True)
+class EdgeState:
+    """Where the robot is: ``s`` metres along run ``run_id``'s edge from ``run.a``."""
+
+    run_id: str
+    s: float
+    towards: str
+
+
+@dataclass
+class Decision:
+    """A decision point: the structure the robot stopped before and what it sensed.
+
+    Attributes:
+        options: detected ways on (sorted straight-on first, then by direction).
+        kind: the detected kind of the structure.
+        truth: ground-truth options of the structure at the same pose.
+        node_id, entry_run: the true fitting ahead and the run the robot is in (diagnostics).
+        pose: the true sensor pose when deciding.
+    """
+
+    options: list[StructureOption]
+    kind: str
+    truth: list[StructureOption]
+    node_id: str
+    entry_run: str
+    pose: Pose
+
+    @property
+    def dead_end(self) -> bool:
+        return self.kind == "closure" or not any(drivable(o) for o in self.options)
+
+
+@dataclass
+class Outcome:
+    """What an action or a drive did. Distances in metres, times in seconds."""
+
+    status: str = "done"  # done | jammed | blocked | goal | back_out
+    distance: float = 0.0
+    sim_time: float = 0.0
+    path: list[EdgeState] = field(default_factory=list)  # waypoints (see Plant.positions)
+    note: str = ""
+
+
+def drivable(
+    option: StructureOption,
+    diameter_range: tuple[float, float] = ROBOT_DIAMETER_RANGE,
+    max_turn: float = MAX_TURN,
+) -> bool:
+    """Whether the robot would attempt this way on (inside its diameter range, turn <= 90 deg)."""
+    if option.kind in ("closure", "straight"):
+        return False
+    lo, hi = diameter_range
+    return lo <= option.diameter <= hi and option.angle <= max_turn
+
+
+def option_vector(option: StructureOption) -> NDArray[np.float64]:
+    """Outgoing axis of an option in the sensor frame."""
+    return direction_from_angles(option.angle, option.direction)
+
+
+def match_option(chosen: StructureOption, truth: list[StructureOption]) -> tuple[int, float]:
+    """Index of the true way on closest to ``chosen`` and the angle (rad) between their axes."""
+    v = option_vector(chosen)
+    sep = [math.acos(clamp(v @ option_vector(t), -1.0, 1.0)) for t in truth]
+    k = int(np.argmin(sep))
+    return k, sep[k]
+
+
+class KinematicPlant:
+    """Fast fidelity: kinematic motion on the centreline and modelled sensing.
+
+    Args:
+        network: the network (with a start pose).
+        detector: ``"ground_truth"``, ``"improved"`` or ``"thesis"`` (its error model).
+        trigger_distance: stop this far before a structure's reference point, metres.
+        tolerance: what a primitive survives.
+        speed: driving speed for simulated time, m/s.
+        decision_time: simulated seconds spent sensing and confirming per structure.
+        odometry_noise: odometry position error per metre driven (std, m/m).
+    """
+
+    fidelity = "fast"
+
+    def __init__(
+        self,
+        network: PipeNetwork,
+        detector: str = "improved",
+        trigger_distance: float = 0.2,
+        tolerance: ExecutionTolerance | None = None,
+        speed: float = 0.05,
+        decision_time: float = 12.0,
+        odometry_noise: float = 0.01,
+        error_model: DetectionErrorModel | None = None,
+    ) -> None:
+        if network.start_pose is None:
+            raise ValueError("the network has no start_pose; the robot needs one")
+        if detector not in DETECTOR_ERROR_MODELS:
+            raise ValueError(
+                f"detector {detector!r} is unknown; allowed: {sorted(DETECTOR_ERROR_MODELS)}"
+            )
+        self.network = network
+        self.detector = detector
+        self.error_model = error_model or DETECTOR_ERROR_MODELS[detector]
+        self.trigger_distance = float(trigger_distance)
+        self.tolerance = tolerance or ExecutionTolerance()
+        self.speed = float(speed)
+        self.decision_time = float(decision_time)
+        self.odometry_noise = float(odometry_noise)
+        self.reset(np.random.default_rng(0))
+
+    # ------------------------------------------------------------------ state
+    def reset(self, rng: np.random.Generator) -> None:
+        """Put the robot at the network's start pose."""
+        self.rng = rng
+        self._pose_memo: tuple[EdgeState, Pose] | None = None
+        start = self.network.start_pose
+        assert start is not None
+        ep, towards = locate(self.network, start)
+        self.state = EdgeState(ep.run_id, ep.s, towards)
+        self.junctions: list[tuple[EdgeState, str]] = []  # (state at decision, node id)
+        self.decision: Decision | None = None
+        self.odometry_error = np.zeros(3)
+        self.travelled = 0.0
+        self.sim_time = 0.0
+
+    def pose(self) -> Pose:
+        """True sensor pose: on the centreline, facing the travel direction, roll zero."""
+        return self._pose_of(self.state)
+
+    def _pose_of(self, st: EdgeState) -> Pose:
+        cached = self._pose_memo
+        if cached is not None and cached[0] == st:
+            return cached[1]
+        path = edge_path(self.network, st.run_id)
+        p, t = path.point_tangent(st.s)
+        r = self.network.run_by_id[st.run_id]
+        pose = Pose.trusted(p, frame_from_forward(t if st.towards == r.b else -t))
+        self._pose_memo = (st, pose)
+        return pose
+
+    def positions(self, waypoints: list[EdgeState]) -> NDArray[np.float64]:
+        """World positions (N, 3) of edge-state waypoints, metres."""
+        pts = [edge_path(self.network, w.run_id).point_tangent(w.s)[0] for w in waypoints]
+        return np.array(pts).reshape(-1, 3)
+
+    def edge_position(self) -> EdgePosition:
+        """The robot's true position on its run's edge."""
+        st = self.state
+        return EdgePosition(st.run_id, st.s, edge_length(self.network, st.run_id))
+
+    def odometry_pose(self) -> Pose:
+        """The pose the robot believes: true pose plus accumulated odometry drift."""
+        p = self.pose()
+        return Pose.trusted(p.position + self.odometry_error, p.rotation)
+
+    @property
+    def clamped_diameter(self) -> float:
+        """Inner diameter at the robot (m); exact in the fast fidelity."""
+        return edge_path(self.network, self.state.run_id).diameter_at(self.state.s)
+
+    def _ahead(self, st: EdgeState) -> float:
+        """Centreline distance from ``st`` to the centre of the fitting ahead."""
+        length = edge_length(self.network, st.run_id)
+        r = self.network.run_by_id[st.run_id]
+        return length - st.s if st.towards == r.b else st.s
+
+    def _move(self, st: EdgeState, distance: float) -> EdgeState:
+        r = self.network.run_by_id[st.run_id]
+        s = st.s + distance if st.towards == r.b else st.s - distance
+        return EdgeState(st.run_id, clamp(s, 0.0, edge_length(self.network, r.id)), st.towards)
+
+    def _record_motion(
+        self, distance: float, out: Outcome, start: EdgeState, end: EdgeState
+    ) -> None:
+        d = abs(distance)
+        self.travelled += d
+        out.distance += d
+        t = d / self.speed
+        out.sim_time += t
+        self.sim_time += t
+        self.odometry_error = self.odometry_error + self.rng.normal(
+            0.0, self.odometry_noise * math.sqrt(d) if d > 0 else 0.0, size=3
+        )
+        out.path += [start, end]
+
+    # ------------------------------------------------------------------ driving
+    def advance(self, goal: NDArray[np.float64] | None = None) -> tuple[Decision | None, Outcome]:
+        """Drive forward to the next decision point, or to ``goal`` if it comes first."""
+        out = Outcome()
+        st = self.state
+        node = st.towards
+        g = self.network.geometry[node]
+        pose = self.pose()
+        ref_distance = float(
+            (g.reference_point(st.run_id) - pose.position) @ -g.port(st.run_id).axis
+        )
+        move = max(0.0, ref_distance - self.trigger_distance)
+        if goal is not None:
+            to_goal = self._goal_ahead(goal, st, move)
+            if to_goal is not None:
+                end = self._move(st, to_goal)
+                self._record_motion(to_goal, out, st, end)
+                self.state = end
+                out.status = "goal"
+                return None, out
+        end = self._move(st, move)
+        self._record_motion(move, out, st, end)
+        self.state = end
+        pose = self.pose()
+        truth = options_at(self.network, node, st.run_id, pose)
+        sensed = self.error_model.apply(truth, self.rng)
+        out.sim_time += self.decision_time
+        self.sim_time += self.decision_time
+        self.decision = Decision(
+            sensed, sensed[0].kind if sensed else "straight", truth, node, st.run_id, pose
+        )
+        return self.decision, out
+
+    def _goal_ahead(self, goal: NDArray, st: EdgeState, move: float) -> float | None:
+        """Distance ahead to the goal if it lies on this edge within ``move`` (plus the
+        trigger distance, since the robot would see it), else None."""
+        gp = goal_edge_position(self.network, goal)
+        if gp.run_id != st.run_id:
+            return None
+        r = self.network.run_by_id[st.run_id]
+        ahead = gp.s - st.s if st.towards == r.b else st.s - gp.s
+        if -1e-9 <= ahead <= move + self.trigger_distance:
+            return max(ahead, 0.0)
+        return None
+
+    # ---------------------------------------------------------------- executing
+    def execute(self, choice: StructureOption | str) -> Outcome:
+        """Take the chosen detected way on, or back out (``BACK_OUT``)."""
+        if self.decision is None:
+            raise RuntimeError("execute() needs a decision; call advance() first")
+        dec = self.decision
+        if isinstance(choice, str):
+            if choice != BACK_OUT:
+                raise ValueError(
+                    f"choice must be a StructureOption or {BACK_OUT!r}, got {choice!r}"
+                )
+            return self._back_out(dec)
+        out = Outcome()
+        if not drivable(choice):
+            out.status, out.note = "blocked", "refused: outside the robot's range"
+            return out
+        k, sep = match_option(choice, dec.truth)
+        true = dec.truth[k]
+        diameter = self.clamped_diameter
+        tol = self.tolerance
+        if sep > tol.match:
+            out.status, out.note = "jammed", f"no way on within {math.degrees(sep):.0f} deg"
+            return out
+        errors = {
+            "distance": abs(choice.distance - true.distance) / max(diameter, 1e-3),
+            "direction": abs(_wrap(choice.direction - true.direction)) * math.sin(true.angle),
+            "angle": abs(choice.angle - true.angle),
+        }
+        limits = {"distance": tol.distance_fraction, "direction": tol.direction, "angle": tol.angle}
+        lo, hi = ROBOT_DIAMETER_RANGE
+        if not lo <= true.diameter <= hi:
+            out.status, out.note = "jammed", "the pipe is narrower/wider than the robot's range"
+            return out
+        for key, value in errors.items():
+            if value > limits[key]:
+                out.status, out.note = "jammed", f"{key} error {value:.3f} > {limits[key]:.3f}"
+                return out
+        node = dec.node_id
+        runs = [r for r in self.network.runs_at[node] if r.id != dec.entry_run]
+        g = self.network.geometry[node]
+        # the run whose outgoing axis is the matched true way on
+        want = _world_vector(true, dec.pose)
+        run_out = min(runs, key=lambda r: float(np.linalg.norm(g.port(r.id).axis - want)))
+        if turn_angle(self.network, node, dec.entry_run, run_out.id) > MAX_TURN:
+            out.status, out.note = "jammed", "turn sharper than the robot can take"
+            return out
+        if len(runs) > 1 and not (self.junctions and self.junctions[-1][1] == node):
+            self.junctions.append((self.state, node))
+        start = self.state
+        into = self._ahead(start)
+        length = edge_length(self.network, run_out.id)
+        past = min(g.port(run_out.id).leg + 0.05, 0.5 * length)
+        s_new = past if run_out.a == node else length - past
+        self.state = EdgeState(run_out.id, s_new, run_out.other(node))
+        self._record_motion(into + past, out, start, self.state)
+        self.decision = None
+        return out
+
+    def _back_out(self, dec: Decision) -> Outcome:
+        out = Outcome(status="back_out")
+        # backing out at a junction already passed goes to the junction before it
+        while self.junctions and self.junctions[-1][1] == dec.node_id:
+            self.junctions.pop()
+        if self.junctions:
+            target, _ = self.junctions[-1]
+        else:
+            start = self.network.start_pose
+            assert start is not None
+            ep, towards = locate(self.network, start)
+            target = EdgeState(ep.run_id, ep.s, towards)
+        length = edge_length(self.network, target.run_id)
+        dist = edge_geodesic(
+            self.network, self.edge_position(), EdgePosition(target.run_id, target.s, length)
+        )
+        begin = self.state
+        self.state = target
+        self._record_motion(dist, out, begin, target)
+        self.decision = None
+        return out
+
+
+def goal_edge_position(network: PipeNetwork, goal: NDArray[np.float64]) -> EdgePosition:
+    """Edge position of a goal point (memoised per network and goal)."""
+    cache = network.__dict__.setdefault("_goal_edges", {})
+    key = tuple(float(v) for v in goal)
+    if key not in cache:
+        cache[key] = edge_position(network, network.centreline.nearest(np.asarray(goal, float)))
+    return cache[key]
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def _world_vector(option: StructureOption, pose: Pose) -> NDArray[np.float64]:
+    """World direction of a (true) option's outgoing axis."""
+    return pose.rotation @ option_vector(option)
