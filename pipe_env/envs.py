@@ -581,26 +581,60 @@ class PipeNavEnv(_DecisionEnv):
 class PipeExploreEnv(_DecisionEnv):
     """Inspect as much of the network as possible; reward = new pipe length covered (m)."""
 
-    def __init__(self, *args: Any, coverage_done: float = 0.98, **kwargs: Any) -> None:
+    def __init__(
+        self, *args: Any, coverage_done: float = 0.98, branch_view: float = 0.3, **kwargs: Any
+    ) -> None:
         super().__init__(*args, **kwargs)
         self.coverage_done = float(coverage_done)
+        self.branch_view = float(branch_view)
 
     def _episode_reset(self) -> None:
         assert self.network is not None
         self.covered: dict[str, list[tuple[float, float]]] = {}
-        self.reachable_length = reachable_length(self.network)
+        self.reachable_length, self.reachable_runs = reachable_runs(self.network)
         self._covered_total = 0.0
+        # the robot was put in through the pipe behind it: that part counts as inspected
+        st = self.plant.state
+        r = self.network.run_by_id[st.run_id]
+        behind = 0.0 if st.towards == r.b else edge_length(self.network, r.id)
+        self._cover(r.id, min(st.s, behind), max(st.s, behind))
         self._cover_from_here()
         self._last_cover = self._covered_total
 
     def _cover_from_here(self) -> None:
-        """Everything between the robot and the fitting ahead is seen by the scans."""
+        """The scans see the pipe between the robot and the fitting ahead, and a short way
+        (``branch_view`` m) into each pipe leaving that fitting."""
         st = getattr(self.plant, "state", None)
         if st is None:
             return
         r = self.network.run_by_id[st.run_id]
         end = edge_length(self.network, r.id) if st.towards == r.b else 0.0
         self._cover(r.id, min(st.s, end), max(st.s, end))
+        for other in self.network.runs_at[st.towards]:
+            if other.id == r.id:
+                continue
+            length = edge_length(self.network, other.id)
+            view = min(self.branch_view, length)
+            if other.a == st.towards:
+                self._cover(other.id, 0.0, view)
+            else:
+                self._cover(other.id, length - view, length)
+
+    def _record(self, outcome: Outcome) -> None:
+        super()._record(outcome)
+        waypoints = outcome.path
+        for a, b in zip(waypoints[::2], waypoints[1::2]):
+            if outcome.status == "back_out":
+                continue  # reversing over pipe already seen
+            if a.run_id == b.run_id:
+                self._cover(a.run_id, min(a.s, b.s), max(a.s, b.s))
+            else:  # through a fitting: to its centre on one run, from it on the next
+                ra = self.network.run_by_id[a.run_id]
+                end_a = edge_length(self.network, ra.id) if a.towards == ra.b else 0.0
+                self._cover(ra.id, min(a.s, end_a), max(a.s, end_a))
+                rb = self.network.run_by_id[b.run_id]
+                start_b = 0.0 if b.towards == rb.b else edge_length(self.network, rb.id)
+                self._cover(rb.id, min(b.s, start_b), max(b.s, start_b))
 
     def _cover(self, run_id: str, a: float, b: float) -> None:
         spans = self.covered.setdefault(run_id, [])
@@ -613,7 +647,9 @@ class PipeExploreEnv(_DecisionEnv):
             else:
                 merged.append((lo, hi))
         self.covered[run_id] = merged
-        self._covered_total = sum(hi - lo for s in self.covered.values() for lo, hi in s)
+        self._covered_total = sum(
+            hi - lo for run, s in self.covered.items() if run in self.reachable_runs for lo, hi in s
+        )
 
     def _advance(self) -> tuple[Decision | None, dict[str, Any]]:
         dec, events = super()._advance()
@@ -639,8 +675,8 @@ class PipeExploreEnv(_DecisionEnv):
         return info
 
 
-def reachable_length(network: PipeNetwork, max_turn: float = MAX_TURN) -> float:
-    """Centreline length (m) of the runs a forward-driving robot can reach from the start."""
+def reachable_runs(network: PipeNetwork, max_turn: float = MAX_TURN) -> tuple[float, set[str]]:
+    """Runs a forward-driving robot can reach from the start, and their centreline length (m)."""
     start = network.start_pose
     assert start is not None
     ep, towards = locate(network, start)
@@ -657,4 +693,4 @@ def reachable_length(network: PipeNetwork, max_turn: float = MAX_TURN) -> float:
             if state not in seen:
                 seen.add(state)
                 frontier.append(state)
-    return float(sum(edge_length(network, r) for r in seen_runs))
+    return float(sum(edge_length(network, r) for r in seen_runs)), seen_runs

@@ -1,0 +1,166 @@
+"""Scripted agents that choose among the options a pipenav environment offers.
+
+All are built with the environment they act in and choose with ``act(observation, info)``,
+returning an action index (the options table row; the last row backs out).
+
+- :class:`RoutePlanner`: the ideal operator. It knows the plant drawing and its true pose,
+  plans the shortest drivable route to the goal and picks the detected option closest to the
+  route's next pipe.
+- :class:`GoalGreedy`: picks the option whose outgoing direction best matches the goal vector
+  (from odometry), trying other ways at a junction it has come back to.
+- :class:`LeftHand`: the wall follower for exploration: leftmost way first, the next one to
+  the right on each return, back out at dead ends.
+- :class:`RandomAgent`: a uniformly random valid action.
+
+Junction memory (GoalGreedy, LeftHand) is keyed by the odometry position of the decision,
+rounded to ``memory_resolution`` metres, since the agents do not know the true fitting ids.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from numpy.typing import NDArray
+
+from pipe_env.envs import K_OPTIONS
+from pipe_env.plant import option_vector
+from pipe_env.routing import route
+
+BACK = K_OPTIONS - 1
+
+
+def _mask(info: dict[str, Any], env: gym.Env) -> NDArray[np.bool_]:
+    m = info.get("action_mask")
+    return np.asarray(m, dtype=bool) if m is not None else env.unwrapped.action_masks()
+
+
+def _option_vectors(observation: dict[str, NDArray]) -> NDArray[np.float64]:
+    """Outgoing axes (K, 3) in the robot frame from the options table."""
+    t = np.asarray(observation["options"], dtype=float)
+    angle, c, s = t[:, 11], t[:, 9], t[:, 10]
+    return np.stack([np.cos(angle), np.sin(angle) * c, np.sin(angle) * s], axis=1)
+
+
+class _Agent:
+    def __init__(self, env: gym.Env) -> None:
+        self.env = env
+
+    def reset(self) -> None:
+        """Forget per-episode memory (call at each episode start)."""
+
+    def act(self, observation: dict[str, NDArray], info: dict[str, Any]) -> int:
+        raise NotImplementedError
+
+
+class RandomAgent(_Agent):
+    """A uniformly random valid action, from its own seeded generator."""
+
+    def __init__(self, env: gym.Env, seed: int = 0) -> None:
+        super().__init__(env)
+        self.rng = np.random.default_rng(seed)
+
+    def act(self, observation: dict[str, NDArray], info: dict[str, Any]) -> int:
+        valid = np.flatnonzero(_mask(info, self.env))
+        return int(self.rng.choice(valid))
+
+
+class RoutePlanner(_Agent):
+    """The ideal operator: shortest drivable route on the plant drawing from the true pose."""
+
+    def act(self, observation: dict[str, NDArray], info: dict[str, Any]) -> int:
+        env = self.env.unwrapped
+        mask = _mask(info, self.env)
+        dec = env.decision
+        if dec is None or not mask[:BACK].any():
+            return BACK
+        goal = env.network.goals[0] if env.network.goals else None
+        if goal is None:
+            return int(np.flatnonzero(mask)[0])
+        planned = route(env.network, env.plant.pose(), goal)
+        if planned is None or not planned.nodes or planned.nodes[0] != dec.node_id:
+            return BACK
+        run_out = planned.runs[1]
+        want = env.network.geometry[dec.node_id].port(run_out).axis
+        best, best_sep = BACK, math.inf
+        for i, o in enumerate(dec.options[:BACK]):
+            if not mask[i]:
+                continue
+            v = dec.pose.rotation @ option_vector(o)
+            sep = math.acos(max(-1.0, min(1.0, float(v @ want))))
+            if sep < best_sep:
+                best, best_sep = i, sep
+        return best
+
+
+class _JunctionMemory(_Agent):
+    def __init__(self, env: gym.Env, memory_resolution: float = 0.1) -> None:
+        super().__init__(env)
+        self.resolution = memory_resolution
+        self.tried: dict[tuple[int, ...], list[int]] = {}
+
+    def reset(self) -> None:
+        self.tried = {}
+
+    def _key(self, info: dict[str, Any]) -> tuple[int, ...]:
+        p = np.asarray(info.get("odometry_position", np.zeros(3)), dtype=float)
+        return tuple(int(v) for v in np.round(p / self.resolution))
+
+    def _choose(self, ranked: list[int], info: dict[str, Any]) -> int:
+        """First ranked option not yet tried here; back out when all were."""
+        key = self._key(info)
+        tried = self.tried.setdefault(key, [])
+        for i in ranked:
+            if i not in tried:
+                tried.append(i)
+                return i
+        return BACK
+
+
+class GoalGreedy(_JunctionMemory):
+    """The option pointing most towards the goal (robot frame, from odometry)."""
+
+    def act(self, observation: dict[str, NDArray], info: dict[str, Any]) -> int:
+        mask = _mask(info, self.env)
+        valid = [i for i in range(BACK) if mask[i]]
+        if not valid:
+            return BACK
+        goal = np.asarray(observation["goal"], dtype=float)
+        norm = float(np.linalg.norm(goal))
+        vecs = _option_vectors(observation)
+        if norm < 1e-9:
+            return valid[0]
+        score = vecs[valid] @ (goal / norm)
+        ranked = [valid[i] for i in np.argsort(-score, kind="stable")]
+        return self._choose(ranked, info)
+
+
+class LeftHand(_JunctionMemory):
+    """Wall follower: the leftmost way first, then the next to the right on each return."""
+
+    def act(self, observation: dict[str, NDArray], info: dict[str, Any]) -> int:
+        mask = _mask(info, self.env)
+        valid = [i for i in range(BACK) if mask[i]]
+        if not valid:
+            return BACK
+        vecs = _option_vectors(observation)
+        yaw_left = np.arctan2(vecs[valid, 1], vecs[valid, 0])  # + to the left
+        ranked = [valid[i] for i in np.argsort(-yaw_left, kind="stable")]
+        return self._choose(ranked, info)
+
+
+SCRIPTED_AGENTS = {
+    "route_planner": RoutePlanner,
+    "goal_greedy": GoalGreedy,
+    "left_hand": LeftHand,
+    "random": RandomAgent,
+}
+
+
+def make_agent(name: str, env: gym.Env, **kwargs: Any) -> _Agent:
+    """A scripted agent by name (see ``SCRIPTED_AGENTS``)."""
+    if name not in SCRIPTED_AGENTS:
+        raise ValueError(f"agent {name!r} is unknown; allowed: {sorted(SCRIPTED_AGENTS)}")
+    return SCRIPTED_AGENTS[name](env, **kwargs)

@@ -1,0 +1,226 @@
+"""The Gymnasium environments: API conformance, determinism, pickling, vector envs, masks."""
+
+from __future__ import annotations
+
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import pipe_env
+from agents import GoalGreedy, RandomAgent, RoutePlanner
+from pipe_env import layouts
+from pipe_env.envs import K_OPTIONS, OPTION_FEATURES
+
+ENV_IDS = sorted(pipe_env.ENV_IDS)
+SMALL = {"n_fittings": 6}
+
+
+def rollout(env: gym.Env, seed: int, max_steps: int = 40, agent_seed: int = 0) -> list:
+    agent = RandomAgent(env, seed=agent_seed)
+    obs, info = env.reset(seed=seed)
+    trace = [(obs["options"].tobytes(), obs["goal"].tobytes())]
+    for _ in range(max_steps):
+        obs, reward, term, trunc, info = env.step(agent.act(obs, info))
+        trace.append((obs["options"].tobytes(), round(reward, 12), term, trunc, info["travelled"]))
+        if term or trunc:
+            break
+    return trace
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_gymnasium_and_sb3_checkers_pass(env_id: str) -> None:
+    env = gym.make(env_id, network_config=SMALL)
+    gym_check_env(env.unwrapped, skip_render_check=True)
+    sb3_check_env(gym.make(env_id, network_config=SMALL).unwrapped, warn=True)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+@pytest.mark.parametrize("detector", ["ground_truth", "improved", "thesis"])
+def test_same_seed_same_trajectory(env_id: str, detector: str) -> None:
+    a = gym.make(env_id, detector=detector, network_config=SMALL)
+    b = gym.make(env_id, detector=detector, network_config=SMALL)
+    assert rollout(a, seed=5) == rollout(b, seed=5)
+    assert rollout(a, seed=5) != rollout(a, seed=6)
+
+
+def test_observations_stay_in_their_spaces_over_many_episodes() -> None:
+    env = gym.make(
+        "pipenav/PipeNav-v0",
+        detector="thesis",
+        network_config={"n_fittings": 12, "planar": False, "allow_loops": True},
+    )
+    agent = RandomAgent(env, seed=1)
+    for ep in range(30):
+        obs, info = env.reset(seed=ep)
+        assert env.observation_space.contains(obs)
+        done = False
+        while not done:
+            obs, reward, term, trunc, info = env.step(agent.act(obs, info))
+            assert env.observation_space.contains(obs), obs
+            assert np.isfinite(reward)
+            done = term or trunc
+    assert obs["options"].shape == (K_OPTIONS, len(OPTION_FEATURES))
+
+
+def test_masked_action_is_a_penalised_no_op() -> None:
+    env = gym.make(
+        "pipenav/PipeNav-v0",
+        network=layouts.t_junction(0.1).with_goals([[0, 0.6, 0]]),
+        detector="ground_truth",
+    )
+    obs, info = env.reset(seed=0)
+    mask = info["action_mask"]
+    masked = int(np.flatnonzero(~mask)[0])
+    before = env.unwrapped.plant.pose().position.copy()
+    obs2, reward, term, trunc, info2 = env.step(masked)
+    assert info2["invalid_action"] is True
+    assert reward == pytest.approx(-0.5 - 0.05)  # invalid + time cost
+    assert not term
+    assert np.array_equal(env.unwrapped.plant.pose().position, before)
+    assert np.array_equal(obs2["options"], obs["options"])  # the same decision again
+    assert info2["decisions"] == info["decisions"]
+
+
+def test_route_planner_reaches_the_goal_in_a_tee() -> None:
+    net = layouts.t_junction(0.1, direction=0.0).with_goals([[0, 0.5, 0]])  # left branch
+    env = gym.make("pipenav/PipeNav-v0", network=net, detector="ground_truth")
+    agent = RoutePlanner(env)
+    obs, info = env.reset(seed=0)
+    assert info["decisions"] == 0
+    obs, reward, term, trunc, info = env.step(agent.act(obs, info))
+    assert term and info["is_success"]
+    assert info["reward_terms"]["goal"] == 10.0
+    assert info["reward_terms"]["progress"] > 0.5
+
+
+def test_wrong_way_then_back_out() -> None:
+    net = layouts.t_junction(0.1, direction=0.0).with_goals([[0, 0.5, 0]])
+    env = gym.make("pipenav/PipeNav-v0", network=net, detector="ground_truth")
+    obs, info = env.reset(seed=0)
+    straight = 0  # the straight-on way leads to a closure
+    obs, reward, term, trunc, info = env.step(straight)
+    assert not term
+    assert env.unwrapped.decision.kind == "closure"
+    assert info["reward_terms"]["progress"] < 0
+    assert not info["action_mask"][: K_OPTIONS - 1].any()  # a dead end: only back out
+    obs, reward, term, trunc, info = env.step(K_OPTIONS - 1)
+    assert env.unwrapped.decision.kind == "junction"  # back at the tee
+    obs, reward, term, trunc, info = env.step(RoutePlanner(env).act(obs, info))
+    assert term and info["is_success"]
+
+
+def test_jams_with_a_badly_wrong_detector_and_terminate_after_max_jams() -> None:
+    from pipe_env.sensing_model import DetectionErrorModel
+
+    net = layouts.mitre_bend(0.1).with_goals([[0.0, 0.5, 0.0]])
+    env = gym.make(
+        "pipenav/PipeNav-v0", network=net, detector="ground_truth", max_jams=2, auto_single=False
+    ).unwrapped
+    obs, info = env.reset(seed=0)
+    env.plant.error_model = DetectionErrorModel("bad", direction_sigma=1.0)
+    # the decision already sensed is exact; make it wrong by 90 deg
+    from dataclasses import replace
+
+    env.decision.options[0] = replace(env.decision.options[0], direction=np.pi / 2)
+    obs, reward, term, trunc, info = env.step(0)
+    assert info["jammed"] and info["jams"] == 1 and not term
+    assert info["reward_terms"]["jam"] == -2.0
+    obs, reward, term, trunc, info = env.step(0)
+    assert info["jams"] == 2 and term and not info["is_success"]
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_pickle_round_trip_continues_identically(env_id: str) -> None:
+    env = gym.make(env_id, network_config=SMALL)
+    env.reset(seed=3)
+    clone = pickle.loads(pickle.dumps(env))
+    for _ in range(5):
+        mask = env.unwrapped.action_masks()
+        action = int(np.flatnonzero(mask)[-1])
+        r1 = env.step(action)
+        r2 = clone.step(action)
+        assert r1[0]["options"].tobytes() == r2[0]["options"].tobytes()
+        assert r1[1] == r2[1] and r1[2] == r2[2]
+        if r1[2] or r1[3]:
+            break
+
+
+@pytest.mark.parametrize("vectorization_mode", ["sync", "async"])
+def test_make_vec(vectorization_mode: str) -> None:
+    envs = gym.make_vec(
+        "pipenav/PipeNav-v0",
+        num_envs=2,
+        vectorization_mode=vectorization_mode,
+        network_config=SMALL,
+    )
+    obs, info = envs.reset(seed=[1, 2])
+    assert obs["options"].shape == (2, K_OPTIONS, len(OPTION_FEATURES))
+    for _ in range(5):
+        obs, reward, term, trunc, info = envs.step(np.full(2, K_OPTIONS - 1))
+        assert reward.shape == (2,)
+    envs.close()
+
+
+def test_masks_reach_maskable_ppo_through_subproc_vec_env() -> None:
+    from sb3_contrib.common.maskable.utils import get_action_masks
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    # "module:id" makes the worker processes import pipe_env (which registers the ids)
+    venv = make_vec_env(
+        "pipe_env:pipenav/PipeNav-v0",
+        n_envs=2,
+        vec_env_cls=SubprocVecEnv,
+        seed=0,
+        env_kwargs={"network_config": SMALL},
+    )
+    venv.reset()
+    masks = get_action_masks(venv)
+    assert masks.shape == (2, K_OPTIONS) and masks[:, -1].all()
+    venv.close()
+
+
+def test_render_modes() -> None:
+    env = gym.make("pipenav/PipeNav-v0", network_config=SMALL, render_mode="ansi")
+    env.reset(seed=0)
+    text = env.render()
+    assert "back out" in text and "structure ahead" in text
+    env = gym.make("pipenav/PipeNav-v0", network_config=SMALL, render_mode="rgb_array")
+    env.reset(seed=0)
+    img = env.render()
+    assert img.ndim == 3 and img.shape[2] == 3 and img.std() > 1
+    env.close()
+
+
+def test_explore_env_rewards_new_coverage_and_finishes() -> None:
+    from agents import LeftHand
+
+    env = gym.make(
+        "pipenav/PipeExplore-v0", network_config={"n_fittings": 5}, detector="ground_truth"
+    )
+    agent = LeftHand(env)
+    obs, info = env.reset(seed=4)
+    total = info["covered"]
+    done = False
+    while not done:
+        obs, reward, term, trunc, info = env.step(agent.act(obs, info))
+        assert reward == pytest.approx(info["reward_terms"]["coverage"] - 0.05)
+        total += info["reward_terms"]["coverage"]
+        done = term or trunc
+    assert info["covered"] == pytest.approx(total)
+    assert info["coverage"] >= 0.98 and info["is_success"]
+
+
+def test_goal_greedy_and_bad_options_are_rejected() -> None:
+    with pytest.raises(ValueError, match="detector='oracle' is not allowed"):
+        gym.make("pipenav/PipeNav-v0", detector="oracle")
+    with pytest.raises(ValueError, match="fidelity='medium' is not allowed"):
+        gym.make("pipenav/PipeNav-v0", fidelity="medium")
+    env = gym.make("pipenav/PipeNav-v0", network_config=SMALL)
+    agent = GoalGreedy(env)
+    obs, info = env.reset(seed=0)
+    assert 0 <= agent.act(obs, info) < K_OPTIONS
