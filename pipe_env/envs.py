@@ -17,9 +17,11 @@ is offered again, the reward is ``reward_invalid`` and ``info["invalid_action"]`
 
 Observation (a flat ``Dict``, fixed shapes, finite bounds):
 
-- ``options`` (K, 13): per row ``valid``, kind one-hot (straight, reducer, closure, bend,
+- ``options`` (K, 14): per row ``valid``, kind one-hot (straight, reducer, closure, bend,
   junction, back out), ``distance`` (m), ``diameter`` (m), ``cos`` and ``sin`` of the direction,
-  ``angle`` (rad), ``confidence``;
+  ``angle`` (rad), ``confidence``, and ``taken``: how often the robot's own log (odometry) says
+  it took this way from here before (0, 1/3, 2/3, 1 for 3 or more; the back-out row counts back
+  outs from here);
 - ``goal`` (3,): the goal in the robot frame from noisy odometry (m, clipped to +-20; PipeNav);
 - ``proprio`` (3,): clamped diameter (m), cos and sin of the robot's roll;
 - ``scan`` (16, 32), optional (``scan_image=True``): a low-resolution range image of the last
@@ -81,14 +83,18 @@ OPTION_FEATURES = (
     "sin_direction",
     "angle",
     "confidence",
+    "taken",
 )
 SCAN_SHAPE = (16, 32)
 FIDELITIES = ("fast", "full")
 GOAL_CLIP = 20.0
 MAX_AUTO_STRUCTURES = 64
 
-_LOW = np.array([0, 0, 0, 0, 0, 0, 0, -1.0, 0.0, -1, -1, 0.0, 0.0], dtype=np.float32)
-_HIGH = np.array([1, 1, 1, 1, 1, 1, 1, 5.0, 0.3, 1, 1, math.pi, 1.0], dtype=np.float32)
+_LOW = np.array([0, 0, 0, 0, 0, 0, 0, -1.0, 0.0, -1, -1, 0.0, 0.0, 0.0], dtype=np.float32)
+_HIGH = np.array([1, 1, 1, 1, 1, 1, 1, 5.0, 0.3, 1, 1, math.pi, 1.0, 1.0], dtype=np.float32)
+#: The robot's log of ways taken: decisions within this many metres (odometry) are "here".
+MEMORY_RESOLUTION = 0.1
+MAX_TAKEN = 3
 
 
 def _as_network(value: PipeNetwork | dict | str | Path | None) -> PipeNetwork | None:
@@ -237,6 +243,7 @@ class _DecisionEnv(gym.Env):
         self._waypoints: list[Any] = [getattr(self.plant, "state", None)]
         self.decision_points: list[NDArray[np.float64]] = []
         self.detection_errors: list[dict[str, float]] = []
+        self._taken: dict[tuple[int, ...], dict[tuple[int, int] | str, int]] = {}
         self._episode_reset()
         self.decision, self._reset_events = self._advance()
 
@@ -265,6 +272,9 @@ class _DecisionEnv(gym.Env):
         choice: StructureOption | str = (
             BACK_OUT if action == K_OPTIONS - 1 else self.decision.options[action]
         )
+        log = self._taken.setdefault(self._here(), {})
+        key = _way_key(choice)
+        log[key] = log.get(key, 0) + 1
         outcome = self.plant.execute(choice)
         self._record(outcome)
         events["outcome"] = outcome.status
@@ -384,9 +394,16 @@ class _DecisionEnv(gym.Env):
         mask[K_OPTIONS - 1] = True
         return mask
 
+    def _here(self) -> tuple[int, ...]:
+        """The robot's log key for its current place (odometry rounded to the memory grid)."""
+        p = self.plant.odometry_pose().position
+        return tuple(int(round(v / MEMORY_RESOLUTION)) for v in p)
+
     def _options_table(self) -> NDArray[np.float32]:
         table = np.zeros((K_OPTIONS, len(OPTION_FEATURES)), dtype=np.float32)
         mask = self.action_masks()
+        log = self._taken.get(self._here(), {}) if self.plant is not None else {}
+        table[K_OPTIONS - 1, 13] = min(log.get(BACK_OUT, 0), MAX_TAKEN) / MAX_TAKEN
         if self.decision is not None:
             for i, o in enumerate(self.decision.options[: K_OPTIONS - 1]):
                 row = table[i]
@@ -397,6 +414,7 @@ class _DecisionEnv(gym.Env):
                 row[9], row[10] = math.cos(o.direction), math.sin(o.direction)
                 row[11] = clamp(o.angle, 0.0, math.pi)
                 row[12] = clamp(o.confidence, 0.0, 1.0)
+                row[13] = min(log.get(_way_key(o), 0), MAX_TAKEN) / MAX_TAKEN
         back = table[K_OPTIONS - 1]
         back[0] = float(mask[K_OPTIONS - 1])
         back[6] = 1.0
@@ -517,6 +535,16 @@ class _DecisionEnv(gym.Env):
         state["_renderer"] = None
         state["_world_for_render"] = None
         return state
+
+
+def _way_key(choice: StructureOption | str) -> tuple[int, int] | str:
+    """A way on identified coarsely by its angle (22.5 deg) and direction (45 deg) buckets."""
+    if isinstance(choice, str):
+        return choice
+    return (
+        int(round(choice.angle / (math.pi / 8))),
+        int(round(choice.direction / (math.pi / 4))) % 8 if choice.angle > 0.17 else 0,
+    )
 
 
 def pool_network(config: NetworkConfig, pool_seed: int, index: int) -> PipeNetwork:
