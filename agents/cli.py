@@ -1,6 +1,14 @@
 """The ``pipenav`` command line.
 
-Subcommands are thin: each parses arguments and calls the library function that owns the job.
+Subcommands are thin: each parses its arguments and calls the library function that owns the
+job. ``pipenav <command> --help`` documents each one.
+
+- ``demo``: the main job on the embedded default: one closed-loop episode (drive, scan, detect,
+  decide, act) with a report and plots;
+- ``scenarios list`` / ``scenarios run``: the autonomy scenario suite with JUnit XML and JSON;
+- ``train`` / ``eval``: MaskablePPO training from a YAML config, agent evaluation;
+- ``drive``: the operator console (Decision Support: the robot proposes, you choose);
+- ``bench``: run a benchmark script; ``plot``: plots from an episode log.
 """
 
 from __future__ import annotations
@@ -10,64 +18,256 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
-import numpy as np
+EXIT_FAILED = 1
+EXIT_USAGE = 2
 
 
+def _print(*args: Any) -> None:
+    print(*args, flush=True)
+
+
+# ------------------------------------------------------------------------------- demo
 def _demo(args: argparse.Namespace) -> int:
-    from pipe_env.generator import NetworkConfig, generate_network
-    from pipe_env.plotting import save_network_plot
-    from pipe_env.rendering import WorldRenderer, save_image
-    from pipe_env.world import build_world
+    from agents.episodes import run_episode, save_episode_plots
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    config = NetworkConfig(
-        n_fittings=args.fittings, planar=not args.three_d, allow_loops=args.loops
+    log = run_episode(
+        seed=args.seed,
+        agent=args.agent,
+        fidelity=args.fidelity,
+        detector=args.detector,
+        lidar=args.lidar,
+        n_fittings=args.fittings,
+        render=not args.no_render,
+        out=out,
     )
-    network = generate_network(config, np.random.default_rng(args.seed))
-    t1 = time.perf_counter()
-    world = build_world(network)
-    t2 = time.perf_counter()
-    network.save(out / "network.json")
-    save_network_plot(network, out / "network.png")
-    renderer = WorldRenderer(world, 800, 600)
-    save_image(renderer.render("iso"), str(out / "render.png"))
-    renderer.close()
-    report = {
-        "seed": args.seed,
-        "network": repr(network),
-        "pipe_length_m": round(network.total_length(), 3),
-        "geoms": int(world.model.ngeom),
-        "ray_mesh_triangles": int(world.triangle_count),
-        "contact_pieces": int(world.contact_geom_count),
-        "generate_s": round(t1 - t0, 3),
-        "build_world_s": round(t2 - t1, 3),
-        "files": ["network.json", "network.png", "render.png"],
-    }
+    files = save_episode_plots(log, out)
+    report = dict(log["summary"])
+    report["files"] = sorted({"episode.json", "report.json", *files})
     (out / "report.json").write_text(json.dumps(report, indent=2))
-    print(json.dumps(report, indent=2))
+    _print(json.dumps(report, indent=2))
+    return 0
+
+
+# -------------------------------------------------------------------------- scenarios
+def _scenarios_list(args: argparse.Namespace) -> int:
+    from agents.scenarios import ScenarioError, discover
+
+    try:
+        found = discover(args.glob, args.dir)
+    except ScenarioError as exc:
+        _print(f"error: {exc}")
+        return EXIT_USAGE
+    for sc in found:
+        _print(
+            f"{sc.name:42s} {sc.mode:8s} {sc.fidelity:4s} {sc.detector:12s} "
+            f"seeds={sc.seeds}  {sc.description}"
+        )
+    _print(f"{len(found)} scenario(s)")
+    return 0
+
+
+def _scenarios_run(args: argparse.Namespace) -> int:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+
+    from agents.scenario_runner import run_and_report, tasks_of
+    from agents.scenarios import ScenarioError, discover
+
+    try:
+        found = discover(args.glob, args.dir)
+    except ScenarioError as exc:
+        _print(f"error: {exc}")
+        return EXIT_USAGE
+    if not found:
+        _print(f"error: no scenario matches {args.glob!r}")
+        return EXIT_USAGE
+    seeds = args.seed if args.seed else None
+    total = len(tasks_of(found, seeds))
+    with Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        transient=False,
+    ) as progress:
+        task = progress.add_task("scenarios", total=total)
+
+        def done(r: Any) -> None:
+            mark = "[green]PASS[/green]" if r.passed else "[red]FAIL[/red]"
+            progress.console.print(
+                f"{mark} {r.scenario} [seed={r.seed}] ({sum(r.timings.values()):.1f} s)"
+            )
+            progress.advance(task)
+
+        results = run_and_report(found, seeds, args.jobs, args.backend, args.junit, args.json, done)
+    failed = [r for r in results if not r.passed]
+    _print(f"{len(results) - len(failed)} passed, {len(failed)} failed")
+    for r in failed:
+        for c in r.failures:
+            _print(f"  {r.scenario}[seed={r.seed}]: {c.message}")
+        _print(f"  replay: {r.replay_command()}")
+    return EXIT_FAILED if failed else 0
+
+
+# ---------------------------------------------------------------------- train / eval
+def _train(args: argparse.Namespace) -> int:
+    from agents.train import DEFAULT_CONFIG, TrainConfig, train
+
+    cfg = TrainConfig.from_yaml(args.config or DEFAULT_CONFIG)
+    if args.minutes is not None:
+        cfg.max_minutes = args.minutes
+    if args.timesteps is not None:
+        cfg.total_timesteps = args.timesteps
+    summary = train(cfg, args.out, progress_bar=not args.no_progress)
+    _print(json.dumps(summary, indent=2))
+    return 0
+
+
+def _eval(args: argparse.Namespace) -> int:
+    from agents.evaluate import evaluate
+
+    kwargs: dict[str, Any] = {"detector": args.detector, "fidelity": args.fidelity}
+    if args.network_config:
+        kwargs["network_config"] = json.loads(args.network_config)
+    result = evaluate(args.agent, args.episodes, env_kwargs=kwargs)
+    _print(json.dumps(result.to_dict(), indent=2))
+    if args.json:
+        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2))
+    return 0
+
+
+# ------------------------------------------------------------------------------ drive
+def _drive(args: argparse.Namespace) -> int:
+    from agents.console import OperatorConsole
+
+    console = OperatorConsole.from_args(args)
+    return console.run()
+
+
+# ------------------------------------------------------------------------ bench / plot
+BENCHES = ("world", "lidar", "detection", "primitives", "agents")
+
+
+def _bench(args: argparse.Namespace) -> int:
+    import runpy
+
+    for root in (Path.cwd(), Path(__file__).resolve().parents[1]):
+        script = root / "benchmarks" / f"bench_{args.name}.py"
+        if script.exists():
+            sys.argv = [str(script), *args.extra]
+            runpy.run_path(str(script), run_name="__main__")
+            return 0
+    _print(f"error: benchmarks/bench_{args.name}.py not found; run from the source checkout")
+    return EXIT_USAGE
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from agents.episodes import load_episode, save_episode_plots
+
+    log = load_episode(args.episode)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    for f in save_episode_plots(log, out, which=args.what):
+        _print(out / f)
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="pipenav", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="pipenav", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="run the main job on the embedded default")
+
+    demo = sub.add_parser("demo", help="one closed-loop episode on the embedded default")
     demo.add_argument("--out", default="results/demo", help="output folder")
     demo.add_argument("--seed", type=int, default=7)
-    demo.add_argument("--fittings", type=int, default=8)
-    demo.add_argument("--three-d", action="store_true", help="generate a 3D network")
-    demo.add_argument("--loops", action="store_true", help="allow loops")
+    demo.add_argument("--fittings", type=int, default=6, help="fittings in the network")
+    demo.add_argument("--agent", default="route_planner")
+    demo.add_argument("--fidelity", default="full", choices=["full", "fast"])
+    demo.add_argument(
+        "--detector", default="improved", choices=["improved", "thesis", "ground_truth"]
+    )
+    demo.add_argument("--lidar", default="ideal")
+    demo.add_argument("--no-render", action="store_true", help="skip the MuJoCo render")
     demo.set_defaults(func=_demo)
+
+    sc = sub.add_parser("scenarios", help="the autonomy scenario suite")
+    scs = sc.add_subparsers(dest="action", required=True)
+    ls = scs.add_parser("list", help="list scenarios")
+    ls.add_argument("glob", nargs="?", default="*")
+    ls.add_argument("--dir", default=None, help="a folder of scenario files (default: packaged)")
+    ls.set_defaults(func=_scenarios_list)
+    run = scs.add_parser("run", help="run scenarios; non-zero exit if any fails")
+    run.add_argument("glob", nargs="?", default="*")
+    run.add_argument("--dir", default=None, help="a folder of scenario files (default: packaged)")
+    run.add_argument("--junit", default=None, help="write JUnit XML here")
+    run.add_argument("--json", default=None, help="write the JSON report here")
+    run.add_argument("--jobs", type=int, default=1)
+    run.add_argument("--backend", default="local", choices=["local", "ray"])
+    run.add_argument(
+        "--seed",
+        type=int,
+        action="append",
+        help="run with this seed instead of the scenarios' own (repeatable)",
+    )
+    run.set_defaults(func=_scenarios_run)
+
+    tr = sub.add_parser("train", help="train MaskablePPO from a YAML config")
+    tr.add_argument("--config", default=None, help="YAML (default: the packaged one)")
+    tr.add_argument("--out", default="runs/ppo")
+    tr.add_argument("--minutes", type=float, default=None, help="wall-clock budget override")
+    tr.add_argument("--timesteps", type=int, default=None)
+    tr.add_argument("--no-progress", action="store_true")
+    tr.set_defaults(func=_train)
+
+    ev = sub.add_parser("eval", help="evaluate an agent on held-out networks")
+    ev.add_argument("agent", help="scripted agent name or a model .zip")
+    ev.add_argument("--episodes", type=int, default=200)
+    ev.add_argument("--detector", default="improved")
+    ev.add_argument("--fidelity", default="fast", choices=["full", "fast"])
+    ev.add_argument("--network-config", default=None, help="NetworkConfig as JSON")
+    ev.add_argument("--json", default=None)
+    ev.set_defaults(func=_eval)
+
+    dr = sub.add_parser("drive", help="operator console: you choose, the robot acts")
+    dr.add_argument("--layout", default=None, help="a canonical layout instead of a network")
+    dr.add_argument("--params", default="{}", help="layout parameters as JSON")
+    dr.add_argument("--network", default=None, help="a network file (.json/.yaml)")
+    dr.add_argument("--seed", type=int, default=0)
+    dr.add_argument("--fidelity", default="full", choices=["full", "fast"])
+    dr.add_argument("--detector", default="improved")
+    dr.add_argument("--lidar", default="ideal")
+    dr.add_argument("--out", default="results/drive", help="where scan images go headless")
+    dr.set_defaults(func=_drive)
+
+    be = sub.add_parser("bench", help="run a benchmark script from benchmarks/")
+    be.add_argument("name", choices=BENCHES)
+    be.add_argument("extra", nargs=argparse.REMAINDER, help="arguments for the script")
+    be.set_defaults(func=_bench)
+
+    pl = sub.add_parser("plot", help="plots from an episode log (episode.json)")
+    pl.add_argument("episode")
+    pl.add_argument("--what", default="all", choices=["all", "map", "detection"])
+    pl.add_argument("--out", default="results/plots")
+    pl.set_defaults(func=_plot)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    return int(args.func(args))
+    t0 = time.perf_counter()
+    try:
+        code = int(args.func(args))
+    except KeyboardInterrupt:
+        _print("interrupted")
+        return 130
+    if getattr(args, "command", "") == "demo":
+        _print(f"done in {time.perf_counter() - t0:.1f} s")
+    return code
 
 
 if __name__ == "__main__":

@@ -87,12 +87,11 @@ def make_env_fns(cfg: TrainConfig, pool_seed: int | None = None, n: int | None =
 
 def train(cfg: TrainConfig, out: str | Path, progress_bar: bool = True) -> dict[str, Any]:
     """Train MaskablePPO per ``cfg`` into folder ``out``; returns the run summary."""
+    import torch
     from sb3_contrib import MaskablePPO
     from sb3_contrib.common.maskable.callbacks import MaskableEvalCallback
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
-
-    import torch
 
     torch.set_num_threads(cfg.torch_threads)
     out = Path(out)

@@ -34,9 +34,11 @@ Reward (PipeNav): ``progress`` (decrease of the along-network distance to the go
 Options (keyword arguments of ``gymnasium.make``): ``detector`` in ``"improved"``,
 ``"thesis"``, ``"ground_truth"``; ``fidelity`` ``"fast"`` (kinematic motion, modelled sensing;
 for RL iterations) or ``"full"`` (MuJoCo robot, rotating LiDAR, detector, executor); ``lidar``
-preset; ``network_config`` (a :class:`~pipe_env.generator.NetworkConfig` or its dict);
+preset name or :class:`~pipe_env.lidar.LidarSpec` (full fidelity); ``network_config`` (a
+:class:`~pipe_env.generator.NetworkConfig` or its dict);
 ``network`` (a fixed network, dict or file path, instead of generating one per episode);
-``misalignment`` (sensor offset m and tilt rad, full fidelity); ``network_pool`` (draw episodes
+``misalignment`` (a Pose: the true sensor pose relative to its nominal mount, full fidelity);
+``network_pool`` (draw episodes
 from a fixed, reproducible pool of that many generated networks, seeded by ``pool_seed``; use
 another ``pool_seed`` for held-out evaluation).
 """
@@ -118,8 +120,8 @@ class _DecisionEnv(gym.Env):
         network: PipeNetwork | dict | str | None = None,
         detector: str = "improved",
         fidelity: str = "fast",
-        lidar: str = "ideal",
-        misalignment: tuple[float, float] | None = None,
+        lidar: Any = "ideal",
+        misalignment: Pose | None = None,
         render_mode: str | None = None,
         trigger_distance: float = 0.2,
         auto_single: bool = True,
@@ -144,6 +146,17 @@ class _DecisionEnv(gym.Env):
             )
         if isinstance(network_config, dict):
             network_config = NetworkConfig.from_dict(network_config)
+        from pipe_env.lidar import LidarSpec, get_preset
+
+        if isinstance(lidar, str):
+            lidar = get_preset(lidar)
+        if not isinstance(lidar, LidarSpec):
+            raise ValueError(f"lidar={lidar!r} is not allowed; use a preset name or a LidarSpec")
+        if misalignment is not None and not isinstance(misalignment, Pose):
+            raise ValueError(
+                f"misalignment={misalignment!r} is not allowed; use a Pose (the "
+                "true sensor pose relative to its nominal mount) or None"
+            )
         self.network_config = network_config or NetworkConfig()
         self.fixed_network = _as_network(network)
         self.detector = detector
@@ -246,6 +259,10 @@ class _DecisionEnv(gym.Env):
         self._taken: dict[tuple[int, ...], dict[tuple[int, int] | str, int]] = {}
         self._episode_reset()
         self.decision, self._reset_events = self._advance()
+        self._sync_progress()
+
+    def _sync_progress(self) -> None:
+        """Hook: take the progress baseline after the reset's drive to the first decision."""
 
     def _episode_reset(self) -> None:
         """Hook for subclasses (goal, coverage)."""
@@ -584,6 +601,9 @@ class PipeNavEnv(_DecisionEnv):
     def _goal_point(self) -> NDArray[np.float64] | None:
         return getattr(self, "goal", None)
 
+    def _sync_progress(self) -> None:
+        self._last_distance = self._progress_measure()
+
     def _progress_measure(self) -> float:
         return edge_geodesic(
             self.network, self.plant.edge_position(), goal_edge_position(self.network, self.goal)
@@ -627,6 +647,8 @@ class PipeExploreEnv(_DecisionEnv):
         behind = 0.0 if st.towards == r.b else edge_length(self.network, r.id)
         self._cover(r.id, min(st.s, behind), max(st.s, behind))
         self._cover_from_here()
+
+    def _sync_progress(self) -> None:
         self._last_cover = self._covered_total
 
     def _cover_from_here(self) -> None:

@@ -184,6 +184,8 @@ class KinematicPlant:
         ep, towards = locate(self.network, start)
         self.state = EdgeState(ep.run_id, ep.s, towards)
         self.junctions: list[tuple[EdgeState, str]] = []  # (state at decision, node id)
+        #: one record per detection: true distance to the structure, estimate and truth
+        self.detection_log: list[dict] = []
         self.decision: Decision | None = None
         self.odometry_error = np.zeros(3)
         self.travelled = 0.0
@@ -275,6 +277,11 @@ class KinematicPlant:
         pose = self.pose()
         truth = options_at(self.network, node, st.run_id, pose)
         sensed = self.error_model.apply(truth, self.rng)
+        self.detection_log.append(
+            detection_record(
+                self.sim_time, node, truth, sensed, sensed[0].kind if sensed else "straight"
+            )
+        )
         out.sim_time += self.decision_time
         self.sim_time += self.decision_time
         self.decision = Decision(
@@ -373,6 +380,25 @@ class KinematicPlant:
         self._record_motion(dist, out, begin, target)
         self.decision = None
         return out
+
+
+def detection_record(
+    time_s: float,
+    node: str,
+    truth: list[StructureOption],
+    options: list[StructureOption],
+    kind: str,
+) -> dict:
+    """A plain-data record of one detection for episode logs and plots."""
+    return {
+        "time": round(float(time_s), 4),
+        "node": node,
+        "true_distance": float(truth[0].distance) if truth else None,
+        "true_kind": truth[0].kind if truth else "straight",
+        "kind": kind,
+        "options": [o.to_dict() for o in options],
+        "truth": [o.to_dict() for o in truth],
+    }
 
 
 def goal_edge_position(network: PipeNetwork, goal: NDArray[np.float64]) -> EdgePosition:
