@@ -10,7 +10,10 @@ A scenario file (packaged ones live in ``agents/scenarios/``)::
     network:                        # exactly one of layout / generator / file / inline
       layout: t_junction
       params: {diameter: 0.09, direction: 0.0}
-    goal: [0.0, -0.5, 0.0]          # optional: replaces the network's goals (m)
+    goal: [0.0, -0.5, 0.0]          # optional: replaces the network's goals (m), or
+    goal: {way: 1, distance: 0.4}   #   along true way on #1 (ground-truth order: straight on
+                                    #   first, then by direction) of the first structure ahead,
+                                    #   this far from its centre (m)
     start: {position: [...], forward: [...]}   # optional start pose override
     sensor: {preset: ideal, overrides: {bias: 0.02}, misalignment: {offset: [0, 0.01, 0],
              tilt_deg: [0, 2, 0]}}
@@ -19,8 +22,9 @@ A scenario file (packaged ones live in ``agents/scenarios/``)::
     agent: route_planner            # a scripted agent name or a model .zip path
     seeds: [0, 1]                   # or repetitions: 3 (seeds 0..2)
     max_decisions: 20
-    detect: {distances: [0.4, 0.3, 0.2, 0.1]}    # detect mode: sensor positions before the
-                                                 # structure (m)
+    detect: {distances: [0.4, 0.3, 0.2, 0.1], planar: false}   # detect mode: sensor positions
+                                    # before the structure (m); planar: the 2D algorithm on one
+                                    # horizontal plane
     criteria:
       success: true                 # expected is_success
       max_jams: 0
@@ -186,18 +190,33 @@ def parse_scenario(data: Any, source: str) -> Scenario:
     if not 1 <= max_decisions <= 1000:
         raise _fail(source, "max_decisions", f"got {max_decisions}; allowed: [1, 1000]")
     _validate_network(data.get("network"), source)
-    for key in ("goal",):
-        if key in data:
-            g = data[key]
-            if not (
-                isinstance(g, list)
-                and len(g) == 3
-                and all(
-                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                    for v in g
-                )
-            ):
-                raise _fail(source, key, f"got {g!r}; allowed: three finite numbers (m)")
+    if "goal" in data:
+        g = data["goal"]
+        as_point = (
+            isinstance(g, list)
+            and len(g) == 3
+            and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in g
+            )
+        )
+        as_way = (
+            isinstance(g, dict)
+            and set(g) == {"way", "distance"}
+            and isinstance(g["way"], int)
+            and not isinstance(g["way"], bool)
+            and g["way"] >= 0
+            and isinstance(g["distance"], (int, float))
+            and not isinstance(g["distance"], bool)
+            and 0 < g["distance"] <= 20
+        )
+        if not (as_point or as_way):
+            raise _fail(
+                source,
+                "goal",
+                f"got {g!r}; allowed: three finite numbers (m) or "
+                "{way: int >= 0, distance: m in (0, 20]}",
+            )
     if "start" in data:
         st = data["start"]
         if not (
@@ -214,8 +233,16 @@ def parse_scenario(data: Any, source: str) -> Scenario:
     _validate_sensor(data.get("sensor", {}), source)
     if mode == "detect":
         det = data.get("detect", {})
-        if not isinstance(det, dict) or set(det) - {"distances"}:
-            raise _fail(source, "detect", f"got {det!r}; allowed: a mapping with 'distances'")
+        if not isinstance(det, dict) or set(det) - {"distances", "planar"}:
+            raise _fail(
+                source, "detect", f"got {det!r}; allowed: a mapping with 'distances' and 'planar'"
+            )
+        if not isinstance(det.get("planar", False), bool):
+            raise _fail(
+                source,
+                "detect.planar",
+                "allowed: true (one horizontal plane, the 2D algorithm) or false (full sweep)",
+            )
         dists = det.get("distances", [0.4, 0.3, 0.2, 0.1])
         if not (
             isinstance(dists, list)
@@ -434,11 +461,32 @@ def build_network(sc: Scenario) -> Any:
         if "start" in sc.data:
             net = net.with_start(Pose.from_dict(sc.data["start"]))
         if "goal" in sc.data:
-            net = net.with_goals([sc.data["goal"]])
+            net = net.with_goals([_goal_point(net, sc.data["goal"], sc.source)])
         net.validate()
     except (ValueError, TypeError) as exc:
         raise _fail(sc.source, "network", str(exc)) from None
     return net
+
+
+def _goal_point(net: Any, goal: Any, source: str) -> list[float]:
+    """A goal given as a point, or as a distance along a true way on of the first structure."""
+    if isinstance(goal, list):
+        return [float(v) for v in goal]
+    from pipe_env.ground_truth import fitting_ahead, options_at
+    from pipe_env.plant import option_vector
+
+    if net.start_pose is None:
+        raise _fail(source, "goal", "a goal by way needs a start pose")
+    node, entry = fitting_ahead(net, net.start_pose)
+    ways = options_at(net, node, entry, net.start_pose)
+    if goal["way"] >= len(ways) or ways[0].kind == "closure":
+        raise _fail(
+            source,
+            "goal.way",
+            f"got {goal['way']}; the structure ahead ({ways[0].kind}) has ways 0..{len(ways) - 1}",
+        )
+    axis = net.start_pose.rotation @ option_vector(ways[goal["way"]])
+    return (net.geometry[node].centre + axis * float(goal["distance"])).tolist()
 
 
 def sensor_settings(sc: Scenario) -> tuple[Any, Any]:
@@ -632,15 +680,20 @@ def _run_detect(sc: Scenario, net: Any, seed: int) -> dict[str, Any]:
     base = truth0[0].distance
     errors: dict[str, float] = {}
     correct = []
+    planar = bool(sc.data.get("detect", {}).get("planar", False))
     for d in sc.data.get("detect", {}).get("distances", [0.4, 0.3, 0.2, 0.1]):
         pose = start.translated(base - d)
         truth = net.structures_ahead(pose, 10.0)
-        scan = lidar.scan(pose, rng)
         diameter = net.inner_diameter_at(pose.position)
         if sc.detector == "ground_truth":
             options, kind = truth, truth[0].kind
+        elif planar:
+            det = detector.detect_planar(
+                lidar.scan_plane(pose, 0.0, rng), diameter, method=sc.detector
+            )
+            options, kind = det.options, det.kind
         else:
-            det = detector.detect(scan, diameter, method=sc.detector)
+            det = detector.detect(lidar.scan(pose, rng), diameter, method=sc.detector)
             options, kind = det.options, det.kind
         correct.append(float(kind == truth[0].kind))
         from pipe_env.plant import match_option
