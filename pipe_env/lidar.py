@@ -109,8 +109,8 @@ class LidarSpec:
                 ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
                 need(ok, f.name, "a finite number")
                 object.__setattr__(self, f.name, float(v))
-        need(0.0 <= self.min_range < self.max_range, "min_range", "0 <= min_range < max_range m")
-        need(self.max_range <= 100.0, "max_range", "(min_range, 100] m")
+        need(0.0 <= self.min_range <= 100.0, "min_range", "[0, 100] m")
+        need(self.min_range < self.max_range <= 100.0, "max_range", "(min_range, 100] m")
         need(0.0 < self.fov <= 2 * math.pi, "fov", "(0, 2 pi] rad")
         need(0.0 < self.beam_step <= self.fov, "beam_step", "(0, fov] rad")
         need(self.fov / self.beam_step <= 100_000, "beam_step", "at most 100000 beams per plane")
@@ -304,6 +304,16 @@ class RotatingLidar:
     @property
     def n_beams(self) -> int:
         return int(len(self.beam_angles))
+
+    @property
+    def cutoff(self) -> float:
+        """Distance up to which rays are cast, metres (max range + |bias| + a margin)."""
+        return self._cutoff
+
+    @property
+    def local_directions(self) -> NDArray[np.float64]:
+        """(P, B, 3) nominal beam directions of a sweep in the sensor frame."""
+        return self._local_dirs.copy()
 
     @property
     def plane_period(self) -> float:

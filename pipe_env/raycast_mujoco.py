@@ -144,6 +144,9 @@ class MujocoCaster:
         self.threads = threads
         self.edge_guard = edge_guard
         self._guard: NDArray[np.float64] | None = None
+        self._dist: NDArray[np.float64] | None = None
+        self._geomid: NDArray[np.int32] | None = None
+        self._normal: NDArray[np.float64] | None = None
         self._pool = ThreadPoolExecutor(threads) if threads > 1 else None
 
     def cast(
@@ -169,9 +172,8 @@ class MujocoCaster:
         if self.edge_guard:
             vec = vec + EDGE_GUARD * self._guard_pattern(p * b)
             vec /= np.linalg.norm(vec, axis=1)[:, None]
-        dist = np.empty(p * b)
-        geomid = np.empty(p * b, dtype=np.int32)
-        nrm = np.empty((p * b, 3)) if normals else None
+        dist, geomid, nrm_buf = self._buffers(p * b)
+        nrm = nrm_buf if normals else None
         same = bool((origins == origins[0]).all())
         # jobs: (origin, ray slice); one origin -> one call per thread
         if same:
@@ -206,14 +208,22 @@ class MujocoCaster:
             split = np.array_split(np.arange(len(jobs)), self.threads)
             list(self._pool.map(run, [s.tolist() for s in split], self.datas))
         hit = (dist >= 0.0) & (dist <= cutoff)
-        dist = np.where(hit, dist, math.inf).reshape(p, b)
+        out = np.where(hit, dist, math.inf).reshape(p, b)
         if nrm is None:
-            return dist, None
+            return out, None
         # MuJoCo reports the face normal; orient it into the wall (along the ray)
-        flip = np.einsum("ij,ij->i", nrm, vec) < 0.0
-        nrm[flip] *= -1.0
-        nrm[~hit] = 0.0
-        return dist, nrm.reshape(p, b, 3)
+        sign = np.where(np.einsum("ij,ij->i", nrm, vec) < 0.0, -1.0, 1.0)
+        out_n = nrm * np.where(hit, sign, 0.0)[:, None]
+        return out, out_n.reshape(p, b, 3)
+
+    def _buffers(self, n: int) -> tuple[NDArray, NDArray, NDArray]:
+        """Output buffers for n rays, reused across calls (grown when needed)."""
+        if self._dist is None or len(self._dist) < n:
+            self._dist = np.empty(n)
+            self._geomid = np.empty(n, dtype=np.int32)
+            self._normal = np.empty((n, 3))
+        assert self._geomid is not None and self._normal is not None
+        return self._dist[:n], self._geomid[:n], self._normal[:n]
 
     def _guard_pattern(self, n: int) -> NDArray[np.float64]:
         """(n, 3) fixed unit vectors (golden-angle spiral), the same for every call."""
