@@ -132,7 +132,6 @@ class MujocoCaster:
             raise ValueError(f"threads = {threads!r} is invalid; allowed an int in [1, 64]")
         if not sensing_only and inner_only:
             raise ValueError("inner_only needs sensing_only=True (it edits the meshes)")
-        self.world = world
         if sensing_only:
             self.model = sensing_model(world, inner_only)
         else:
@@ -234,6 +233,17 @@ class MujocoCaster:
             rho = np.sqrt(1.0 - z * z)
             self._guard = np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
         return self._guard[:n]
+
+    def __getstate__(self) -> dict:
+        """Picklable (for subprocess vector envs): the thread pool is recreated on load."""
+        state = self.__dict__.copy()
+        state["_pool"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        if self.threads > 1:
+            self._pool = ThreadPoolExecutor(self.threads)
 
     def close(self) -> None:
         if self._pool is not None:

@@ -250,3 +250,21 @@ def test_mujoco_caster_rejects_bad_settings() -> None:
         MujocoCaster(world, threads=0)
     with pytest.raises(ValueError, match="inner_only"):
         MujocoCaster(world, inner_only=True, sensing_only=False)
+
+
+def test_casters_pickle_and_cast_the_same() -> None:
+    """Subprocess vector envs pickle their sensors: both backends survive a round trip."""
+    import pickle
+
+    net = layouts.reducer()
+    world = build_world(net, contact_walls=False)
+    dirs = sample_directions(200, np.random.default_rng(6))
+    origin = net.start_pose.position
+    caster = MujocoCaster(world, threads=2)
+    again = pickle.loads(pickle.dumps(caster))
+    assert again.cast(origin[None], dirs[None], 5.0)[0].tobytes() == (
+        caster.cast(origin[None], dirs[None], 5.0)[0].tobytes()
+    )
+    bore = AnalyticBore.from_network(net)
+    bore2 = pickle.loads(pickle.dumps(bore))
+    assert bore2.cast(origin, dirs).dist.tobytes() == bore.cast(origin, dirs).dist.tobytes()
