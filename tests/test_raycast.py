@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pipe_env import layouts
 from pipe_env.generator import NetworkConfig, generate_network
@@ -268,3 +270,29 @@ def test_casters_pickle_and_cast_the_same() -> None:
     bore = AnalyticBore.from_network(net)
     bore2 = pickle.loads(pickle.dumps(bore))
     assert bore2.cast(origin, dirs).dist.tobytes() == bore.cast(origin, dirs).dist.tobytes()
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    name=st.sampled_from(sorted(layouts.LAYOUTS)),
+    diameter=st.floats(0.03, 0.2),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_analytic_hits_are_where_rays_leave_the_bore(name: str, diameter: float, seed: int) -> None:
+    """Just before each hit the ray is inside the bore and just after it is outside; for every
+    layout, diameter and interior origin, and no ray escapes."""
+    key = "diameter_in" if name == "reducer" else "diameter"
+    net = layouts.make_layout(name, **{key: diameter})
+    bore = AnalyticBore.from_network(net)
+    rng = np.random.default_rng(seed)
+    origins = interior_points(net, 3, rng)
+    for origin in origins:
+        dirs = sample_directions(400, rng)
+        hits = bore.cast(origin, dirs)
+        assert np.isfinite(hits.dist).all() and (hits.dist > 0).all()
+        eps = 1e-7
+        before = origin + (hits.dist - eps)[:, None] * dirs
+        after = origin + (hits.dist + eps)[:, None] * dirs
+        assert bore.contains(before).all()
+        assert not bore.contains(after).any()
+        np.testing.assert_allclose(np.linalg.norm(hits.normal, axis=1), 1.0, atol=1e-9)
