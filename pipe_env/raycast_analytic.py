@@ -401,7 +401,9 @@ class _Rays:
         self.d = np.ascontiguousarray(d)
         self.o = None if o is None else np.ascontiguousarray(o)
         self.single = o is None
+        self.dx, self.dy, self.dz = (np.ascontiguousarray(d[:, i]) for i in range(3))
         if o is not None:
+            self.ox, self.oy, self.oz = (np.ascontiguousarray(o[:, i]) for i in range(3))
             self.od = np.einsum("ij,ij->i", o, d)
             self.oo = np.einsum("ij,ij->i", o, o)
 
@@ -415,20 +417,24 @@ class _Pairs:
     kk: NDArray[np.int64]
     ki: NDArray[np.int64]
     near: NDArray[np.int64]
+    counts: NDArray[np.int64]  # pairs per kept piece; pairs are sorted by kk
+
+    def spread(self, values: NDArray) -> NDArray:
+        """Per-piece ``values`` (K',) repeated for each pair (cheaper than a gather)."""
+        return np.repeat(values, self.counts)
 
     def dots(self, rays: _Rays, vectors: NDArray) -> tuple[list[NDArray], list[NDArray]]:
         """Per pair, d . v_j and (several origins) o . v_j for the (K', m, 3) vectors of the
-        kept pieces: one product per vector for all rays, then a gather."""
-        k, m = vectors.shape[0], vectors.shape[1]
-        flat_v = vectors.transpose(1, 0, 2).reshape(m * k, 3)
-        n = rays.n
-        d_all = _products(rays.d, flat_v).ravel()
-        idx = [(j * k + self.kk) * n + self.ri for j in range(m)]
-        d_dots = [d_all[i] for i in idx]
+        kept pieces (gathered ray components times gathered piece components)."""
+        v = np.ascontiguousarray(vectors.transpose(1, 2, 0))  # (m, 3, K')
+
+        comps = [[self.spread(v[j, i]) for i in range(3)] for j in range(v.shape[0])]
+        gx, gy, gz = rays.dx[self.ri], rays.dy[self.ri], rays.dz[self.ri]
+        d_dots = [gx * c[0] + gy * c[1] + gz * c[2] for c in comps]
         o_dots: list[NDArray] = []
         if rays.o is not None:
-            o_all = _products(rays.o, flat_v).ravel()
-            o_dots = [o_all[i] for i in idx]
+            hx, hy, hz = rays.ox[self.ri], rays.oy[self.ri], rays.oz[self.ri]
+            o_dots = [hx * c[0] + hy * c[1] + hz * c[2] for c in comps]
         return d_dots, o_dots
 
 
@@ -473,7 +479,8 @@ def _candidates(rays: _Rays, centres: NDArray, radii: NDArray, cutoff: float) ->
     if len(flat) == 0:
         return None
     kk, ri = np.divmod(flat, rays.n)
-    return _Pairs(ri, kk, near[kk], near)
+    counts = np.bincount(kk, minlength=len(near))
+    return _Pairs(ri, kk, near[kk], near, counts)
 
 
 def _clip(
@@ -499,7 +506,7 @@ def _plane_gaps(
     """Per pair and plane, ``h - o . n`` with o relative to ``ref``."""
     out = []
     for i in range(2):
-        h_rel = (offsets[:, i] - normals[:, i, :] @ ref)[pairs.near][pairs.kk]
+        h_rel = pairs.spread((offsets[:, i] - normals[:, i, :] @ ref)[pairs.near])
         out.append(h_rel - o_dots[i] if o_dots else h_rel)
     return out
 
@@ -507,14 +514,14 @@ def _plane_gaps(
 def _quadric_intervals(
     q: QuadricPieces, ref: NDArray, rays: _Rays, pairs: _Pairs
 ) -> tuple[NDArray, NDArray, NDArray]:
-    near, kk, ri = pairs.near, pairs.kk, pairs.ri
+    near, ri = pairs.near, pairs.ri
     p0 = q.origin[near] - ref
     axis = q.axis[near]
     vectors = np.stack([axis, p0, q.plane_normals[near, 0], q.plane_normals[near, 1]], axis=1)
     (du, dp, dn0, dn1), o_dots = pairs.dots(rays, vectors)
     # w = o - p0; with one origin (o = 0 after the shift) w = -p0 for every pair
-    s0 = (-np.einsum("ij,ij->i", p0, axis))[kk]
-    ww = np.einsum("ij,ij->i", p0, p0)[kk]
+    s0 = pairs.spread(-np.einsum("ij,ij->i", p0, axis))
+    ww = pairs.spread(np.einsum("ij,ij->i", p0, p0))
     if o_dots:
         ou, op = o_dots[0], o_dots[1]
         s0 = s0 + ou
@@ -524,8 +531,8 @@ def _quadric_intervals(
         wd = -dp
     gaps = _plane_gaps(q.plane_normals, q.plane_offsets, ref, pairs, o_dots[2:])
     planes = [(dn0, gaps[0]), (dn1, gaps[1])]
-    k = q.slope[near][kk]
-    rs = q.radius0[near][kk] + k * s0
+    k = pairs.spread(q.slope[near])
+    rs = pairs.spread(q.radius0[near]) + k * s0
     # f(t) = a t^2 + 2 b t + c <= 0 inside the (double) cone
     kdu = k * du
     a = 1.0 - du * du - kdu * kdu
@@ -659,14 +666,14 @@ def _torus_intervals(
     t: TorusPieces, ref: NDArray, rays: _Rays, pairs: _Pairs
 ) -> list[tuple[NDArray, NDArray, NDArray]]:
     """Up to two intervals per (ray, torus sector) pair, clipped by the sector's planes."""
-    near, kk, ri = pairs.near, pairs.kk, pairs.ri
+    near, ri = pairs.near, pairs.ri
     centre = t.centre[near] - ref
     axis = t.axis[near]
     vectors = np.stack([axis, centre, t.plane_normals[near, 0], t.plane_normals[near, 1]], axis=1)
     (e, dc, dn0, dn1), o_dots = pairs.dots(rays, vectors)
-    big = t.major[near][kk]
-    cn = np.einsum("ij,ij->i", centre, axis)[kk]
-    cc = np.einsum("ij,ij->i", centre, centre)[kk]
+    big = pairs.spread(t.major[near])
+    cn = pairs.spread(np.einsum("ij,ij->i", centre, axis))
+    cc = pairs.spread(np.einsum("ij,ij->i", centre, centre))
     # w = o - centre; solve from the ray point closest to the centre, in units of R
     if o_dots:
         on, oc = o_dots[0], o_dots[1]
@@ -680,7 +687,7 @@ def _torus_intervals(
     inv = 1.0 / big
     c = (wn + t0 * e) * inv
     qq = np.maximum(ww - t0 * t0, 0.0) * inv * inv
-    rr = t.minor[near][kk] * inv
+    rr = pairs.spread(t.minor[near]) * inv
     bb = qq + 1.0 - rr * rr
     p2 = 2.0 * bb - 4.0 * (1.0 - e * e)
     p1 = 8.0 * c * e
