@@ -14,8 +14,8 @@ same run:
   if open3d is installed (it uses every core);
 - the bound: the same rays against one infinite cylinder in numpy, in a straight pipe.
 
-Each figure is the best of ``--repeat`` runs (wall clock), so that other load on the machine
-disturbs it least.
+Each figure is the best of ``--repeat`` runs (wall clock); the methods take turns run by run, so
+that changing load on the machine affects them alike and disturbs the best runs least.
 
 Usage: python benchmarks/bench_lidar.py [--repeat N]
 """
@@ -23,6 +23,7 @@ Usage: python benchmarks/bench_lidar.py [--repeat N]
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from collections.abc import Callable
 
@@ -36,14 +37,17 @@ from pipe_env.raycast_mujoco import MujocoCaster
 from pipe_env.world import build_world, network_meshes
 
 
-def best_time(fn: Callable[[], object], repeat: int) -> float:
-    fn()  # warm up
-    times = []
+def best_times(jobs: list[Callable[[], object]], repeat: int) -> list[float]:
+    """Best wall-clock time of each job; the jobs take turns, ``repeat`` rounds."""
+    for fn in jobs:
+        fn()  # warm up
+    best = [math.inf] * len(jobs)
     for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+        for i, fn in enumerate(jobs):
+            t = time.perf_counter()
+            fn()
+            best[i] = min(best[i], time.perf_counter() - t)
+    return best
 
 
 def cylinder_bound(origin: np.ndarray, dirs: np.ndarray, radius: float) -> np.ndarray:
@@ -73,12 +77,10 @@ def main() -> None:
     cutoff = lidar.cutoff
     n_full, n_plane = dirs_full.shape[0] * dirs_full.shape[1], dirs_plane.shape[1]
 
-    rows: list[tuple[str, float, float]] = []
+    methods: list[tuple[str, Callable[[], object], Callable[[], object]]] = []
 
     def measure(label: str, cast: Callable[[np.ndarray], object]) -> None:
-        t_plane = best_time(lambda: cast(dirs_plane), repeat)
-        t_full = best_time(lambda: cast(dirs_full), repeat)
-        rows.append((label, t_plane, t_full))
+        methods.append((label, lambda: cast(dirs_plane), lambda: cast(dirs_full)))
 
     def world_model_cast(d: np.ndarray) -> None:
         n = d.shape[0] * d.shape[1]
@@ -115,12 +117,20 @@ def main() -> None:
     rng = np.random.default_rng(0)
     scan_mj = RotatingLidar(world, "ideal", backend="mujoco")
     scan_an = RotatingLidar(world, "ideal", backend="analytic")
-    t_plane = best_time(lambda: scan_mj.scan_plane(pose, 0.0, rng), repeat)
-    t_full = best_time(lambda: scan_mj.scan(pose, rng), repeat)
-    rows.append(("RotatingLidar.scan, backend='mujoco' (with noise model)", t_plane, t_full))
-    t_plane = best_time(lambda: scan_an.scan_plane(pose, 0.0, rng), repeat)
-    t_full = best_time(lambda: scan_an.scan(pose, rng), repeat)
-    rows.append(("RotatingLidar.scan, backend='analytic' (with noise model)", t_plane, t_full))
+    methods.append(
+        (
+            "RotatingLidar.scan, backend='mujoco' (with noise model)",
+            lambda: scan_mj.scan_plane(pose, 0.0, rng),
+            lambda: scan_mj.scan(pose, rng),
+        )
+    )
+    methods.append(
+        (
+            "RotatingLidar.scan, backend='analytic' (with noise model)",
+            lambda: scan_an.scan_plane(pose, 0.0, rng),
+            lambda: scan_an.scan(pose, rng),
+        )
+    )
 
     embree_note = ""
     try:
@@ -148,6 +158,9 @@ def main() -> None:
         lambda d: cylinder_bound(straight_origin, d.reshape(-1, 3), 0.05),
     )
 
+    t_plane = best_times([m[1] for m in methods], repeat)
+    t_full = best_times([m[2] for m in methods], repeat)
+    rows = [(m[0], tp, tf) for m, tp, tf in zip(methods, t_plane, t_full)]
     mj_ref = rows[0][2]
     default_mj = rows[2][2]
     embree = next((r[2] for r in rows if r[0].startswith("Embree")), None)
