@@ -241,9 +241,9 @@ def test_ls02_in_a_60mm_pipe_sees_only_a_few_points_per_side(pipe60_world) -> No
     assert scan.valid.sum(axis=1).max() <= 0.5 * spec.n_beams
     assert (scan.ranges[scan.valid] >= spec.min_range).all()
     # the near wall (true distance < 10 cm - bias, beams beyond ~25 deg) returns nothing
-    near_wall = np.abs(beta) > math.asin(0.03 / (spec.min_range - spec.bias - 0.01))
-    assert near_wall.sum() > 30
-    assert not scan.valid[:, near_wall].any()
+    near_beams = np.abs(beta) > math.asin(0.03 / (spec.min_range - spec.bias - 0.01))
+    assert near_beams.sum() > 30
+    assert not scan.valid[:, near_beams].any()
     pts = scan.points("sensor")
     assert (pts[:, 0] > 0.07).all()
 
