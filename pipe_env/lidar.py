@@ -1,10 +1,19 @@
 """The rotating 2D LiDAR of thesis chapter 3.2: sensor models, presets and the simulator.
 
 A 2D LiDAR scans a plane that contains the front module's forward axis; a servo rotates that
-plane about the forward axis (thesis: 2 deg steps over 180 deg, position control). Each plane is
-cast with ``mujoco.mj_multiRay`` against the world's ray meshes only (``world.wall_group``).
+plane about the forward axis (thesis 3.2.2: 2 deg steps over 180 deg, position control). Beam and
+plane geometry are defined in :mod:`detector.scan`.
 
-Geometry of a scan is defined in :mod:`detector.scan`. Poses:
+Ray casting backends (``RotatingLidar(..., backend=...)``):
+
+- ``"mujoco"`` (default): ``mujoco.mj_multiRay`` against the world's wall meshes (geom group
+  ``world.wall_group``), batched, on a sensing-only copy of those meshes
+  (:mod:`pipe_env.raycast_mujoco`). The meshes are faceted, so ranges carry the tessellation
+  error of :mod:`pipe_env.meshes` (a fraction of a millimetre radially).
+- ``"analytic"``: exact intersection with the network's cylinders, cones, planes and tori
+  (:mod:`pipe_env.raycast_analytic`), vectorised in numpy.
+
+Poses:
 
 - ``body_pose`` (argument of :meth:`RotatingLidar.scan`): world pose of the robot's front module
   (or of any carrier), x forward;
@@ -15,23 +24,30 @@ Geometry of a scan is defined in :mod:`detector.scan`. Poses:
 
 Measurement model, applied per beam in this order to the true distance ``r`` of a hit:
 ``r + bias + N(0, sigma^2 + (sigma_rel * r)^2)``, quantised to ``range_resolution``, then lost if
-outside ``[min_range, max_range]``, on a dropout (probability ``dropout``) or when the beam meets
-the surface at an incidence above ``max_incidence``. Angular jitter perturbs the cast direction
-while the reported beam angle stays nominal. No return is ``inf`` with ``valid == False``.
+the *measured* value lies outside ``[min_range, max_range]``, on a dropout (probability
+``dropout``) or when the beam meets the surface at an incidence above ``max_incidence``. Angular
+jitter perturbs the cast direction within the scan plane (the sensor's encoder), the servo
+jitter perturbs a whole plane about the forward axis (the servo's position error); the reported
+angles stay nominal. No return is ``inf`` with ``valid == False``, never a fake distance.
 
-Modes: ``"stop_and_scan"`` (the thesis: the carrier stands still during a sweep) and
-``"continuous"`` (the servo turns while the carrier moves: pass a callable ``t -> body pose`` and
-each plane is cast from the pose at its own timestamp, which distorts the cloud as on hardware).
+Modes: ``"stop_and_scan"`` (the thesis: the carrier stands still during a sweep; each plane
+takes ``1 / scan_rate`` plus ``servo_settle``) and ``"continuous"`` (the servo turns at
+``servo_step * scan_rate`` while the carrier moves: pass a callable ``t -> body pose`` and each
+plane is cast from the pose at its own timestamp, which distorts the cloud as on hardware; the
+motion during one plane's in-plane sweep is neglected).
+
+Randomness: all noise comes from the ``numpy.random.Generator`` passed to :meth:`scan`, with a
+fixed number of draws per scan, so the same seed gives the same bytes.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
-import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
@@ -40,6 +56,9 @@ from pipe_env.geometry import Pose
 from pipe_env.world import PipeWorld
 
 MODES = ("stop_and_scan", "continuous")
+BACKENDS = ("mujoco", "analytic")
+#: Rays are cast this far beyond ``max_range + |bias|`` so that noise can still reach max_range.
+_CUTOFF_MARGIN = 0.05
 
 
 @dataclass(frozen=True)
@@ -48,7 +67,7 @@ class LidarSpec:
 
     Attributes:
         name: preset name or a label.
-        min_range, max_range: returns outside this interval are lost.
+        min_range, max_range: measured ranges outside this interval are lost.
         fov: in-plane field of view, centred on the forward axis.
         beam_step: angle between beams in the plane.
         range_resolution: quantisation step of reported ranges (0: none).
@@ -56,7 +75,7 @@ class LidarSpec:
         noise_sigma_rel: standard deviation relative to the range (0.01 = 1 %).
         bias: constant offset added to every range (the thesis saw 2 cm on the LS02).
         dropout: probability that a return is lost.
-        angular_jitter: standard deviation of the actual beam direction around the nominal one.
+        angular_jitter: standard deviation of the actual in-plane beam angle around the nominal.
         max_incidence: returns are lost when the beam meets the surface at a larger angle from
             its normal (pi/2: never).
         scan_rate: in-plane sweeps per second; one plane takes ``1 / scan_rate`` seconds.
@@ -83,32 +102,38 @@ class LidarSpec:
                     f"LidarSpec.{name} = {getattr(self, name)!r} is invalid; allowed: {allowed}"
                 )
 
+        need(isinstance(self.name, str) and self.name != "", "name", "a non-empty string")
         for f in fields(self):
             if f.name != "name":
                 v = getattr(self, f.name)
-                need(isinstance(v, (int, float)) and math.isfinite(v), f.name, "a finite number")
-        need(0.0 <= self.min_range < self.max_range, "min_range", "0 <= min_range < max_range")
-        need(self.max_range <= 100.0, "max_range", "(min_range, 100] m")
+                ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+                need(ok, f.name, "a finite number")
+                object.__setattr__(self, f.name, float(v))
+        need(0.0 <= self.min_range <= 100.0, "min_range", "[0, 100] m")
+        need(self.min_range < self.max_range <= 100.0, "max_range", "(min_range, 100] m")
         need(0.0 < self.fov <= 2 * math.pi, "fov", "(0, 2 pi] rad")
         need(0.0 < self.beam_step <= self.fov, "beam_step", "(0, fov] rad")
+        need(self.fov / self.beam_step <= 100_000, "beam_step", "at most 100000 beams per plane")
         need(0.0 <= self.range_resolution <= 0.1, "range_resolution", "[0, 0.1] m")
         need(0.0 <= self.noise_sigma <= 1.0, "noise_sigma", "[0, 1] m")
         need(0.0 <= self.noise_sigma_rel <= 0.5, "noise_sigma_rel", "[0, 0.5]")
         need(abs(self.bias) <= 1.0, "bias", "[-1, 1] m")
         need(0.0 <= self.dropout < 1.0, "dropout", "[0, 1)")
-        need(0.0 <= self.angular_jitter <= math.radians(10), "angular_jitter", "[0, 10 deg]")
+        need(0.0 <= self.angular_jitter <= math.radians(10), "angular_jitter", "[0, 10 deg] rad")
         need(0.0 < self.max_incidence <= math.pi / 2, "max_incidence", "(0, pi/2] rad")
         need(0.0 < self.scan_rate <= 1000.0, "scan_rate", "(0, 1000] Hz")
 
     @property
     def n_beams(self) -> int:
-        return int(round(self.fov / self.beam_step)) + 1
+        """Beams per plane; a full circle does not repeat its first beam."""
+        n = int(round(self.fov / self.beam_step))
+        return n if self.fov >= 2 * math.pi - 1e-9 else n + 1
 
     @property
     def beam_angles(self) -> NDArray[np.float64]:
         """(B,) in-plane beam angles, radians, symmetric about forward."""
         half = 0.5 * (self.n_beams - 1) * self.beam_step
-        return np.linspace(-half, half, self.n_beams)
+        return -half + self.beam_step * np.arange(self.n_beams)
 
     @property
     def is_noiseless(self) -> bool:
@@ -128,10 +153,13 @@ class LidarSpec:
         return asdict(self)
 
 
-#: Sensor presets. Figures from thesis table 4.2 (ideal) and table 3.1 with the manufacturers'
-#: datasheets it cites ([24] LeiShen LS02, [25] EAI YDLIDAR X4).
+#: Sensor presets. Sources: thesis table 4.2 (the simulated "ideal Lidar"), thesis table 3.1 with
+#: the manufacturers' data it cites ([24] LeiShen LS02, [25] EAI YDLIDAR X4 data sheet), and the
+#: thesis's own measurements (5.2.2). Figures no source gives are marked "assumed".
 PRESETS: dict[str, LidarSpec] = {
-    # thesis table 4.2 "ideal Lidar": 0.1-200 cm, 0.1 cm resolution, 180 deg FoV, 0.5 deg steps
+    # thesis table 4.2 "ideal Lidar": detection range 0.1-200 cm, range resolution 0.1 cm,
+    # field of view 180 deg, angle resolution 0.5-1 deg (0.5 deg used). Noiseless.
+    # scan_rate: assumed (the Gazebo sensor's rate is not given).
     "ideal": LidarSpec(
         name="ideal",
         min_range=0.1,
@@ -141,10 +169,14 @@ PRESETS: dict[str, LidarSpec] = {
         range_resolution=0.001,
         scan_rate=10.0,
     ),
-    # LS02 solid-state 2D LiDAR (thesis table 3.1, datasheet [24]): range 0.1-4 m, accuracy
-    # < 0.5 % below 2 m, 86 deg scanning angle, 1 deg resolution, 10 Hz. Thesis 5.2.2 measured a
-    # constant 2 cm error on the real unit, modelled as bias; the 5 mm quantisation and 1 % noise
-    # reflect the coarse returns seen in thesis figure 5.8.
+    # LeiShen LS02 solid-state 2D LiDAR, thesis table 3.1 after [24]: detection range 0.1-4 m,
+    # scanning angle 86 deg, angle resolution 1 deg, scan frequency 10 Hz; detection accuracy
+    # "< 0.5 (for range < 2 m)". The table's unit column says mm, but 0.5 mm is not credible for
+    # a sensor whose unit the thesis measured with a constant 2 cm error (5.2.2) and found
+    # unusable in small pipes (5.1.1, 6); it is read here as 0.5 % of the distance (1 sigma).
+    # bias 2 cm: thesis 5.2.2 ("a constant measurement error of 2 cm").
+    # Assumed (no source): 2 mm absolute noise, 5 mm output resolution, 2 % dropouts, 0.2 deg
+    # beam jitter, returns lost beyond 80 deg incidence.
     "ls02": LidarSpec(
         name="ls02",
         min_range=0.1,
@@ -160,10 +192,12 @@ PRESETS: dict[str, LidarSpec] = {
         max_incidence=math.radians(80),
         scan_rate=10.0,
     ),
-    # YDLIDAR X4 (thesis table 3.1, datasheet [25]): range 0.12-10 m, accuracy < 0.5 mm below
-    # 2 m and < 1.5 % beyond (the thesis lists < 3 % of distance), 0.48-0.52 deg resolution,
-    # 6-12 Hz, 360 deg restricted to the front 180 deg in the thesis (4.3). Range resolution
-    # below 1 % of distance; modelled as 0.5 mm quantisation, 1.5 mm plus 0.5 % gaussian noise.
+    # EAI YDLIDAR X4, thesis table 3.1 after [25]: range 0.12 to > 10 m, angle resolution
+    # 0.48-0.52 deg (0.5 used), scan frequency 6-12 Hz (7 Hz, the data sheet's typical value),
+    # 360 deg restricted to the front 180 deg as in thesis 4.3. Detection accuracy "< 3 % of
+    # distance" (table 3.1), modelled as 1 % of distance at 1 sigma. The X4 data sheet gives a
+    # range resolution of < 0.5 mm below 2 m (and < 1 % of the distance beyond): 0.5 mm
+    # quantisation. Assumed: 1 % dropouts, 0.1 deg beam jitter, returns lost beyond 85 deg.
     "ydlidar_x4": LidarSpec(
         name="ydlidar_x4",
         min_range=0.12,
@@ -171,8 +205,8 @@ PRESETS: dict[str, LidarSpec] = {
         fov=math.pi,
         beam_step=math.radians(0.5),
         range_resolution=0.0005,
-        noise_sigma=0.0015,
-        noise_sigma_rel=0.005,
+        noise_sigma=0.0,
+        noise_sigma_rel=0.01,
         dropout=0.01,
         angular_jitter=math.radians(0.1),
         max_incidence=math.radians(85),
@@ -183,21 +217,16 @@ PRESETS: dict[str, LidarSpec] = {
 
 def get_preset(name: str) -> LidarSpec:
     """The preset called ``name``; raises ValueError listing the presets if unknown."""
-    if name not in PRESETS:
+    if not isinstance(name, str) or name not in PRESETS:
         raise ValueError(f"unknown LiDAR preset {name!r}; allowed: {sorted(PRESETS)}")
     return PRESETS[name]
-
-
-def _rot_x(angle: float) -> NDArray[np.float64]:
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
 
 
 class RotatingLidar:
     """A 2D LiDAR on a servo that turns its scan plane about the forward axis.
 
     Args:
-        world: the world whose ray meshes are scanned.
+        world: the world whose walls are scanned.
         spec: sensor model (a :class:`LidarSpec` or a preset name).
         servo_step: plane angle increment, radians (thesis: 2 deg).
         servo_range: total servo sweep, radians (thesis: 180 deg; planes at 0, step, ... < range).
@@ -205,6 +234,10 @@ class RotatingLidar:
         mount: nominal sensor pose in the body frame.
         misalignment: true sensor pose relative to the nominal one.
         servo_settle: stop-and-scan time to move and settle between planes, seconds.
+        servo_jitter: standard deviation of the servo's position error, radians (one draw per
+            plane; the plane is cast at the perturbed angle and reported at the nominal one).
+        backend: ``"mujoco"`` (``mj_multiRay`` on the meshes) or ``"analytic"`` (exact).
+        threads: MuJoCo backend only: split each batch over this many threads.
     """
 
     def __init__(
@@ -217,42 +250,70 @@ class RotatingLidar:
         mount: Pose | None = None,
         misalignment: Pose | None = None,
         servo_settle: float = 0.02,
+        servo_jitter: float = 0.0,
+        backend: str = "mujoco",
+        threads: int = 1,
     ) -> None:
-        self.world = world
-        self.spec = get_preset(spec) if isinstance(spec, str) else spec
-        if not isinstance(self.spec, LidarSpec):
+        if not isinstance(world, PipeWorld):
+            raise ValueError(f"world must be a PipeWorld, got {type(world).__name__}")
+        if isinstance(spec, str):
+            spec = get_preset(spec)
+        if not isinstance(spec, LidarSpec):
             raise ValueError(f"spec must be a LidarSpec or a preset name, got {spec!r}")
-        if not (math.isfinite(servo_step) and 0.0 < servo_step <= math.pi):
-            raise ValueError(f"servo_step = {servo_step!r} rad is invalid; allowed (0, pi]")
-        if not (math.isfinite(servo_range) and servo_step <= servo_range <= 2 * math.pi):
-            raise ValueError(
-                f"servo_range = {servo_range!r} rad is invalid; allowed [servo_step, 2 pi]"
-            )
+        _need_number(servo_step, "servo_step", 0.0, math.pi, "rad", low_open=True)
+        _need_number(servo_range, "servo_range", servo_step, 2 * math.pi, "rad")
         if mode not in MODES:
             raise ValueError(f"mode = {mode!r} is invalid; allowed: {MODES}")
-        if not (math.isfinite(servo_settle) and 0.0 <= servo_settle <= 10.0):
-            raise ValueError(f"servo_settle = {servo_settle!r} s is invalid; allowed [0, 10]")
+        _need_number(servo_settle, "servo_settle", 0.0, 10.0, "s")
+        _need_number(servo_jitter, "servo_jitter", 0.0, math.radians(10), "rad")
+        if backend not in BACKENDS:
+            raise ValueError(f"backend = {backend!r} is invalid; allowed: {BACKENDS}")
+        if not (isinstance(threads, int) and not isinstance(threads, bool) and 1 <= threads):
+            raise ValueError(f"threads = {threads!r} is invalid; allowed an int >= 1")
+        self.world = world
+        self.spec = spec
         self.servo_step = float(servo_step)
         self.servo_range = float(servo_range)
         self.mode = mode
-        self.mount = mount if mount is not None else Pose.identity()
-        self.misalignment = misalignment if misalignment is not None else Pose.identity()
+        self.mount = _checked(mount, "mount") if mount is not None else Pose.identity()
+        self.misalignment = (
+            _checked(misalignment, "misalignment") if misalignment is not None else Pose.identity()
+        )
         self.servo_settle = float(servo_settle)
+        self.servo_jitter = float(servo_jitter)
+        self.backend = backend
         n_planes = max(1, int(math.floor(self.servo_range / self.servo_step + 1e-9)))
         self.plane_angles = np.arange(n_planes) * self.servo_step
-        self.beam_angles = self.spec.beam_angles
+        self.beam_angles = spec.beam_angles
         self._local_dirs = beam_directions(self.plane_angles, self.beam_angles)  # (P, B, 3)
-        n_rays = n_planes * self.spec.n_beams
-        self._geomid = np.zeros(n_rays, dtype=np.int32)
-        self._dist = np.zeros(n_rays, dtype=float)
-        self._normal = np.zeros(3 * n_rays, dtype=float)
-        self._vec = np.zeros(3 * n_rays, dtype=float)
-        self._geomgroup = world.ray_geomgroup
+        self._cutoff = spec.max_range + abs(spec.bias) + _CUTOFF_MARGIN
+        if backend == "mujoco":
+            from pipe_env.raycast_mujoco import MujocoCaster
+
+            self._caster: Any = MujocoCaster(world, threads=threads)
+        else:
+            from pipe_env.raycast_analytic import AnalyticBore
+
+            self._caster = AnalyticBore.from_network(world.network)
 
     # ------------------------------------------------------------------ timing
     @property
     def n_planes(self) -> int:
         return int(len(self.plane_angles))
+
+    @property
+    def n_beams(self) -> int:
+        return int(len(self.beam_angles))
+
+    @property
+    def cutoff(self) -> float:
+        """Distance up to which rays are cast, metres (max range + |bias| + a margin)."""
+        return self._cutoff
+
+    @property
+    def local_directions(self) -> NDArray[np.float64]:
+        """(P, B, 3) nominal beam directions of a sweep in the sensor frame."""
+        return self._local_dirs.copy()
 
     @property
     def plane_period(self) -> float:
@@ -275,39 +336,36 @@ class RotatingLidar:
         """A full servo sweep.
 
         Args:
-            body_pose: the carrier's world pose, or (continuous mode) a function of time giving
-                it; stop-and-scan with a function uses its value at ``t0``.
+            body_pose: the carrier's world pose, or (continuous mode) a function of time in
+                seconds giving it; stop-and-scan with a function uses its value at ``t0``.
             rng: source of all measurement noise.
             t0: time of the first plane, seconds.
         """
+        _need_rng(rng)
+        _need_number(t0, "t0", -1e9, 1e9, "s")
         times = t0 + np.arange(self.n_planes) * self.plane_period
-        if callable(body_pose):
+        if callable(body_pose) and not isinstance(body_pose, Pose):
             if self.mode == "continuous":
-                bodies = [_checked(body_pose(float(t)), "body_pose(t)") for t in times]
+                bodies = [_checked(body_pose(float(t)), f"body_pose({float(t)})") for t in times]
             else:
-                bodies = [_checked(body_pose(float(t0)), "body_pose(t0)")] * self.n_planes
+                bodies = [_checked(body_pose(float(t0)), f"body_pose({float(t0)})")] * len(times)
         else:
             bodies = [_checked(body_pose, "body_pose")] * self.n_planes
-        return self._cast(np.arange(self.n_planes), bodies, times, rng)
+        return self._cast(self._local_dirs, self.plane_angles, bodies, times, rng)
 
     def scan_plane(
         self, body_pose: Pose, plane_angle: float, rng: np.random.Generator, t0: float = 0.0
     ) -> Scan:
         """One plane at servo angle ``plane_angle`` (radians), for the 2D algorithm."""
-        _checked(body_pose, "body_pose")
-        if not math.isfinite(plane_angle):
-            raise ValueError(f"plane_angle must be finite, got {plane_angle!r}")
-        dirs = beam_directions(np.array([plane_angle]), self.beam_angles)
-        return self._cast_dirs(dirs, np.array([plane_angle]), [body_pose], np.array([t0]), rng)
+        body = _checked(body_pose, "body_pose")
+        _need_rng(rng)
+        _need_number(plane_angle, "plane_angle", -2 * math.pi, 2 * math.pi, "rad")
+        _need_number(t0, "t0", -1e9, 1e9, "s")
+        angles = np.array([float(plane_angle)])
+        dirs = beam_directions(angles, self.beam_angles)
+        return self._cast(dirs, angles, [body], np.array([float(t0)]), rng)
 
     def _cast(
-        self, planes: NDArray, bodies: list[Pose], times: NDArray, rng: np.random.Generator
-    ) -> Scan:
-        return self._cast_dirs(
-            self._local_dirs[planes], self.plane_angles[planes], bodies, times, rng
-        )
-
-    def _cast_dirs(
         self,
         local_dirs: NDArray,
         plane_angles: NDArray,
@@ -317,76 +375,55 @@ class RotatingLidar:
     ) -> Scan:
         spec = self.spec
         n_p, n_b = local_dirs.shape[:2]
-        n = n_p * n_b
-        nominal = [b.compose(self.mount) for b in bodies]
-        true = [p.compose(self.misalignment) for p in nominal]
-        # draw every random number up front, a fixed count per ray, so a seed fixes the scan
-        jitter = rng.normal(0.0, 1.0, size=(2, n_p, n_b)) if spec.angular_jitter > 0 else None
-        noise = rng.normal(0.0, 1.0, size=(n_p, n_b))
-        drop = rng.random(size=(n_p, n_b))
+        composed: dict[int, tuple[Pose, Pose]] = {}
+        for body in bodies:  # stop-and-scan repeats one body pose: compose it once
+            if id(body) not in composed:
+                nom = body.compose(self.mount)
+                composed[id(body)] = (nom, nom.compose(self.misalignment))
+        nominal = [composed[id(b)][0] for b in bodies]
+        true = [composed[id(b)][1] for b in bodies]
+        # every random number is drawn up front, a fixed count per scan, so a seed fixes it
+        beam_noise = rng.standard_normal((n_p, n_b)) if spec.angular_jitter > 0 else None
+        servo_noise = rng.standard_normal(n_p) if self.servo_jitter > 0 else None
+        noise = rng.standard_normal((n_p, n_b))
+        drop = rng.random((n_p, n_b))
         dirs = local_dirs
-        if jitter is not None:
-            dirs = _jittered(
-                local_dirs, plane_angles, self.beam_angles, jitter, spec.angular_jitter
-            )
-        vec = self._vec[: 3 * n].reshape(n_p, n_b, 3)
-        for k in range(n_p):
-            vec[k] = dirs[k] @ true[k].rotation.T
-        dist = self._dist[:n]
-        geomid = self._geomid[:n]
+        if beam_noise is not None or servo_noise is not None:
+            a = np.asarray(plane_angles, dtype=float)
+            if servo_noise is not None:
+                a = a + self.servo_jitter * servo_noise
+            b = self.beam_angles[None, :]
+            if beam_noise is not None:
+                b = b + spec.angular_jitter * beam_noise
+            a, b = np.broadcast_arrays(a[:, None], b)
+            sb = np.sin(b)
+            dirs = np.stack([np.cos(b), sb * np.cos(a), sb * np.sin(a)], axis=-1)
+        rot = np.array([t.rotation for t in true])
+        pos = np.array([t.position for t in true])
+        world_dirs = _rotate(rot, dirs)
         want_normals = spec.max_incidence < math.pi / 2
-        normal = self._normal[: 3 * n]
-        m, d = self.world.model, self.world.data
-        cutoff = spec.max_range + abs(spec.bias) + 0.05
-        same_origin = all(np.array_equal(t.position, true[0].position) for t in true)
-        if same_origin:
-            mujoco.mj_multiRay(
-                m,
-                d,
-                true[0].position,
-                self._vec[: 3 * n],
-                self._geomgroup,
-                1,
-                -1,
-                geomid,
-                dist,
-                normal if want_normals else None,
-                n,
-                cutoff,
-            )
-        else:
-            for k in range(n_p):
-                sl = slice(k * n_b, (k + 1) * n_b)
-                mujoco.mj_multiRay(
-                    m,
-                    d,
-                    true[k].position,
-                    self._vec[3 * sl.start : 3 * sl.stop],
-                    self._geomgroup,
-                    1,
-                    -1,
-                    geomid[sl],
-                    dist[sl],
-                    normal[3 * sl.start : 3 * sl.stop] if want_normals else None,
-                    n_b,
-                    cutoff,
-                )
-        true_r = dist.reshape(n_p, n_b)
-        hit = true_r >= 0.0
+        true_r, normals = self._raycast(pos, world_dirs, want_normals)
+        hit = np.isfinite(true_r)
         r = np.where(hit, true_r, 0.0)
         sigma = np.sqrt(spec.noise_sigma**2 + (spec.noise_sigma_rel * r) ** 2)
         meas = r + spec.bias + sigma * noise
         if spec.range_resolution > 0:
             meas = np.round(meas / spec.range_resolution) * spec.range_resolution
         valid = hit & (meas >= spec.min_range) & (meas <= spec.max_range) & (drop >= spec.dropout)
-        if want_normals:
-            cos_inc = -np.einsum("pbi,pbi->pb", normal.reshape(n_p, n_b, 3), vec)
+        if normals is not None:
+            cos_inc = (
+                normals[..., 0] * world_dirs[..., 0]
+                + normals[..., 1] * world_dirs[..., 1]
+                + normals[..., 2] * world_dirs[..., 2]
+            )
             valid &= cos_inc >= math.cos(spec.max_incidence)
         ranges = np.where(valid, meas, np.inf)
         meta = {
             "mode": self.mode,
+            "backend": self.backend,
             "servo_step": self.servo_step,
             "servo_range": self.servo_range,
+            "servo_jitter": self.servo_jitter,
             "n_planes": int(n_p),
         }
         return Scan(
@@ -394,31 +431,58 @@ class RotatingLidar:
             valid=valid,
             beam_angles=self.beam_angles.copy(),
             plane_angles=np.asarray(plane_angles, dtype=float).copy(),
-            timestamps=np.asarray(times, dtype=float),
-            positions=np.array([t.position for t in true]),
-            rotations=np.array([t.rotation for t in true]),
+            timestamps=np.asarray(times, dtype=float).copy(),
+            positions=pos,
+            rotations=rot,
             nominal_positions=np.array([p.position for p in nominal]),
             nominal_rotations=np.array([p.rotation for p in nominal]),
             spec=spec.to_dict(),
             metadata=meta,
         )
 
+    def _raycast(
+        self, origins: NDArray, dirs: NDArray, normals: bool
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+        """(P, B) true distances (inf: no wall within the cutoff) and optionally normals."""
+        if self.backend == "mujoco":
+            return self._caster.cast(origins, dirs, self._cutoff, normals)
+        n_p, n_b = dirs.shape[:2]
+        same = bool((origins == origins[0]).all())
+        o = origins[0] if same else np.repeat(origins, n_b, axis=0)
+        hits = self._caster.cast(o, dirs.reshape(-1, 3), self._cutoff, normals)
+        # a ray starting outside the bore reports 0: no measurement
+        dist = np.where(hits.dist > 0.0, hits.dist, np.inf).reshape(n_p, n_b)
+        return dist, hits.normal.reshape(n_p, n_b, 3) if normals else None
+
+
+def _rotate(rot: NDArray, dirs: NDArray) -> NDArray[np.float64]:
+    """(P, B, 3) directions rotated by the (P, 3, 3) per-plane rotations (component-wise: small
+    matrix products through BLAS are slower here)."""
+    x, y, z = dirs[..., 0], dirs[..., 1], dirs[..., 2]
+    out = np.empty(dirs.shape)
+    for i in range(3):
+        r = rot[:, i, :, None]  # (P, 3, 1)
+        out[..., i] = r[:, 0] * x + r[:, 1] * y + r[:, 2] * z
+    return out
+
+
+def _need_number(
+    value: Any, name: str, lo: float, hi: float, unit: str, low_open: bool = False
+) -> None:
+    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
+    if ok:
+        ok = (lo < value if low_open else lo <= value) and value <= hi
+    if not ok:
+        bracket = "(" if low_open else "["
+        raise ValueError(f"{name} = {value!r} is invalid; allowed {bracket}{lo:g}, {hi:g}] {unit}")
+
+
+def _need_rng(rng: Any) -> None:
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+
 
 def _checked(pose: Any, name: str) -> Pose:
     if not isinstance(pose, Pose):
         raise ValueError(f"{name} must be a pipe_env.geometry.Pose, got {type(pose).__name__}")
     return pose
-
-
-def _jittered(
-    local_dirs: NDArray,
-    plane_angles: NDArray,
-    beam_angles: NDArray,
-    unit_noise: NDArray,
-    sigma: float,
-) -> NDArray:
-    """Beam directions with the in-plane and plane angles perturbed by ``sigma`` * noise."""
-    a = np.asarray(plane_angles)[:, None] + sigma * unit_noise[0]
-    b = np.asarray(beam_angles)[None, :] + sigma * unit_noise[1]
-    sb = np.sin(b)
-    return np.stack([np.cos(b), sb * np.cos(a), sb * np.sin(a)], axis=-1)
