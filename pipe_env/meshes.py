@@ -48,7 +48,10 @@ def circle_segments(radius: float, tol: float = TESSELLATION_TOL) -> int:
     centre, so a ray along a pipe axis never meets an end wall exactly on a triangle edge
     (where ray-triangle tests may miss it).
     """
-    c = 1.0 - 4.0 * tol / max(radius, 1e-6)  # (1 - cos(pi/n)) / (1 + cos(pi/n)) ~ tol / r
+    # vertices at r k with k = 2 / (1 + cos(pi/n)) deviate by r (1 - cos(pi/n)) / (1 + cos(pi/n))
+    # both ways; that is tol when cos(pi/n) = (r - tol) / (r + tol)
+    r = max(radius, 1e-6)
+    c = (r - tol) / (r + tol)
     n = math.ceil(math.pi / math.acos(max(min(c, 1.0 - 1e-12), -1.0)))
     n = int(min(max(n, 25), 161))
     return n if n % 2 else n + 1

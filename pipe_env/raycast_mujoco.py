@@ -10,8 +10,8 @@ only those meshes, because measurements showed where ``mj_multiRay``'s time goes
 - each mesh is traversed through its bounding-volume hierarchy without pruning by the nearest
   hit so far, so every triangle box the ray crosses costs a test. A ray from inside the bore can
   only ever hit the bore-facing (inner) surface of a shell, so with ``inner_only`` the outer
-  surface and the end rings are dropped (about half of the triangles); the hits of rays that start
-  inside the bore are unchanged;
+  surface is dropped (about half of the triangles); the hits of rays that start inside the bore
+  are unchanged;
 - ``mj_multiRay`` releases the GIL, so ``threads > 1`` splits a batch over threads, each with its
   own ``MjData`` (useful when cores are free; results are identical).
 
@@ -36,12 +36,12 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from pipe_env.meshes import WALL
 from pipe_env.world import PipeWorld
 
 #: Tilt of every ray direction that keeps rays off exact mesh edges, radians (see module doc).
 EDGE_GUARD = 2.0e-6
-#: A face is kept in ``inner_only`` mode when a point this far along its outward normal (metres;
-#: below the shell thickness of :mod:`pipe_env.meshes`) lies inside the bore.
+#: Probe offset off a face in ``inner_only`` mode, metres (below the shell thickness ``WALL``).
 _PROBE = 0.001
 
 
@@ -96,17 +96,27 @@ def sensing_model(world: PipeWorld, inner_only: bool = True) -> mujoco.MjModel:
 
 
 def _bore_facing(verts: NDArray, faces: NDArray, bore, geom: mujoco.MjsGeom) -> NDArray:
-    """Mask of faces whose outward side (right-hand winding) looks into the bore."""
+    """Mask of the faces to keep: all but those provably on a shell's outer side.
+
+    A face is dropped only when a probe just outside it (along its outward normal) lies outside
+    the bore while a probe through the shell behind it (``WALL`` + 1 mm inwards) lies inside:
+    the outer surface of a shell around a bore. CSG leaves sliver faces where two solids overlap
+    (a mitre's seam, a hole rim) that bound the mesh's bore although no probe off them lies in
+    the exact bore; such faces fail the test and are kept, so no ray leaks through them.
+    """
     tri = verts[faces]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     length = np.linalg.norm(normal, axis=1)
     ok = length > 0
     normal[ok] /= length[ok, None]
-    probe = tri.mean(axis=1) + _PROBE * normal
+    centroid = tri.mean(axis=1)
     rot = np.zeros(9)
     mujoco.mju_quat2Mat(rot, np.asarray(geom.quat, dtype=float))
-    probe_world = probe @ rot.reshape(3, 3).T + np.asarray(geom.pos, dtype=float)
-    return ok & bore.contains(probe_world)
+    rot = rot.reshape(3, 3)
+    pos = np.asarray(geom.pos, dtype=float)
+    outside = ~bore.contains((centroid + _PROBE * normal) @ rot.T + pos)
+    behind = bore.contains((centroid - (WALL + _PROBE) * normal) @ rot.T + pos)
+    return ~(ok & outside & behind)
 
 
 class MujocoCaster:
