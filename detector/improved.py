@@ -1,0 +1,649 @@
+"""The improved detector (``method="improved"``): model fitting in the pipe frame.
+
+Where the thesis categorises points by radius and fits an ellipse to the outline of an opening,
+this method fits the 3D geometry of the structure itself, using what the PIRATE knows: the
+clamped diameter and (optionally) the sensor pose in the pipe.
+
+1. **Pipe frame.** Every return is mapped into the pipe frame (the known ``sensor_in_pipe`` pose,
+   else the thesis's centred-and-aligned assumption), then the pipe axis is refined by a robust
+   fit of a cylinder of the clamped radius to the wall points (4 parameters: cross-section
+   offset and tilt, with a weak prior towards the known pose when the wall seen is short). This
+   removes sensor misalignment (thesis 5.3) without any outside feedback.
+2. **Classification.** Each return's radial residual ``r - D/2`` is compared with a per-point
+   tolerance from the sensor model in ``scan.spec`` (range noise projected on the radius, plus a
+   floor). Non-wall returns are grouped into connected regions of the unrolled scan grid
+   (:mod:`detector.grid`); regions too small or one azimuth wide are rejected as clutter.
+3. **Hypotheses.** Returns beyond the wall (``r > D/2``) are *lobes*: openings towards an
+   outgoing pipe. Without lobes the structure is axisymmetric: an end wall (a plane
+   perpendicular to the axis, kind ``closure``) or a reducer (a cone from the wall radius to a new
+   radius: the most frequent inner radius is the new pipe, a robust line ``u = a + b r``
+   through the taper returns gives the start of the taper). With lobes, each lobe is an outgoing
+   pipe: a cylinder whose axis meets the incoming axis at the reference point ``(L, 0, 0)`` with
+   deflection ``angle``, roll ``direction`` and radius ``rho``. Initial values come from a coarse
+   grid over ``(L, angle)`` with the lobe's mean roll; all lobes are then refined jointly by
+   Tukey-weighted Gauss-Newton on the returns of every lobe (each return assigned to the surface
+   it fits best). A single lobe is also fitted as a long-radius bend (a torus of bend radius
+   ``R_b`` between the two straight pipes, the reference point still where the straight axes
+   meet) and the better fit is kept.
+4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
+   beyond the structure (more than two diameters past the reference point) around most of the
+   circumference; its option has the clamped diameter.
+5. **Kind and confidence.** One way on -> ``bend``; two or more -> ``junction``. Confidence
+   combines the number of supporting returns and the fit residual relative to the tolerance.
+   Degenerate inputs (no returns, too few wall returns, fits that fail or leave the physical
+   range) give ``straight`` with low confidence, never NaN.
+
+All lengths in metres, angles in radians.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from detector.detection import Detection
+from detector.grid import ScanGrid, build_grid, label_regions
+from detector.options import StructureOption
+from detector.robust import mad_sigma, robust_gauss_newton, tukey_weights
+from detector.scan import Scan
+from detector.transforms import SensorInPipe, option_direction
+
+X_AXIS = np.array([1.0, 0.0, 0.0])
+
+
+@dataclass(frozen=True)
+class ImprovedConfig:
+    """Tuning of the improved detector. Lengths in metres, angles in radians.
+
+    Attributes:
+        tol_floor: smallest radial tolerance of a wall return.
+        noise_k: tolerance = floor + ``noise_k`` x the return's radial noise (sensor model).
+        min_lobe_points: fewest returns beyond the wall in an opening.
+        min_region_rows: fewest azimuth rows an anomaly region must span.
+        min_anomaly_points: fewest non-wall returns for anything but ``straight``.
+        horizon: returns farther along the axis are ignored.
+        fit_points: returns used per fit (evenly subsampled).
+        prior_offset, prior_tilt: prior standard deviation of the pipe-axis refinement.
+        straight_on_coverage: fraction of the circumference on which the wall must be seen
+            beyond a junction for a straight-on option.
+    """
+
+    tol_floor: float = 0.002
+    noise_k: float = 3.0
+    min_lobe_points: int = 8
+    min_region_rows: int = 3
+    min_anomaly_points: int = 12
+    horizon: float = 2.0
+    fit_points: int = 1200
+    prior_offset: float = 0.01
+    prior_tilt: float = math.radians(3.0)
+    straight_on_coverage: float = 0.5
+
+
+DEFAULT_CONFIG = ImprovedConfig()
+
+
+# --------------------------------------------------------------------------- point cloud
+@dataclass
+class PipeCloud:
+    """Returns of one scan in the pipe frame, on the unrolled grid."""
+
+    grid: ScanGrid
+    sensor_pts: NDArray[np.float64]  # (G, K, 3) sensor frame (0 where invalid)
+    valid: NDArray[np.bool_]  # (G, K)
+    sigma_r: NDArray[np.float64]  # (G, K) radial noise of each return
+    pose: SensorInPipe
+    pts: NDArray[np.float64] = field(init=False)  # (G, K, 3) pipe frame
+
+    def set_pose(self, pose: SensorInPipe) -> None:
+        self.pose = pose
+        self.pts = pose.to_pipe(self.sensor_pts.reshape(-1, 3)).reshape(self.sensor_pts.shape)
+
+
+def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig) -> PipeCloud:
+    grid = build_grid(scan)
+    ranges = np.where(scan.valid, scan.ranges - range_bias, 0.0)
+    ranges = np.maximum(ranges, 0.0)
+    local = scan.directions() * ranges[..., None]
+    if scan.n_planes > 1 and not np.allclose(scan.nominal_positions, scan.nominal_positions[0]):
+        # continuous sweep: express every plane in the last plane's sensor frame (odometry)
+        world = (
+            np.einsum("pij,pbj->pbi", scan.nominal_rotations, local)
+            + scan.nominal_positions[:, None, :]
+        )
+        local = (world - scan.nominal_positions[-1]) @ scan.nominal_rotations[-1]
+    spec = scan.spec or {}
+    sig = float(spec.get("noise_sigma", 0.0))
+    sig_rel = float(spec.get("noise_sigma_rel", 0.0))
+    res = float(spec.get("range_resolution", 0.0))
+    sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
+    sin_b = np.abs(np.sin(scan.beam_angles))[None, :]
+    jitter = float(spec.get("angular_jitter", 0.0))
+    sigma_r = sigma_range * sin_b + ranges * jitter * np.abs(np.cos(scan.beam_angles))[None, :]
+    valid = grid.take(scan.valid, fill=False).astype(bool)
+    horizon_ok = grid.take(local[..., 0], fill=0.0) <= cfg.horizon
+    valid &= horizon_ok
+    sensor_pts = np.stack([grid.take(local[..., i], fill=0.0) for i in range(3)], axis=-1)
+    cloud = PipeCloud(grid, sensor_pts, valid, grid.take(sigma_r, fill=0.0), pose)
+    cloud.set_pose(pose)
+    return cloud
+
+
+def _subsample(idx: NDArray[np.intp], n: int) -> NDArray[np.intp]:
+    if idx.size <= n:
+        return idx
+    step = idx.size / n
+    return idx[(np.arange(n) * step).astype(np.intp)]
+
+
+# --------------------------------------------------------------------------- axis refinement
+def _axis_pose(params: NDArray[np.float64], sensor_origin: NDArray[np.float64]) -> SensorInPipe:
+    """Correction pose: pipe frame whose axis passes through (0, y0, z0) with slopes (a, b)."""
+    y0, z0, a, b = params
+    d = np.array([1.0, a, b])
+    d /= np.linalg.norm(d)
+    # rotation taking the new axis direction d to +x (minimal rotation)
+    v = np.cross(d, X_AXIS)
+    s = float(np.linalg.norm(v))
+    c = float(d @ X_AXIS)
+    if s < 1e-12:
+        rot = np.eye(3)
+    else:
+        k = v / s
+        kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+        rot = np.eye(3) + s * kx + (1.0 - c) * (kx @ kx)
+    origin = np.array([0.0, y0, z0])
+    # new coordinates: rot @ (p - origin), shifted along x so the sensor origin is at u = 0
+    pos = -rot @ origin
+    pos[0] -= float((rot @ (sensor_origin - origin))[0])
+    return SensorInPipe(pos, rot)
+
+
+def _refine_axis(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
+) -> tuple[SensorInPipe, dict[str, Any]]:
+    pts = cloud.pts[cloud.valid]
+    info: dict[str, Any] = {"axis_points": 0}
+    if pts.shape[0] < 20:
+        return cloud.pose, info
+    r = np.hypot(pts[:, 1], pts[:, 2])
+    gate = max(0.35 * big_r, 0.01)
+    cand = np.flatnonzero(np.abs(r - big_r) < gate)
+    if cand.size < 20:
+        return cloud.pose, info
+    # prefer the nearest wall returns: the structure ahead is farther
+    cand = cand[np.argsort(pts[cand, 0], kind="stable")]
+    cand = cand[: max(400, int(0.6 * cand.size))]
+    sub = pts[_subsample(cand, cfg.fit_points)]
+
+    def resid(p: NDArray[np.float64]) -> NDArray[np.float64]:
+        y0, z0, a, b = p
+        d = np.array([1.0, a, b]) / math.sqrt(1.0 + a * a + b * b)
+        q = sub - np.array([0.0, y0, z0])
+        t = q @ d
+        perp = q - t[:, None] * d
+        return np.sqrt(np.einsum("ij,ij->i", perp, perp)) - big_r
+
+    prior = np.array([cfg.prior_offset, cfg.prior_offset, cfg.prior_tilt, cfg.prior_tilt])
+    x, res, w = robust_gauss_newton(
+        resid,
+        np.zeros(4),
+        np.array([1e-5, 1e-5, 1e-5, 1e-5]),
+        c=gate,
+        iterations=12,
+        prior_sigma=prior,
+        c_final=0.004,
+    )
+    info.update(
+        axis_points=int((w > 0).sum()),
+        axis_offset=[float(x[0]), float(x[1])],
+        axis_tilt_deg=math.degrees(math.atan(math.hypot(x[2], x[3]))),
+        axis_rms=float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9))),
+    )
+    if not np.all(np.isfinite(x)) or abs(x[0]) > big_r or abs(x[1]) > big_r:
+        return cloud.pose, info
+    if math.hypot(x[2], x[3]) > math.tan(math.radians(15.0)):
+        return cloud.pose, info
+    return _axis_pose(x, cloud.pose.position).compose(cloud.pose), info
+
+
+# --------------------------------------------------------------------------- geometry helpers
+def _dir(theta: float, phi: float) -> NDArray[np.float64]:
+    st = math.sin(theta)
+    return np.array([math.cos(theta), st * math.cos(phi), st * math.sin(phi)])
+
+
+def _line_dist(p: NDArray, c: NDArray, d: NDArray) -> NDArray:
+    q = p - c
+    t = q @ d
+    perp = q - t[:, None] * d
+    return np.sqrt(np.einsum("ij,ij->i", perp, perp))
+
+
+def _torus_dist(p: NDArray, big_l: float, theta: float, phi: float, rb: float) -> NDArray:
+    """Distance from points to the centreline of a long-radius bend: the incoming axis up to the
+    tangent point, an arc of radius ``rb`` turning by ``theta`` towards roll ``phi``, then the
+    outgoing straight axis. The straight axes meet at ``(big_l, 0, 0)``."""
+    w = np.array([0.0, math.cos(phi), math.sin(phi)])
+    n = np.cross(X_AXIS, w)
+    t1 = big_l - rb * math.tan(theta / 2.0)
+    centre = np.array([t1, 0.0, 0.0]) + rb * w
+    q = p - centre
+    qa = q @ X_AXIS
+    qw = -(q @ w)
+    qn = q @ n
+    ang = np.arctan2(qa, qw)  # 0 at the tangent point on the incoming axis
+    rho_in = np.hypot(qa, qw)
+    d_arc = np.sqrt((rho_in - rb) ** 2 + qn**2)
+    d_out = _line_dist(p, np.array([big_l, 0.0, 0.0]), _dir(theta, phi))
+    d_in = np.hypot(p[:, 1], p[:, 2])
+    return np.where(ang < 0.0, d_in, np.where(ang > theta, d_out, d_arc))
+
+
+# --------------------------------------------------------------------------- main entry
+def detect_improved(
+    scan: Scan,
+    clamped_diameter: float,
+    sensor_in_pipe: object = None,
+    config: ImprovedConfig = DEFAULT_CONFIG,
+    range_bias: float | None = None,
+    refine_axis: bool = True,
+) -> Detection:
+    """The improved detector on a full sweep (see module docstring).
+
+    Args:
+        scan: a rotating-LiDAR sweep (any number of planes).
+        clamped_diameter: inner diameter from the clamping encoders, metres.
+        sensor_in_pipe: known sensor pose in the pipe frame (:class:`SensorInPipe` or a
+            ``(position, rotation)`` pair); ``None``: centred and aligned, refined from the scan.
+        config: tuning.
+        range_bias: calibrated constant range bias subtracted from every return, metres;
+            default: ``scan.spec["bias"]`` (0 if absent).
+        refine_axis: refine the pipe axis from the wall returns.
+    """
+    t0 = time.perf_counter()
+    d_clamped = float(clamped_diameter)
+    if not (math.isfinite(d_clamped) and d_clamped > 0.0):
+        raise ValueError(f"clamped_diameter must be a positive length (m), got {clamped_diameter}")
+    big_r = 0.5 * d_clamped
+    pose0 = SensorInPipe.coerce(sensor_in_pipe)
+    bias = float((scan.spec or {}).get("bias", 0.0)) if range_bias is None else float(range_bias)
+    if not math.isfinite(bias):
+        bias = 0.0
+    diag: dict[str, Any] = {"method": "improved", "n_points": int(scan.n_valid)}
+    try:
+        cloud = _prepare(scan, pose0, bias, config)
+        if refine_axis:
+            pose, axis_info = _refine_axis(cloud, big_r, config)
+            diag.update(axis_info)
+            cloud.set_pose(pose)
+        det = _detect_in_pipe_frame(cloud, big_r, config, diag)
+    except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
+        diag["error"] = f"{type(exc).__name__}: {exc}"
+        det = Detection.straight(confidence=0.0, **diag)
+    return det.with_diagnostics(time_s=time.perf_counter() - t0)
+
+
+def _detect_in_pipe_frame(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, diag: dict[str, Any]
+) -> Detection:
+    valid = cloud.valid
+    pts = cloud.pts
+    r = np.hypot(pts[..., 1], pts[..., 2])
+    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_r
+    e = np.where(valid, r - big_r, 0.0)
+    wall = valid & (np.abs(e) <= tol)
+    beyond = valid & (e > tol)
+    inside = valid & (e < -tol)
+    n_valid = int(valid.sum())
+    diag.update(
+        n_wall=int(wall.sum()), n_beyond=int(beyond.sum()), n_inside=int(inside.sum())
+    )
+    if n_valid < cfg.min_anomaly_points:
+        diag["reason"] = "too few returns"
+        return Detection.straight(confidence=0.0, **diag)
+    # significant anomaly regions
+    anomaly = beyond | inside
+    labels, n_lab = label_regions(anomaly, cloud.grid.wraps)
+    keep = np.zeros_like(anomaly)
+    if n_lab:
+        rows = np.nonzero(anomaly)[0]
+        lab = labels[anomaly]
+        counts = np.bincount(lab, minlength=n_lab + 1)
+        # rows spanned per label
+        row_span = np.zeros(n_lab + 1, dtype=int)
+        pairs = np.unique(np.stack([lab, rows], axis=1), axis=0)
+        np.add.at(row_span, pairs[:, 0], 1)
+        good = (counts >= cfg.min_anomaly_points) & (row_span >= cfg.min_region_rows)
+        good[0] = False
+        keep = good[labels] & anomaly
+    n_keep = int(keep.sum())
+    diag["n_anomaly"] = n_keep
+    wall_frac = float(wall.sum()) / max(n_valid, 1)
+    if n_keep < cfg.min_anomaly_points:
+        conf = min(1.0, float(wall.sum()) / 200.0) * wall_frac
+        return Detection.straight(confidence=conf, **diag)
+    beyond_k = beyond & keep
+    inside_k = inside & keep
+    lobes = _find_lobes(cloud, beyond_k, cfg)
+    diag["n_lobes"] = len(lobes)
+    if not lobes:
+        return _axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
+    return _branches(cloud, big_r, lobes, keep, wall, tol, cfg, diag)
+
+
+# --------------------------------------------------------------------------- lobes
+@dataclass
+class Lobe:
+    mask: NDArray[np.bool_]
+    roll: float
+    n: int
+
+
+def _find_lobes(cloud: PipeCloud, beyond: NDArray[np.bool_], cfg: ImprovedConfig) -> list[Lobe]:
+    labels, n_lab = label_regions(beyond, cloud.grid.wraps)
+    if n_lab == 0:
+        return []
+    pts = cloud.pts
+    lobes: list[Lobe] = []
+    for k in range(1, n_lab + 1):
+        m = labels == k
+        n = int(m.sum())
+        if n < cfg.min_lobe_points:
+            continue
+        nrows = int(np.any(m, axis=1).sum())
+        if nrows < cfg.min_region_rows:
+            continue
+        p = pts[m]
+        roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
+        lobes.append(Lobe(m, roll, n))
+    # merge lobes within 45 deg of roll (an opening split by dropouts)
+    lobes.sort(key=lambda lb: -lb.n)
+    merged: list[Lobe] = []
+    for lb in lobes:
+        for mg in merged:
+            if abs(_wrap(lb.roll - mg.roll)) < math.radians(45.0):
+                mg.mask = mg.mask | lb.mask
+                p = pts[mg.mask]
+                mg.roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
+                mg.n += lb.n
+                break
+        else:
+            merged.append(Lobe(lb.mask.copy(), lb.roll, lb.n))
+    # a lobe must be a real opening, not a sliver: compare with the largest
+    if merged:
+        biggest = max(m.n for m in merged)
+        merged = [m for m in merged if m.n >= max(cfg.min_lobe_points, 0.05 * biggest)]
+    return merged
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+# --------------------------------------------------------------------------- axisymmetric
+def _axisymmetric(
+    cloud: PipeCloud,
+    big_r: float,
+    inside: NDArray[np.bool_],
+    beyond: NDArray[np.bool_],
+    wall: NDArray[np.bool_],
+    tol: NDArray[np.float64],
+    cfg: ImprovedConfig,
+    diag: dict[str, Any],
+) -> Detection:
+    pts = cloud.pts
+    if not inside.any():
+        # isolated returns beyond the wall but no lobe: treat as clutter
+        return Detection.straight(confidence=0.3, **diag)
+    p = pts[inside]
+    u = p[:, 0]
+    r = np.hypot(p[:, 1], p[:, 2])
+    u_first = float(np.percentile(u, 2))
+    # --- closure: a plane perpendicular to the axis
+    u_med = float(np.median(u))
+    tol_u = 0.004 + 3.0 * float(np.median(tol[inside]))
+    on_plane = np.abs(u - u_med) <= tol_u
+    frac_plane = float(on_plane.mean())
+    diag["closure_plane_fraction"] = frac_plane
+    if frac_plane >= 0.8:
+        up = u[on_plane]
+        dist = float(np.mean(up))
+        spread = float(np.std(up))
+        cov = _azimuth_coverage(p[on_plane])
+        conf = _confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
+        diag.update(closure_rms=spread, closure_coverage=cov)
+        return Detection("closure", [StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)], conf, diag)
+    # --- reducer (contraction): new radius = most frequent inner radius
+    r2 = _radius_mode(r, r.size)
+    near_r2 = np.abs(r - r2) <= max(0.002, 2.0 * float(np.median(tol[inside])))
+    taper = (r > r2 + 0.002) & (r < big_r - 0.001) & (u <= np.percentile(u[near_r2], 50))
+    dist = u_first
+    if taper.sum() >= 6:
+        a, b = _robust_line(r[taper], u[taper])
+        cand = a + b * big_r
+        if math.isfinite(cand) and abs(cand - u_first) < 0.1:
+            dist = float(cand)
+    cov = _azimuth_coverage(p)
+    conf = _confidence(int(near_r2.sum()), mad_sigma(r[near_r2] - r2), 0.003) * cov
+    diag.update(reducer_r2=r2, reducer_support=int(near_r2.sum()), coverage=cov)
+    if r2 < 0.25 * big_r:
+        # nothing but an end wall seen obliquely: closure at the first returns
+        conf = 0.5 * conf
+        return Detection("closure", [StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)], conf, diag)
+    opt = StructureOption("reducer", max(dist, 0.0), 2.0 * r2, 0.0, 0.0, conf)
+    return Detection("reducer", [opt], conf, diag)
+
+
+def _radius_mode(r: NDArray, n: int) -> float:
+    """Most frequent radius: 1 mm histogram peak refined by the median of its neighbourhood."""
+    bins = np.floor(r / 0.001).astype(np.int64)
+    lo = int(bins.min())
+    cnt = np.bincount(bins - lo)
+    smooth = np.convolve(cnt, np.ones(3), mode="same")
+    peak = (int(np.argmax(smooth)) + lo + 0.5) * 0.001
+    near = np.abs(r - peak) <= 0.002
+    return float(np.median(r[near])) if near.any() else float(peak)
+
+
+def _robust_line(x: NDArray, y: NDArray) -> tuple[float, float]:
+    """Robust fit ``y = a + b x`` (Tukey IRLS)."""
+    w = np.ones_like(x)
+    a, b = float(np.median(y)), 0.0
+    for _ in range(6):
+        sw = w.sum()
+        if sw <= 0:
+            break
+        xm = float((w * x).sum() / sw)
+        ym = float((w * y).sum() / sw)
+        sxx = float((w * (x - xm) ** 2).sum())
+        if sxx <= 1e-18:
+            break
+        b = float((w * (x - xm) * (y - ym)).sum() / sxx)
+        a = ym - b * xm
+        res = y - (a + b * x)
+        s = max(mad_sigma(res), 1e-4)
+        w = tukey_weights(res, 4.685 * s)
+    return a, b
+
+
+def _azimuth_coverage(p: NDArray, bins: int = 36) -> float:
+    phi = np.arctan2(p[:, 2], p[:, 1])
+    k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
+    return float(np.unique(k).size) / bins
+
+
+def _confidence(n_support: int, rms: float, tol: float) -> float:
+    c = (1.0 - math.exp(-n_support / 30.0)) * math.exp(-((rms / max(tol, 1e-6)) ** 2) / 4.0)
+    return float(min(1.0, max(0.0, c)))
+
+
+# --------------------------------------------------------------------------- bends/junctions
+@dataclass
+class BranchFit:
+    theta: float
+    phi: float
+    rho: float
+    rb: float = 0.0
+
+
+def _branches(
+    cloud: PipeCloud,
+    big_r: float,
+    lobes: list[Lobe],
+    keep: NDArray[np.bool_],
+    wall: NDArray[np.bool_],
+    tol: NDArray[np.float64],
+    cfg: ImprovedConfig,
+    diag: dict[str, Any],
+) -> Detection:
+    pts = cloud.pts
+    # returns of the structure: anomalies (lobes, inner returns)
+    anomaly_idx = np.flatnonzero(keep.reshape(-1))
+    flat = pts.reshape(-1, 3)
+    sub_idx = _subsample(anomaly_idx, cfg.fit_points)
+    p_all = flat[sub_idx]
+    tol_all = tol.reshape(-1)[sub_idx]
+    tol_med = float(np.median(tol_all))
+    # crossing position of the first lobe returns: where beams left the incoming cylinder
+    inits: list[tuple[float, float]] = []
+    lobe_pts = []
+    for lb in lobes:
+        lp = pts[lb.mask]
+        lobe_pts.append(lp[_subsample(np.arange(lp.shape[0]), 300)])
+    u_edge = float("inf")
+    for lb, lp in zip(lobes, lobe_pts):
+        # crossing of r = R along the ray from the origin (sensor near the axis)
+        rr = np.hypot(lp[:, 1], lp[:, 2])
+        uc = lp[:, 0] * big_r / np.maximum(rr, 1e-9)
+        u_edge = min(u_edge, float(np.percentile(uc, 1)))
+    # --- coarse grid per lobe over (L, theta) with the lobe roll, radius = R
+    thetas = np.radians(np.arange(30.0, 151.0, 7.5))
+    l_grid = u_edge + np.linspace(0.0, 3.0 * big_r, 13)
+    c0 = max(6.0 * tol_med, 0.006)
+    best_l_cost = np.zeros(l_grid.size)
+    lobe_best_theta = []
+    for lb, lp in zip(lobes, lobe_pts):
+        costs = np.empty((l_grid.size, thetas.size))
+        for j, th in enumerate(thetas):
+            d = _dir(float(th), lb.roll)
+            for i, big_l in enumerate(l_grid):
+                res = _line_dist(lp, np.array([big_l, 0.0, 0.0]), d) - big_r
+                costs[i, j] = float(np.mean(np.minimum(res * res, c0 * c0)))
+        lobe_best_theta.append(costs)
+        best_l_cost += costs.min(axis=1)
+    i_l = int(np.argmin(best_l_cost))
+    l0 = float(l_grid[i_l])
+    fits = [
+        BranchFit(float(thetas[int(np.argmin(c[i_l]))]), lb.roll, big_r)
+        for lb, c in zip(lobes, lobe_best_theta)
+    ]
+    # --- joint refinement (straight outgoing axes through (L, 0, 0))
+    x0 = [l0]
+    for f in fits:
+        x0 += [f.theta, f.phi, f.rho]
+    x0a = np.array(x0)
+    n_l = len(fits)
+
+    def resid(x: NDArray) -> NDArray:
+        c = np.array([x[0], 0.0, 0.0])
+        best = None
+        for k in range(n_l):
+            th, ph, rho = x[1 + 3 * k : 4 + 3 * k]
+            res = _line_dist(p_all, c, _dir(th, ph)) - rho
+            best = res if best is None else np.where(np.abs(res) < np.abs(best), res, best)
+        return best
+
+    scales = np.array([1e-5] + [1e-5, 1e-5, 1e-5] * n_l)
+    lower = np.array([-0.5] + [math.radians(5.0), -10.0, 0.25 * big_r] * n_l)
+    upper = np.array([cfg.horizon] + [math.radians(175.0), 10.0, 2.5 * big_r] * n_l)
+    c_fin = max(3.0 * tol_med, 0.003)
+    x, res, w = robust_gauss_newton(
+        resid, x0a, scales, c=c0 * 2, iterations=14, lower=lower, upper=upper, c_final=c_fin
+    )
+    rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
+    support = int((w > 0.1).sum())
+    diag.update(fit_rms=rms, fit_support=support, fit_points=int(p_all.shape[0]))
+    model = "straight_axes"
+    fits = [BranchFit(x[1 + 3 * k], x[2 + 3 * k], x[3 + 3 * k]) for k in range(n_l)]
+    big_l = float(x[0])
+    # --- a single way on may be a long-radius bend: try a torus
+    straight_on, cov_on = _straight_on(cloud, big_r, big_l, wall, cfg)
+    diag["straight_on_coverage"] = cov_on
+    if n_l == 1 and not straight_on:
+        tor = _fit_torus(p_all, big_r, big_l, fits[0], c0, c_fin)
+        if tor is not None:
+            xt, rms_t, sup_t = tor
+            diag.update(torus_rms=rms_t, torus_support=sup_t, torus_rb=float(xt[4]))
+            if sup_t >= support * 0.98 and rms_t < rms * 0.85 and xt[4] > 0.4 * big_r:
+                big_l = float(xt[0])
+                fits = [BranchFit(xt[1], xt[2], xt[3], xt[4])]
+                rms, support = rms_t, sup_t
+                model = "torus"
+    diag["model"] = model
+    # --- options
+    if not (math.isfinite(big_l) and -0.5 <= big_l <= cfg.horizon):
+        diag["reason"] = "fit left the physical range"
+        return Detection.straight(confidence=0.0, **diag)
+    conf = _confidence(support, rms, c_fin / 3.0)
+    options: list[StructureOption] = []
+    for f in fits:
+        d = _dir(f.theta, f.phi)
+        angle, direction = option_direction(d, cloud.pose)
+        diameter = 2.0 * float(f.rho)
+        options.append(StructureOption("bend", big_l, diameter, direction, angle, conf))
+    if straight_on:
+        options.append(StructureOption("junction", big_l, 2.0 * big_r, 0.0, 0.0, conf * cov_on))
+    kind = "bend" if len(options) == 1 else "junction"
+    options = [
+        StructureOption(kind, o.distance, o.diameter, o.direction, o.angle, o.confidence)
+        for o in options
+    ]
+    options.sort(key=lambda o: (round(o.angle, 6), o.direction))
+    return Detection(kind, options, conf, diag)
+
+
+def _straight_on(
+    cloud: PipeCloud, big_r: float, big_l: float, wall: NDArray[np.bool_], cfg: ImprovedConfig
+) -> tuple[bool, float]:
+    """Is the incoming pipe's wall seen again well beyond the structure, all around?"""
+    u = cloud.pts[..., 0]
+    far = wall & (u > big_l + 4.0 * big_r)
+    if far.sum() < 10:
+        return False, 0.0
+    cov = _azimuth_coverage(cloud.pts[far])
+    return cov >= cfg.straight_on_coverage, cov
+
+
+def _fit_torus(
+    p: NDArray, big_r: float, big_l: float, f: BranchFit, c0: float, c_fin: float
+) -> tuple[NDArray, float, int] | None:
+    def resid(x: NDArray) -> NDArray:
+        return _torus_dist(p, x[0], x[1], x[2], x[4]) - x[3]
+
+    best = None
+    for rb_factor in (1.0, 1.5, 2.5):
+        x0 = np.array([big_l, f.theta, f.phi, big_r, rb_factor * 2.0 * big_r])
+        lower = np.array([-0.5, math.radians(5.0), -10.0, 0.5 * big_r, 0.2 * big_r])
+        upper = np.array([3.0, math.radians(175.0), 10.0, 2.0 * big_r, 8.0 * big_r])
+        x, res, w = robust_gauss_newton(
+            resid,
+            x0,
+            np.full(5, 1e-5),
+            c=c0 * 2,
+            iterations=12,
+            lower=lower,
+            upper=upper,
+            c_final=c_fin,
+        )
+        rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
+        sup = int((w > 0.1).sum())
+        score = sup - 0.0
+        if best is None or (score, -rms) > (best[2], -best[1]):
+            best = (x, rms, sup)
+    return best
