@@ -182,6 +182,4 @@ def _from_conic(conic: NDArray[np.float64], x: NDArray, y: NDArray) -> Ellipse |
     if not (np.all(np.isfinite(centre)) and all(math.isfinite(v) for v in out)):
         return EllipseFitFailure("non-finite ellipse parameters", n)
     sign = 1.0 if A >= 0 else -1.0
-    return Ellipse(
-        centre, out[0], out[1], out[2], sign * np.array([A, B, C, D, E, F]), out[3], n
-    )
+    return Ellipse(centre, out[0], out[1], out[2], sign * np.array([A, B, C, D, E, F]), out[3], n)

@@ -301,9 +301,7 @@ def _detect_in_pipe_frame(
     beyond = valid & (e > tol)
     inside = valid & (e < -tol)
     n_valid = int(valid.sum())
-    diag.update(
-        n_wall=int(wall.sum()), n_beyond=int(beyond.sum()), n_inside=int(inside.sum())
-    )
+    diag.update(n_wall=int(wall.sum()), n_beyond=int(beyond.sum()), n_inside=int(inside.sum()))
     if n_valid < cfg.min_anomaly_points:
         diag["reason"] = "too few returns"
         return Detection.straight(confidence=0.0, **diag)
@@ -418,7 +416,9 @@ def _axisymmetric(
         cov = _azimuth_coverage(p[on_plane])
         conf = _confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
         diag.update(closure_rms=spread, closure_coverage=cov)
-        return Detection("closure", [StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)], conf, diag)
+        return Detection(
+            "closure", [StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)], conf, diag
+        )
     # --- reducer (contraction): new radius = most frequent inner radius
     r2 = _radius_mode(r, r.size)
     near_r2 = np.abs(r - r2) <= max(0.002, 2.0 * float(np.median(tol[inside])))
@@ -435,7 +435,9 @@ def _axisymmetric(
     if r2 < 0.25 * big_r:
         # nothing but an end wall seen obliquely: closure at the first returns
         conf = 0.5 * conf
-        return Detection("closure", [StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)], conf, diag)
+        return Detection(
+            "closure", [StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)], conf, diag
+        )
     opt = StructureOption("reducer", max(dist, 0.0), 2.0 * r2, 0.0, 0.0, conf)
     return Detection("reducer", [opt], conf, diag)
 

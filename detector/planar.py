@@ -184,9 +184,7 @@ def detect_planar_thesis(
     for name, mask in sides.items():
         idx = np.flatnonzero(mask)
         order = idx[np.argsort(-np.abs(beta[idx]), kind="stable")]
-        gaps, wall_angle = gap_detection(
-            forward[order], radius[order], big_r, tolerance, min_gap
-        )
+        gaps, wall_angle = gap_detection(forward[order], radius[order], big_r, tolerance, min_gap)
         direction = alpha if name == "left" else alpha + math.pi
         gap_diag[name] = {
             "gaps": [g.__dict__ for g in gaps],
@@ -215,8 +213,10 @@ def detect_planar_thesis(
             kind = "junction"
             dist = float(np.mean([o.distance for o in options]))
             options.append(StructureOption("junction", dist, clamped_diameter, 0.0, 0.0, 1.0))
-        options = [StructureOption(kind, o.distance, o.diameter, o.direction, o.angle, 1.0)
-                   for o in options]
+        options = [
+            StructureOption(kind, o.distance, o.diameter, o.direction, o.angle, 1.0)
+            for o in options
+        ]
         diag["time_s"] = time.perf_counter() - t0
         return Detection(kind, options, 1.0, diag)
     # no gap: obstruction or reducer

@@ -197,9 +197,7 @@ def detect_spatial_thesis(
         options.append(
             StructureOption(kind, float(centre[0]), float(diameter), direction, angle, 1.0)
         )
-        ellipses.append(
-            {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in e.items()}
-        )
+        ellipses.append({k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in e.items()})
     diag["ellipses"] = ellipses
     if not options:
         diag["reason"] = "no outline gave an ellipse"
