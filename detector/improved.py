@@ -67,7 +67,8 @@ class ImprovedConfig:
         min_region_rows: fewest azimuth rows an anomaly region must span.
         min_anomaly_points: fewest non-wall returns for anything but ``straight``.
         horizon: returns farther along the axis are ignored.
-        fit_points: returns used per fit (evenly subsampled).
+        fit_points: returns used per structure fit (evenly subsampled).
+        axis_points: wall returns used for the pipe-axis refinement.
         prior_offset, prior_tilt: prior standard deviation of the pipe-axis refinement.
         straight_on_coverage: fraction of the circumference on which the wall must be seen
             beyond a junction for a straight-on option.
@@ -79,7 +80,8 @@ class ImprovedConfig:
     min_region_rows: int = 3
     min_anomaly_points: int = 12
     horizon: float = 2.0
-    fit_points: int = 1200
+    fit_points: int = 500
+    axis_points: int = 600
     prior_offset: float = 0.01
     prior_tilt: float = math.radians(3.0)
     straight_on_coverage: float = 0.5
@@ -164,6 +166,30 @@ def _axis_pose(params: NDArray[np.float64], sensor_origin: NDArray[np.float64]) 
     return SensorInPipe(pos, rot)
 
 
+def _cyl_axis_residual(
+    sub: NDArray[np.float64], big_r: float, x: NDArray[np.float64], want_jac: bool
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """Residual (distance to the axis - R) of points for the axis through (0, y0, z0) along
+    (1, a, b), and its analytic Jacobian."""
+    y0, z0, a, b = x
+    n = math.sqrt(1.0 + a * a + b * b)
+    d = np.array([1.0, a, b]) / n
+    q = sub - np.array([0.0, y0, z0])
+    t = q @ d
+    dist = np.sqrt(np.maximum(np.einsum("ij,ij->i", q, q) - t * t, 1e-18))
+    res = dist - big_r
+    if not want_jac:
+        return res, None
+    jac = np.empty((sub.shape[0], 4))
+    jac[:, 0] = (t * d[1] - q[:, 1]) / dist
+    jac[:, 1] = (t * d[2] - q[:, 2]) / dist
+    dda = (np.array([0.0, 1.0, 0.0]) - d * d[1]) / n
+    ddb = (np.array([0.0, 0.0, 1.0]) - d * d[2]) / n
+    jac[:, 2] = -t * (q @ dda) / dist
+    jac[:, 3] = -t * (q @ ddb) / dist
+    return res, jac
+
+
 def _refine_axis(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
 ) -> tuple[SensorInPipe, dict[str, Any]]:
@@ -179,25 +205,17 @@ def _refine_axis(
     # prefer the nearest wall returns: the structure ahead is farther
     cand = cand[np.argsort(pts[cand, 0], kind="stable")]
     cand = cand[: max(400, int(0.6 * cand.size))]
-    sub = pts[_subsample(cand, cfg.fit_points)]
-
-    def resid(p: NDArray[np.float64]) -> NDArray[np.float64]:
-        y0, z0, a, b = p
-        d = np.array([1.0, a, b]) / math.sqrt(1.0 + a * a + b * b)
-        q = sub - np.array([0.0, y0, z0])
-        t = q @ d
-        perp = q - t[:, None] * d
-        return np.sqrt(np.einsum("ij,ij->i", perp, perp)) - big_r
-
+    sub = pts[_subsample(cand, cfg.axis_points)]
     prior = np.array([cfg.prior_offset, cfg.prior_offset, cfg.prior_tilt, cfg.prior_tilt])
     x, res, w = robust_gauss_newton(
-        resid,
+        lambda p: _cyl_axis_residual(sub, big_r, p, False)[0],
         np.zeros(4),
-        np.array([1e-5, 1e-5, 1e-5, 1e-5]),
+        np.full(4, 1e-5),
         c=gate,
-        iterations=12,
+        iterations=10,
         prior_sigma=prior,
         c_final=0.004,
+        jacobian=lambda p: _cyl_axis_residual(sub, big_r, p, True)[1],
     )
     info.update(
         axis_points=int((w > 0).sum()),
@@ -221,28 +239,33 @@ def _dir(theta: float, phi: float) -> NDArray[np.float64]:
 def _line_dist(p: NDArray, c: NDArray, d: NDArray) -> NDArray:
     q = p - c
     t = q @ d
-    perp = q - t[:, None] * d
-    return np.sqrt(np.einsum("ij,ij->i", perp, perp))
+    return np.sqrt(np.maximum(np.einsum("ij,ij->i", q, q) - t * t, 0.0))
 
 
 def _torus_dist(p: NDArray, big_l: float, theta: float, phi: float, rb: float) -> NDArray:
     """Distance from points to the centreline of a long-radius bend: the incoming axis up to the
     tangent point, an arc of radius ``rb`` turning by ``theta`` towards roll ``phi``, then the
     outgoing straight axis. The straight axes meet at ``(big_l, 0, 0)``."""
-    w = np.array([0.0, math.cos(phi), math.sin(phi)])
-    n = np.cross(X_AXIS, w)
+    d, _ = _torus_parts(p, big_l, theta, phi, rb)
+    return d
+
+
+def _torus_parts(
+    p: NDArray, big_l: float, theta: float, phi: float, rb: float
+) -> tuple[NDArray, NDArray]:
+    """(distance to the bend centreline, arc angle of each point's projection)."""
+    cp, sp = math.cos(phi), math.sin(phi)
     t1 = big_l - rb * math.tan(theta / 2.0)
-    centre = np.array([t1, 0.0, 0.0]) + rb * w
-    q = p - centre
-    qa = q @ X_AXIS
-    qw = -(q @ w)
-    qn = q @ n
+    qa = p[:, 0] - t1
+    py = p[:, 1] - rb * cp
+    pz = p[:, 2] - rb * sp
+    qw = -(py * cp + pz * sp)
+    qn = pz * cp - py * sp
     ang = np.arctan2(qa, qw)  # 0 at the tangent point on the incoming axis
-    rho_in = np.hypot(qa, qw)
-    d_arc = np.sqrt((rho_in - rb) ** 2 + qn**2)
+    d_arc = np.sqrt((np.hypot(qa, qw) - rb) ** 2 + qn**2)
     d_out = _line_dist(p, np.array([big_l, 0.0, 0.0]), _dir(theta, phi))
     d_in = np.hypot(p[:, 1], p[:, 2])
-    return np.where(ang < 0.0, d_in, np.where(ang > theta, d_out, d_arc))
+    return np.where(ang < 0.0, d_in, np.where(ang > theta, d_out, d_arc)), ang
 
 
 # --------------------------------------------------------------------------- main entry
@@ -314,9 +337,9 @@ def _detect_in_pipe_frame(
         lab = labels[anomaly]
         counts = np.bincount(lab, minlength=n_lab + 1)
         # rows spanned per label
-        row_span = np.zeros(n_lab + 1, dtype=int)
-        pairs = np.unique(np.stack([lab, rows], axis=1), axis=0)
-        np.add.at(row_span, pairs[:, 0], 1)
+        spans = np.zeros((n_lab + 1, anomaly.shape[0]), dtype=bool)
+        spans[lab, rows] = True
+        row_span = spans.sum(axis=1)
         good = (counts >= cfg.min_anomaly_points) & (row_span >= cfg.min_region_rows)
         good[0] = False
         keep = good[labels] & anomaly
@@ -477,7 +500,7 @@ def _robust_line(x: NDArray, y: NDArray) -> tuple[float, float]:
 def _azimuth_coverage(p: NDArray, bins: int = 36) -> float:
     phi = np.arctan2(p[:, 2], p[:, 1])
     k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
-    return float(np.unique(k).size) / bins
+    return float(np.count_nonzero(np.bincount(k, minlength=bins))) / bins
 
 
 def _confidence(n_support: int, rms: float, tol: float) -> float:
@@ -494,6 +517,43 @@ class BranchFit:
     rb: float = 0.0
 
 
+def _line_resjac(
+    p: NDArray, x: NDArray, n_l: int, want_jac: bool
+) -> tuple[NDArray, NDArray | None]:
+    """Residuals of points to the nearest of ``n_l`` outgoing cylinders whose axes meet the
+    incoming axis at ``(x[0], 0, 0)``; parameters per lobe: (theta, phi, rho)."""
+    q = p - np.array([x[0], 0.0, 0.0])
+    qq = np.einsum("ij,ij->i", q, q)
+    best = np.full(p.shape[0], np.inf)
+    arg = np.zeros(p.shape[0], dtype=np.intp)
+    parts = []
+    for k in range(n_l):
+        th, ph, rho = x[1 + 3 * k : 4 + 3 * k]
+        d = _dir(th, ph)
+        t = q @ d
+        dist = np.sqrt(np.maximum(qq - t * t, 1e-18))
+        res = dist - rho
+        better = np.abs(res) < np.abs(best)
+        best = np.where(better, res, best)
+        arg = np.where(better, k, arg)
+        parts.append((d, t, dist, th, ph))
+    if not want_jac:
+        return best, None
+    jac = np.zeros((p.shape[0], 1 + 3 * n_l))
+    for k, (d, t, dist, th, ph) in enumerate(parts):
+        m = arg == k
+        if not m.any():
+            continue
+        qk, tk, dk = q[m], t[m], dist[m]
+        d_th = np.array([-math.sin(th), math.cos(th) * math.cos(ph), math.cos(th) * math.sin(ph)])
+        d_ph = np.array([0.0, -math.sin(th) * math.sin(ph), math.sin(th) * math.cos(ph)])
+        jac[m, 0] = (tk * d[0] - qk[:, 0]) / dk
+        jac[m, 1 + 3 * k] = -tk * (qk @ d_th) / dk
+        jac[m, 2 + 3 * k] = -tk * (qk @ d_ph) / dk
+        jac[m, 3 + 3 * k] = -1.0
+    return best, jac
+
+
 def _branches(
     cloud: PipeCloud,
     big_r: float,
@@ -505,68 +565,56 @@ def _branches(
     diag: dict[str, Any],
 ) -> Detection:
     pts = cloud.pts
-    # returns of the structure: anomalies (lobes, inner returns)
-    anomaly_idx = np.flatnonzero(keep.reshape(-1))
     flat = pts.reshape(-1, 3)
+    anomaly_idx = np.flatnonzero(keep.reshape(-1))
     sub_idx = _subsample(anomaly_idx, cfg.fit_points)
     p_all = flat[sub_idx]
-    tol_all = tol.reshape(-1)[sub_idx]
-    tol_med = float(np.median(tol_all))
-    # crossing position of the first lobe returns: where beams left the incoming cylinder
-    inits: list[tuple[float, float]] = []
+    tol_med = float(np.median(tol.reshape(-1)[sub_idx]))
+    noise_med = float(np.median(cloud.sigma_r.reshape(-1)[sub_idx])) + 0.3e-3
     lobe_pts = []
+    u_edge = math.inf
     for lb in lobes:
         lp = pts[lb.mask]
-        lobe_pts.append(lp[_subsample(np.arange(lp.shape[0]), 300)])
-    u_edge = float("inf")
-    for lb, lp in zip(lobes, lobe_pts):
-        # crossing of r = R along the ray from the origin (sensor near the axis)
+        lp = lp[_subsample(np.arange(lp.shape[0]), 200)]
+        lobe_pts.append(lp)
+        # where the beams left the incoming cylinder (sensor near the axis)
         rr = np.hypot(lp[:, 1], lp[:, 2])
         uc = lp[:, 0] * big_r / np.maximum(rr, 1e-9)
         u_edge = min(u_edge, float(np.percentile(uc, 1)))
-    # --- coarse grid per lobe over (L, theta) with the lobe roll, radius = R
+    # --- coarse grid per lobe over (L, theta) with the lobe's roll and radius R
     thetas = np.radians(np.arange(30.0, 151.0, 7.5))
     l_grid = u_edge + np.linspace(0.0, 3.0 * big_r, 13)
     c0 = max(6.0 * tol_med, 0.006)
-    best_l_cost = np.zeros(l_grid.size)
-    lobe_best_theta = []
+    total = np.zeros(l_grid.size)
+    per_lobe = []
     for lb, lp in zip(lobes, lobe_pts):
-        costs = np.empty((l_grid.size, thetas.size))
-        for j, th in enumerate(thetas):
-            d = _dir(float(th), lb.roll)
-            for i, big_l in enumerate(l_grid):
-                res = _line_dist(lp, np.array([big_l, 0.0, 0.0]), d) - big_r
-                costs[i, j] = float(np.mean(np.minimum(res * res, c0 * c0)))
-        lobe_best_theta.append(costs)
-        best_l_cost += costs.min(axis=1)
-    i_l = int(np.argmin(best_l_cost))
-    l0 = float(l_grid[i_l])
-    fits = [
-        BranchFit(float(thetas[int(np.argmin(c[i_l]))]), lb.roll, big_r)
-        for lb, c in zip(lobes, lobe_best_theta)
-    ]
-    # --- joint refinement (straight outgoing axes through (L, 0, 0))
-    x0 = [l0]
-    for f in fits:
-        x0 += [f.theta, f.phi, f.rho]
+        dirs = np.stack([_dir(float(t), lb.roll) for t in thetas])  # (T, 3)
+        q = lp[None, :, :] - np.stack([l_grid, 0 * l_grid, 0 * l_grid], axis=1)[:, None, :]
+        qq = np.einsum("lnk,lnk->ln", q, q)
+        t = q @ dirs.T  # (L, n, T)
+        res = np.sqrt(np.maximum(qq[..., None] - t * t, 0.0)) - big_r
+        cost = np.minimum(res * res, c0 * c0).mean(axis=1)  # (L, T)
+        per_lobe.append(cost)
+        total += cost.min(axis=1)
+    i_l = int(np.argmin(total))
+    x0 = [float(l_grid[i_l])]
+    for lb, cost in zip(lobes, per_lobe):
+        x0 += [float(thetas[int(np.argmin(cost[i_l]))]), lb.roll, big_r]
+    n_l = len(lobes)
     x0a = np.array(x0)
-    n_l = len(fits)
-
-    def resid(x: NDArray) -> NDArray:
-        c = np.array([x[0], 0.0, 0.0])
-        best = None
-        for k in range(n_l):
-            th, ph, rho = x[1 + 3 * k : 4 + 3 * k]
-            res = _line_dist(p_all, c, _dir(th, ph)) - rho
-            best = res if best is None else np.where(np.abs(res) < np.abs(best), res, best)
-        return best
-
-    scales = np.array([1e-5] + [1e-5, 1e-5, 1e-5] * n_l)
     lower = np.array([-0.5] + [math.radians(5.0), -10.0, 0.25 * big_r] * n_l)
     upper = np.array([cfg.horizon] + [math.radians(175.0), 10.0, 2.5 * big_r] * n_l)
     c_fin = max(3.0 * tol_med, 0.003)
     x, res, w = robust_gauss_newton(
-        resid, x0a, scales, c=c0 * 2, iterations=14, lower=lower, upper=upper, c_final=c_fin
+        lambda v: _line_resjac(p_all, v, n_l, False)[0],
+        x0a,
+        np.full(x0a.size, 1e-5),
+        c=2.0 * c0,
+        iterations=12,
+        lower=lower,
+        upper=upper,
+        c_final=c_fin,
+        jacobian=lambda v: _line_resjac(p_all, v, n_l, True)[1],
     )
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     support = int((w > 0.1).sum())
@@ -574,31 +622,33 @@ def _branches(
     model = "straight_axes"
     fits = [BranchFit(x[1 + 3 * k], x[2 + 3 * k], x[3 + 3 * k]) for k in range(n_l)]
     big_l = float(x[0])
-    # --- a single way on may be a long-radius bend: try a torus
     straight_on, cov_on = _straight_on(cloud, big_r, big_l, wall, cfg)
     diag["straight_on_coverage"] = cov_on
-    if n_l == 1 and not straight_on:
+    # --- a single way on that the straight model explains poorly: a long-radius bend (torus)
+    lower_bound = False
+    if n_l == 1 and not straight_on and rms > 2.0 * noise_med:
         tor = _fit_torus(p_all, big_r, big_l, fits[0], c0, c_fin)
         if tor is not None:
-            xt, rms_t, sup_t = tor
+            xt, rms_t, sup_t, vis = tor
             diag.update(torus_rms=rms_t, torus_support=sup_t, torus_rb=float(xt[4]))
-            if sup_t >= support * 0.98 and rms_t < rms * 0.85 and xt[4] > 0.4 * big_r:
+            if sup_t >= support * 0.98 and rms_t < rms * 0.85:
                 big_l = float(xt[0])
                 fits = [BranchFit(xt[1], xt[2], xt[3], xt[4])]
                 rms, support = rms_t, sup_t
                 model = "torus"
+                # the end of the arc unseen: the angle is only a lower bound
+                lower_bound = vis >= float(xt[1]) - math.radians(3.0)
+                diag["torus_visible_arc_deg"] = math.degrees(vis)
     diag["model"] = model
-    # --- options
+    diag["angle_lower_bound"] = lower_bound
     if not (math.isfinite(big_l) and -0.5 <= big_l <= cfg.horizon):
         diag["reason"] = "fit left the physical range"
         return Detection.straight(confidence=0.0, **diag)
-    conf = _confidence(support, rms, c_fin / 3.0)
+    conf = _confidence(support, rms, c_fin / 3.0) * (0.6 if lower_bound else 1.0)
     options: list[StructureOption] = []
     for f in fits:
-        d = _dir(f.theta, f.phi)
-        angle, direction = option_direction(d, cloud.pose)
-        diameter = 2.0 * float(f.rho)
-        options.append(StructureOption("bend", big_l, diameter, direction, angle, conf))
+        angle, direction = option_direction(_dir(f.theta, f.phi), cloud.pose)
+        options.append(StructureOption("bend", big_l, 2.0 * float(f.rho), direction, angle, conf))
     if straight_on:
         options.append(StructureOption("junction", big_l, 2.0 * big_r, 0.0, 0.0, conf * cov_on))
     kind = "bend" if len(options) == 1 else "junction"
@@ -624,28 +674,34 @@ def _straight_on(
 
 def _fit_torus(
     p: NDArray, big_r: float, big_l: float, f: BranchFit, c0: float, c_fin: float
-) -> tuple[NDArray, float, int] | None:
-    def resid(x: NDArray) -> NDArray:
-        return _torus_dist(p, x[0], x[1], x[2], x[4]) - x[3]
+) -> tuple[NDArray, float, int, float] | None:
+    """Long-radius bend fit from two bend-radius starts; returns (x, rms, support,
+    largest arc angle seen)."""
+    sub = p[_subsample(np.arange(p.shape[0]), 300)]
 
+    def resid(x: NDArray) -> NDArray:
+        return _torus_dist(sub, x[0], x[1], x[2], x[4]) - x[3]
+
+    lower = np.array([-0.5, math.radians(5.0), -10.0, 0.5 * big_r, 0.2 * big_r])
+    upper = np.array([3.0, math.radians(175.0), 10.0, 2.0 * big_r, 8.0 * big_r])
     best = None
-    for rb_factor in (1.0, 1.5, 2.5):
+    for rb_factor in (1.25, 2.5):
         x0 = np.array([big_l, f.theta, f.phi, big_r, rb_factor * 2.0 * big_r])
-        lower = np.array([-0.5, math.radians(5.0), -10.0, 0.5 * big_r, 0.2 * big_r])
-        upper = np.array([3.0, math.radians(175.0), 10.0, 2.0 * big_r, 8.0 * big_r])
         x, res, w = robust_gauss_newton(
-            resid,
-            x0,
-            np.full(5, 1e-5),
-            c=c0 * 2,
-            iterations=12,
-            lower=lower,
-            upper=upper,
+            resid, x0, np.full(5, 1e-6), c=c0 * 2, iterations=10, lower=lower, upper=upper,
             c_final=c_fin,
         )
         rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
         sup = int((w > 0.1).sum())
-        score = sup - 0.0
-        if best is None or (score, -rms) > (best[2], -best[1]):
+        if best is None or (sup, -rms) > (best[2], -best[1]):
             best = (x, rms, sup)
-    return best
+    if best is None:
+        return None
+    x, rms, sup = best
+    res_full = _torus_dist(p, x[0], x[1], x[2], x[4]) - x[3]
+    _, ang = _torus_parts(p, x[0], x[1], x[2], x[4])
+    ok = np.abs(res_full) < c_fin
+    vis = float(np.max(ang[ok])) if ok.any() else 0.0
+    sup_full = int(ok.sum() * (p.shape[0] / max(sub.shape[0], 1)) / (p.shape[0] / sub.shape[0]))
+    rms_full = float(np.sqrt(np.mean(res_full[ok] ** 2))) if ok.any() else math.inf
+    return x, rms_full, int(ok.sum()) if sup_full >= 0 else sup, vis

@@ -37,6 +37,9 @@ def robust_gauss_newton(
     lower: NDArray[np.float64] | None = None,
     upper: NDArray[np.float64] | None = None,
     c_final: float | None = None,
+    data_sigma: float = 1e-3,
+    jacobian: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
+    step_tol: float = 1e-7,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Minimise ``sum rho_c(residual(x))`` (+ a gaussian prior) by reweighted Gauss-Newton.
 
@@ -48,6 +51,10 @@ def robust_gauss_newton(
             ``c_final`` (default ``c``) over the iterations.
         prior_sigma, prior_mean: optional independent gaussian prior per parameter
             (``inf`` sigma = none).
+        data_sigma: standard deviation of one residual, which weighs the data against the
+            prior (MAP estimate).
+        jacobian: optional analytic Jacobian ``x -> (N, n_params)``; numeric otherwise.
+        step_tol: stop when every parameter step is below this.
         lower, upper: box bounds (clipped after every step).
 
     Returns:
@@ -64,17 +71,22 @@ def robust_gauss_newton(
         w = tukey_weights(r, ci)
         if w.sum() < n_p + 1:
             break
-        jac = np.empty((r.size, n_p))
-        for k in range(n_p):
-            xk = x.copy()
-            xk[k] += eps[k]
-            jac[:, k] = (residual(xk) - r) / eps[k]
+        if jacobian is not None:
+            jac = jacobian(x)
+        else:
+            jac = np.empty((r.size, n_p))
+            for k in range(n_p):
+                xk = x.copy()
+                xk[k] += eps[k]
+                jac[:, k] = (residual(xk) - r) / eps[k]
         jw = jac * w[:, None]
         h = jac.T @ jw
         g = jw.T @ r
         if prior_sigma is not None:
             pm = x0 if prior_mean is None else prior_mean
-            inv = np.where(np.isfinite(prior_sigma), 1.0 / np.square(prior_sigma), 0.0)
+            inv = np.where(
+                np.isfinite(prior_sigma), np.square(data_sigma / np.asarray(prior_sigma)), 0.0
+            )
             h = h + np.diag(inv)
             g = g + inv * (x - pm)
         cost0 = float(np.sum(w * r * r))
@@ -103,7 +115,7 @@ def robust_gauss_newton(
             lam *= 10.0
         if not step_ok:
             break
-        if np.all(np.abs(dx) < 1e-3 * eps):
+        if np.all(np.abs(dx) < step_tol):
             break
     w = tukey_weights(r, cf)
     return x, r, w
