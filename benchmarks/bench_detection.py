@@ -204,7 +204,7 @@ def match_options(
         if not left:
             break
 
-        def cost(o: StructureOption) -> float:
+        def cost(o: StructureOption, t: StructureOption = t) -> float:
             dd = abs(_wrap(o.direction - t.direction)) * min(math.sin(t.angle), 1.0)
             return abs(o.angle - t.angle) + dd
 
@@ -660,7 +660,8 @@ def main(argv: list[str] | None = None) -> int:
     elapsed = time.perf_counter() - t_start
     header = (
         f"# Detection accuracy study ({'quick' if quick else 'full'} run, seed "
-        f"{args.seed}, {elapsed / 60:.1f} min, threads={os.environ.get('OMP_NUM_THREADS', 'default')})\n"
+        f"{args.seed}, {elapsed / 60:.1f} min, "
+        f"threads={os.environ.get('OMP_NUM_THREADS', 'default')})\n"
     )
     report = header + "\n\n".join(sections) + "\n"
     (out / "report.md").write_text(report)

@@ -62,7 +62,8 @@ class ImprovedConfig:
 
     Attributes:
         tol_floor: smallest radial tolerance of a wall return.
-        noise_k: tolerance = floor + ``noise_k`` x the return's radial noise (sensor model).
+        noise_k: tolerance = floor + ``noise_k`` x the return's radial noise (sensor model)
+            + ``axis_slope`` x the return's distance along the axis (residual axis error).
         min_lobe_points: fewest returns beyond the wall in an opening.
         min_region_rows: fewest azimuth rows an anomaly region must span.
         min_anomaly_points: fewest non-wall returns for anything but ``straight``.
@@ -75,6 +76,7 @@ class ImprovedConfig:
     """
 
     tol_floor: float = 0.002
+    axis_slope: float = 0.002
     noise_k: float = 3.0
     min_lobe_points: int = 8
     min_region_rows: int = 3
@@ -191,8 +193,11 @@ def _cyl_axis_residual(
 
 
 def _refine_axis(
-    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float | None = None
 ) -> tuple[SensorInPipe, dict[str, Any]]:
+    """Refine the pipe axis from the wall returns. Without ``u_max`` the nearest 60 % of the
+    wall-like returns are used (a structure ahead is farther away); with it, every wall-like
+    return before ``u_max`` (the start of the structure), which gives the tilt a long lever."""
     pts = cloud.pts[cloud.valid]
     info: dict[str, Any] = {"axis_points": 0}
     if pts.shape[0] < 20:
@@ -202,9 +207,13 @@ def _refine_axis(
     cand = np.flatnonzero(np.abs(r - big_r) < gate)
     if cand.size < 20:
         return cloud.pose, info
-    # prefer the nearest wall returns: the structure ahead is farther
     cand = cand[np.argsort(pts[cand, 0], kind="stable")]
-    cand = cand[: max(400, int(0.6 * cand.size))]
+    if u_max is None:
+        cand = cand[: max(400, int(0.6 * cand.size))]
+    else:
+        cand = cand[pts[cand, 0] < u_max]
+        if cand.size < 40:
+            return cloud.pose, info
     sub = pts[_subsample(cand, cfg.axis_points)]
     prior = np.array([cfg.prior_offset, cfg.prior_offset, cfg.prior_tilt, cfg.prior_tilt])
     x, res, w = robust_gauss_newton(
@@ -305,6 +314,13 @@ def detect_improved(
             pose, axis_info = _refine_axis(cloud, big_r, config)
             diag.update(axis_info)
             cloud.set_pose(pose)
+            # second pass: all of the intact wall before the structure
+            u_start = _structure_start(cloud, big_r, config)
+            pose2, axis_info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
+            if axis_info2.get("axis_points", 0) >= 40:
+                diag.update(axis_info2)
+                diag["axis_wall_until"] = u_start
+                cloud.set_pose(pose2.compose(SensorInPipe.identity()))
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
@@ -312,13 +328,37 @@ def detect_improved(
     return det.with_diagnostics(time_s=time.perf_counter() - t0)
 
 
+def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:
+    """Axial position where the wall stops being intact (first significant anomalies); the
+    horizon when there are none."""
+    pts = cloud.pts
+    r = np.hypot(pts[..., 1], pts[..., 2])
+    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(pts[..., 0])
+    anomaly = cloud.valid & (np.abs(r - big_r) > 2.0 * tol)
+    labels, n_lab = label_regions(anomaly, cloud.grid.wraps)
+    if n_lab == 0:
+        return cfg.horizon
+    counts = np.bincount(labels[anomaly], minlength=n_lab + 1)
+    good = counts >= cfg.min_anomaly_points
+    good[0] = False
+    sel = good[labels] & anomaly
+    if not sel.any():
+        return cfg.horizon
+    u = pts[..., 0][sel]
+    # where the beams of those returns crossed the wall radius (sensor near the axis)
+    uc = u * big_r / np.maximum(r[sel], 1e-9)
+    return float(np.percentile(np.minimum(u, uc), 1)) - 0.005
+
+
 def _detect_in_pipe_frame(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, diag: dict[str, Any]
 ) -> Detection:
     valid = cloud.valid
     pts = cloud.pts
+    diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
     r = np.hypot(pts[..., 1], pts[..., 2])
-    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_r
+    # residual axis error grows with the distance along the axis
+    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(pts[..., 0])
     e = np.where(valid, r - big_r, 0.0)
     wall = valid & (np.abs(e) <= tol)
     beyond = valid & (e > tol)
@@ -688,7 +728,13 @@ def _fit_torus(
     for rb_factor in (1.25, 2.5):
         x0 = np.array([big_l, f.theta, f.phi, big_r, rb_factor * 2.0 * big_r])
         x, res, w = robust_gauss_newton(
-            resid, x0, np.full(5, 1e-6), c=c0 * 2, iterations=10, lower=lower, upper=upper,
+            resid,
+            x0,
+            np.full(5, 1e-6),
+            c=c0 * 2,
+            iterations=10,
+            lower=lower,
+            upper=upper,
             c_final=c_fin,
         )
         rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
