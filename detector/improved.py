@@ -78,9 +78,9 @@ class ImprovedConfig:
     tol_floor: float = 0.002
     axis_slope: float = 0.002
     noise_k: float = 3.0
-    min_lobe_points: int = 8
+    min_lobe_points: int = 6
     min_region_rows: int = 3
-    min_anomaly_points: int = 12
+    min_anomaly_points: int = 10
     horizon: float = 2.0
     fit_points: int = 500
     axis_points: int = 600
@@ -215,7 +215,12 @@ def _refine_axis(
         if cand.size < 40:
             return cloud.pose, info
     sub = pts[_subsample(cand, cfg.axis_points)]
-    prior = np.array([cfg.prior_offset, cfg.prior_offset, cfg.prior_tilt, cfg.prior_tilt])
+    # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
+    # gentle taper would pass for a tilted wall), so it is held at the prior
+    span = float(np.percentile(sub[:, 0], 95) - np.percentile(sub[:, 0], 5))
+    tilt_sigma = cfg.prior_tilt if span >= 0.05 else math.radians(0.05)
+    prior = np.array([cfg.prior_offset, cfg.prior_offset, tilt_sigma, tilt_sigma])
+    info["axis_span"] = span
     x, res, w = robust_gauss_newton(
         lambda p: _cyl_axis_residual(sub, big_r, p, False)[0],
         np.zeros(4),
@@ -234,7 +239,7 @@ def _refine_axis(
     )
     if not np.all(np.isfinite(x)) or abs(x[0]) > big_r or abs(x[1]) > big_r:
         return cloud.pose, info
-    if math.hypot(x[2], x[3]) > math.tan(math.radians(15.0)):
+    if math.hypot(x[2], x[3]) > math.tan(math.radians(8.0)):
         return cloud.pose, info
     return _axis_pose(x, cloud.pose.position).compose(cloud.pose), info
 
@@ -311,21 +316,47 @@ def detect_improved(
     try:
         cloud = _prepare(scan, pose0, bias, config)
         if refine_axis:
-            pose, axis_info = _refine_axis(cloud, big_r, config)
-            diag.update(axis_info)
-            cloud.set_pose(pose)
+            candidates = [(pose0, {})]
+            pose1, info1 = _refine_axis(cloud, big_r, config)
+            candidates.append((pose1, info1))
+            cloud.set_pose(pose1)
             # second pass: all of the intact wall before the structure
             u_start = _structure_start(cloud, big_r, config)
-            pose2, axis_info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
-            if axis_info2.get("axis_points", 0) >= 40:
-                diag.update(axis_info2)
-                diag["axis_wall_until"] = u_start
-                cloud.set_pose(pose2.compose(SensorInPipe.identity()))
+            pose2, info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
+            if info2.get("axis_points", 0) >= 40:
+                info2["axis_wall_until"] = u_start
+                candidates.append((pose2, info2))
+            # keep the pose that explains the most wall returns before the structure (a fit
+            # pulled by the structure's own returns, e.g. tilted onto one side of a taper,
+            # explains fewer of them)
+            cloud.set_pose(pose0)
+            u_near = min(u_start, _structure_start(cloud, big_r, config))
+            scores = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
+            best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
+            pose, info = candidates[best]
+            diag.update(info)
+            diag["axis_pass"] = best
+            cloud.set_pose(pose)
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
     return det.with_diagnostics(time_s=time.perf_counter() - t0)
+
+
+def _wall_count(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, pose: SensorInPipe, u_max: float
+) -> int:
+    """Returns within the wall tolerance of the clamped radius under ``pose``, counting those
+    nearer than ``u_max`` along the axis (all of them when fewer than 100 are)."""
+    pts = pose.to_pipe(cloud.sensor_pts[cloud.valid])
+    r = np.hypot(pts[:, 1], pts[:, 2])
+    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_r[cloud.valid]
+    ok = np.abs(r - big_r) <= tol
+    near = pts[:, 0] < u_max
+    if np.count_nonzero(near) >= 100:
+        ok &= near
+    return int(np.count_nonzero(ok))
 
 
 def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:
@@ -391,11 +422,26 @@ def _detect_in_pipe_frame(
         return Detection.straight(confidence=conf, **diag)
     beyond_k = beyond & keep
     inside_k = inside & keep
-    lobes = _find_lobes(cloud, beyond_k, cfg)
+    lobes = _find_lobes(cloud, beyond_k, big_r, cfg)
     diag["n_lobes"] = len(lobes)
-    if not lobes:
-        return _axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
-    return _branches(cloud, big_r, lobes, keep, wall, tol, cfg, diag)
+    if lobes:
+        # an expansion: returns beyond the wall all around and hardly any inside
+        cov = _azimuth_coverage(pts[beyond_k])
+        uniform = _azimuth_uniformity(pts[beyond_k])
+        diag.update(beyond_coverage=cov, beyond_uniformity=uniform)
+        if uniform >= 0.3 and inside_k.sum() < 0.3 * beyond_k.sum():
+            return _axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
+        return _branches(cloud, big_r, lobes, keep, wall, tol, cfg, diag)
+    det = _axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
+    if det.diagnostics.get("axisymmetric_support", 1.0) >= 0.6:
+        return det
+    # neither an end wall nor a reducer: the far wall of a turn seen head-on (small pipes, far
+    # away): fit an outgoing pipe to the inner returns with unknown roll
+    pseudo = Lobe(inside_k, 0.0, int(inside_k.sum()))
+    alt = _branches(cloud, big_r, [pseudo], keep, wall, tol, cfg, dict(diag), any_roll=True)
+    if alt.kind != "straight" and alt.confidence > det.confidence:
+        return alt
+    return det
 
 
 # --------------------------------------------------------------------------- lobes
@@ -406,7 +452,9 @@ class Lobe:
     n: int
 
 
-def _find_lobes(cloud: PipeCloud, beyond: NDArray[np.bool_], cfg: ImprovedConfig) -> list[Lobe]:
+def _find_lobes(
+    cloud: PipeCloud, beyond: NDArray[np.bool_], big_r: float, cfg: ImprovedConfig
+) -> list[Lobe]:
     labels, n_lab = label_regions(beyond, cloud.grid.wraps)
     if n_lab == 0:
         return []
@@ -421,6 +469,9 @@ def _find_lobes(cloud: PipeCloud, beyond: NDArray[np.bool_], cfg: ImprovedConfig
         if nrows < cfg.min_region_rows:
             continue
         p = pts[m]
+        depth = float(np.percentile(np.hypot(p[:, 1], p[:, 2]), 90)) - big_r
+        if depth < max(0.006, 0.1 * big_r):
+            continue  # a shallow sliver (seam leaks, noise), not an opening
         roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
         lobes.append(Lobe(m, roll, n))
     # merge lobes within 45 deg of roll (an opening split by dropouts)
@@ -458,50 +509,74 @@ def _axisymmetric(
     cfg: ImprovedConfig,
     diag: dict[str, Any],
 ) -> Detection:
+    """End wall (closure) or reducer/expander: the structure is (nearly) axisymmetric."""
     pts = cloud.pts
-    if not inside.any():
-        # isolated returns beyond the wall but no lobe: treat as clutter
+    contraction = bool(inside.sum() >= beyond.sum())
+    anomaly = inside if contraction else beyond
+    if anomaly.sum() < cfg.min_anomaly_points:
         return Detection.straight(confidence=0.3, **diag)
-    p = pts[inside]
+    p = pts[anomaly]
     u = p[:, 0]
     r = np.hypot(p[:, 1], p[:, 2])
-    u_first = float(np.percentile(u, 2))
-    # --- closure: a plane perpendicular to the axis
-    u_med = float(np.median(u))
-    tol_u = 0.004 + 3.0 * float(np.median(tol[inside]))
-    on_plane = np.abs(u - u_med) <= tol_u
-    frac_plane = float(on_plane.mean())
-    diag["closure_plane_fraction"] = frac_plane
-    if frac_plane >= 0.8:
-        up = u[on_plane]
-        dist = float(np.mean(up))
-        spread = float(np.std(up))
-        cov = _azimuth_coverage(p[on_plane])
-        conf = _confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
-        diag.update(closure_rms=spread, closure_coverage=cov)
-        return Detection(
-            "closure", [StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)], conf, diag
-        )
-    # --- reducer (contraction): new radius = most frequent inner radius
+    tol_med = float(np.median(tol[anomaly]))
+    # --- closure: a plane perpendicular to the axis, seen down to the centre
+    if contraction:
+        u_med = float(np.median(u))
+        tol_u = 0.003 + 2.0 * tol_med
+        on_plane = np.abs(u - u_med) <= tol_u
+        frac_plane = float(on_plane.mean())
+        diag["closure_plane_fraction"] = frac_plane
+        if frac_plane >= 0.8 and float(np.percentile(r[on_plane], 5)) < 0.5 * big_r:
+            up = u[on_plane]
+            dist = float(np.mean(up))
+            spread = float(np.std(up))
+            cov = _azimuth_coverage(p[on_plane])
+            diag.update(closure_rms=spread, closure_coverage=cov, axisymmetric_support=1.0)
+            if spread <= 0.5 * tol_u:
+                conf = _confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
+                opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
+                return Detection("closure", [opt], conf, diag)
+    # --- reducer: r(u) = R + (R2 - R) clip((u - L) / T, 0, 1)
+    if contraction:
+        u_cross = u
+    else:
+        u_cross = u * big_r / np.maximum(r, 1e-9)  # where the beams crossed the wall radius
+    u_first = float(np.percentile(u_cross, 1))
     r2 = _radius_mode(r, r.size)
-    near_r2 = np.abs(r - r2) <= max(0.002, 2.0 * float(np.median(tol[inside])))
-    taper = (r > r2 + 0.002) & (r < big_r - 0.001) & (u <= np.percentile(u[near_r2], 50))
-    dist = u_first
-    if taper.sum() >= 6:
-        a, b = _robust_line(r[taper], u[taper])
-        cand = a + b * big_r
-        if math.isfinite(cand) and abs(cand - u_first) < 0.1:
-            dist = float(cand)
+    sub = _subsample(np.arange(u.size), cfg.fit_points)
+    us, rs = u[sub], r[sub]
+    t0 = max(0.01, float(np.percentile(u, 30)) - u_first)
+
+    def resid(x: NDArray) -> NDArray:
+        big_l, t_len, rr2 = x
+        frac = np.clip((us - big_l) / max(t_len, 1e-4), 0.0, 1.0)
+        return rs - (big_r + (rr2 - big_r) * frac)
+
+    c_fin = max(2.0 * tol_med, 0.002)
+    x, res, w = robust_gauss_newton(
+        resid,
+        np.array([u_first, t0, r2]),
+        np.array([1e-4, 1e-4, 1e-5]),
+        c=max(4.0 * c_fin, 0.01),
+        iterations=15,
+        lower=np.array([-0.2, 0.002, 0.0]),
+        upper=np.array([cfg.horizon, 1.0, 3.0 * big_r]),
+        c_final=c_fin,
+    )
+    support = float((w > 0.1).mean())
+    rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
+    big_l, t_len, r2 = (float(v) for v in x)
+    diag.update(reducer_r2=r2, reducer_taper=t_len, reducer_rms=rms, axisymmetric_support=support)
     cov = _azimuth_coverage(p)
-    conf = _confidence(int(near_r2.sum()), mad_sigma(r[near_r2] - r2), 0.003) * cov
-    diag.update(reducer_r2=r2, reducer_support=int(near_r2.sum()), coverage=cov)
+    if not (math.isfinite(big_l) and math.isfinite(r2)):
+        return Detection.straight(confidence=0.0, **diag)
     if r2 < 0.25 * big_r:
-        # nothing but an end wall seen obliquely: closure at the first returns
-        conf = 0.5 * conf
-        return Detection(
-            "closure", [StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)], conf, diag
-        )
-    opt = StructureOption("reducer", max(dist, 0.0), 2.0 * r2, 0.0, 0.0, conf)
+        # the pipe closes (a cap seen obliquely, or a cone to nothing): a closure at its start
+        conf = 0.5 * _confidence(int(w.sum()), rms, c_fin) * cov
+        opt = StructureOption("closure", max(big_l, 0.0), 0.0, 0.0, 0.0, conf)
+        return Detection("closure", [opt], conf, diag)
+    conf = _confidence(int((w > 0.1).sum()), rms, c_fin) * cov * min(1.0, support / 0.6)
+    opt = StructureOption("reducer", max(big_l, 0.0), 2.0 * r2, 0.0, 0.0, conf)
     return Detection("reducer", [opt], conf, diag)
 
 
@@ -541,6 +616,17 @@ def _azimuth_coverage(p: NDArray, bins: int = 36) -> float:
     phi = np.arctan2(p[:, 2], p[:, 1])
     k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
     return float(np.count_nonzero(np.bincount(k, minlength=bins))) / bins
+
+
+def _azimuth_uniformity(p: NDArray, bins: int = 12) -> float:
+    """Smallest azimuth-bin count relative to the median bin count (1: even all around)."""
+    if p.shape[0] == 0:
+        return 0.0
+    phi = np.arctan2(p[:, 2], p[:, 1])
+    k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
+    cnt = np.bincount(k, minlength=bins)
+    med = float(np.median(cnt))
+    return float(cnt.min()) / med if med > 0 else 0.0
 
 
 def _confidence(n_support: int, rms: float, tol: float) -> float:
@@ -603,7 +689,10 @@ def _branches(
     tol: NDArray[np.float64],
     cfg: ImprovedConfig,
     diag: dict[str, Any],
+    any_roll: bool = False,
 ) -> Detection:
+    """Bends and junctions: one outgoing pipe per lobe (``any_roll``: the lobe's roll is
+    unknown and searched too)."""
     pts = cloud.pts
     flat = pts.reshape(-1, 3)
     anomaly_idx = np.flatnonzero(keep.reshape(-1))
@@ -627,8 +716,11 @@ def _branches(
     c0 = max(6.0 * tol_med, 0.006)
     total = np.zeros(l_grid.size)
     per_lobe = []
+    rolls_of = []
     for lb, lp in zip(lobes, lobe_pts):
-        dirs = np.stack([_dir(float(t), lb.roll) for t in thetas])  # (T, 3)
+        rolls = np.radians(np.arange(0.0, 360.0, 15.0)) if any_roll else np.array([lb.roll])
+        rolls_of.append(rolls)
+        dirs = np.stack([_dir(float(t), float(ro)) for ro in rolls for t in thetas])  # (RT, 3)
         q = lp[None, :, :] - np.stack([l_grid, 0 * l_grid, 0 * l_grid], axis=1)[:, None, :]
         qq = np.einsum("lnk,lnk->ln", q, q)
         t = q @ dirs.T  # (L, n, T)
@@ -638,8 +730,9 @@ def _branches(
         total += cost.min(axis=1)
     i_l = int(np.argmin(total))
     x0 = [float(l_grid[i_l])]
-    for lb, cost in zip(lobes, per_lobe):
-        x0 += [float(thetas[int(np.argmin(cost[i_l]))]), lb.roll, big_r]
+    for rolls, cost in zip(rolls_of, per_lobe):
+        k = int(np.argmin(cost[i_l]))
+        x0 += [float(thetas[k % thetas.size]), float(rolls[k // thetas.size]), big_r]
     n_l = len(lobes)
     x0a = np.array(x0)
     lower = np.array([-0.5] + [math.radians(5.0), -10.0, 0.25 * big_r] * n_l)
