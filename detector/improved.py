@@ -695,8 +695,19 @@ def _branches(
     unknown and searched too)."""
     pts = cloud.pts
     flat = pts.reshape(-1, 3)
-    anomaly_idx = np.flatnonzero(keep.reshape(-1))
-    sub_idx = _subsample(anomaly_idx, cfg.fit_points)
+    # returns of the outgoing pipes: the lobes, and the inner returns near them (the far wall
+    # of a turn seen head-on), not far end walls of a run that goes on
+    lobe_mask = np.zeros_like(keep)
+    for lb in lobes:
+        lobe_mask |= lb.mask
+    u_all = pts[..., 0]
+    u_hi = float(np.percentile(u_all[lobe_mask], 95)) + 2.0 * big_r if lobe_mask.any() else 0.0
+    near_inside = keep & ~lobe_mask & (u_all <= u_hi)
+    lobe_idx = _subsample(np.flatnonzero(lobe_mask.reshape(-1)), cfg.fit_points // 2)
+    near_idx = _subsample(np.flatnonzero(near_inside.reshape(-1)), cfg.fit_points // 2)
+    sub_idx = np.concatenate([lobe_idx, near_idx])
+    if any_roll:
+        sub_idx = _subsample(np.flatnonzero(keep.reshape(-1)), cfg.fit_points)
     p_all = flat[sub_idx]
     tol_med = float(np.median(tol.reshape(-1)[sub_idx]))
     noise_med = float(np.median(cloud.sigma_r.reshape(-1)[sub_idx])) + 0.3e-3
@@ -710,6 +721,11 @@ def _branches(
         rr = np.hypot(lp[:, 1], lp[:, 2])
         uc = lp[:, 0] * big_r / np.maximum(rr, 1e-9)
         u_edge = min(u_edge, float(np.percentile(uc, 1)))
+    # --- does the incoming pipe go on? Then this is a junction seen along its run: every
+    # lobe is a side branch of a standard fitting (tee 90 deg, wye 45 deg), no wider than
+    # the run
+    straight_on, cov_on = _straight_on(cloud, big_r, u_edge + big_r, wall, cfg)
+    diag["straight_on_coverage"] = cov_on
     # --- coarse grid per lobe over (L, theta) with the lobe's roll and radius R
     thetas = np.radians(np.arange(30.0, 151.0, 7.5))
     l_grid = u_edge + np.linspace(0.0, 3.0 * big_r, 13)
@@ -735,8 +751,9 @@ def _branches(
         x0 += [float(thetas[k % thetas.size]), float(rolls[k // thetas.size]), big_r]
     n_l = len(lobes)
     x0a = np.array(x0)
-    lower = np.array([-0.5] + [math.radians(5.0), -10.0, 0.25 * big_r] * n_l)
-    upper = np.array([cfg.horizon] + [math.radians(175.0), 10.0, 2.5 * big_r] * n_l)
+    # physical ranges: bends deflect 30-90 deg, branches 45, 90 or 135 deg
+    lower = np.array([-0.5] + [math.radians(25.0), -10.0, 0.25 * big_r] * n_l)
+    upper = np.array([cfg.horizon] + [math.radians(150.0), 10.0, 2.5 * big_r] * n_l)
     c_fin = max(3.0 * tol_med, 0.003)
     x, res, w = robust_gauss_newton(
         lambda v: _line_resjac(p_all, v, n_l, False)[0],
@@ -755,8 +772,6 @@ def _branches(
     model = "straight_axes"
     fits = [BranchFit(x[1 + 3 * k], x[2 + 3 * k], x[3 + 3 * k]) for k in range(n_l)]
     big_l = float(x[0])
-    straight_on, cov_on = _straight_on(cloud, big_r, big_l, wall, cfg)
-    diag["straight_on_coverage"] = cov_on
     # --- a single way on that the straight model explains poorly: a long-radius bend (torus)
     lower_bound = False
     if n_l == 1 and not straight_on and rms > 2.0 * noise_med:
