@@ -106,7 +106,9 @@ class PipeCloud:
 
     def set_pose(self, pose: SensorInPipe) -> None:
         self.pose = pose
-        self.pts = pose.to_pipe(self.sensor_pts.reshape(-1, 3)).reshape(self.sensor_pts.shape)
+        pts = np.zeros_like(self.sensor_pts)
+        pts[self.valid] = self.sensor_pts[self.valid] @ pose.rotation.T + pose.position
+        self.pts = pts
 
 
 def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig) -> PipeCloud:
@@ -349,12 +351,13 @@ def _wall_count(
 ) -> int:
     """Returns within the wall tolerance of the clamped radius under ``pose``, counting those
     nearer than ``u_max`` along the axis (all of them when fewer than 100 are)."""
-    pts = pose.to_pipe(cloud.sensor_pts[cloud.valid])
+    sp = cloud.sensor_pts[cloud.valid][::3]
+    pts = sp @ pose.rotation.T + pose.position
     r = np.hypot(pts[:, 1], pts[:, 2])
-    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_r[cloud.valid]
+    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_r[cloud.valid][::3]
     ok = np.abs(r - big_r) <= tol
     near = pts[:, 0] < u_max
-    if np.count_nonzero(near) >= 100:
+    if np.count_nonzero(near) >= 40:
         ok &= near
     return int(np.count_nonzero(ok))
 
