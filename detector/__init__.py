@@ -12,6 +12,7 @@ it runs on recorded scans.
 from detector.api import METHODS, PLANAR_METHODS, detect, detect_planar
 from detector.detection import Detection
 from detector.ellipse import Ellipse, EllipseFitFailure, fit_ellipse
+from detector.fusion import StructureTracker, TrackState
 from detector.options import KINDS, StructureOption
 from detector.scan import Scan
 from detector.transforms import SensorInPipe
@@ -26,6 +27,8 @@ __all__ = [
     "Scan",
     "SensorInPipe",
     "StructureOption",
+    "StructureTracker",
+    "TrackState",
     "detect",
     "detect_planar",
     "fit_ellipse",
