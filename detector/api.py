@@ -1,0 +1,92 @@
+"""The detector's entry points: :func:`detect` (full sweeps) and :func:`detect_planar` (one plane).
+
+``method="thesis"`` runs the faithful reproduction of the thesis algorithms (Algorithm 2 for
+sweeps, :mod:`detector.spatial`; Algorithm 1 for planes, :mod:`detector.planar`);
+``method="improved"`` (the default for sweeps) runs :mod:`detector.improved`. Both return a
+:class:`~detector.detection.Detection` and never NaN.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from detector.detection import Detection
+from detector.improved import detect_improved
+from detector.planar import detect_planar_thesis
+from detector.scan import Scan
+from detector.spatial import detect_spatial_thesis
+
+#: Methods of :func:`detect`.
+METHODS: tuple[str, ...] = ("thesis", "improved")
+#: Methods of :func:`detect_planar`.
+PLANAR_METHODS: tuple[str, ...] = ("thesis",)
+
+
+def _check(scan: Any, clamped_diameter: Any) -> float:
+    if not isinstance(scan, Scan):
+        raise ValueError(f"scan must be a detector.scan.Scan, got {type(scan).__name__}")
+    try:
+        d = float(clamped_diameter)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(
+            f"clamped_diameter must be a number (m), got {clamped_diameter!r}"
+        ) from exc
+    if not (math.isfinite(d) and 0.0 < d <= 2.0):
+        raise ValueError(f"clamped_diameter must be in (0, 2] m, got {clamped_diameter!r}")
+    return d
+
+
+def detect(
+    scan: Scan,
+    clamped_diameter: float,
+    method: str = "improved",
+    *,
+    sensor_in_pipe: Any = None,
+    **options: Any,
+) -> Detection:
+    """The structure ahead from a full rotating-LiDAR sweep.
+
+    Args:
+        scan: the sweep.
+        clamped_diameter: inner diameter of the current pipe from the clamping encoders, m.
+        method: ``"improved"`` (default) or ``"thesis"``.
+        sensor_in_pipe: known sensor pose in the local pipe-axis frame (a
+            :class:`~detector.transforms.SensorInPipe` or a ``(position (3,), rotation (3, 3))``
+            pair); ``None`` assumes the sensor centred and aligned (the improved method still
+            refines the axis from the scan).
+        **options: method-specific keywords (see :func:`detector.improved.detect_improved` and
+            :func:`detector.spatial.detect_spatial_thesis`).
+    """
+    d = _check(scan, clamped_diameter)
+    if method == "improved":
+        return detect_improved(scan, d, sensor_in_pipe=sensor_in_pipe, **options)
+    if method == "thesis":
+        return detect_spatial_thesis(scan, d, sensor_in_pipe=sensor_in_pipe, **options)
+    raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+
+
+def detect_planar(
+    scan: Scan,
+    clamped_diameter: float,
+    method: str = "thesis",
+    *,
+    plane: int = 0,
+    sensor_in_pipe: Any = None,
+    **options: Any,
+) -> Detection:
+    """The structure ahead from one scan plane (thesis Algorithm 1).
+
+    Args:
+        scan: a scan; plane ``plane`` is used (a single-plane scan by default).
+        clamped_diameter: inner diameter of the current pipe, m.
+        method: ``"thesis"``.
+        plane: index of the plane in ``scan``.
+        sensor_in_pipe: known sensor pose in the pipe frame; ``None``: centred and aligned.
+    """
+    d = _check(scan, clamped_diameter)
+    if not -scan.n_planes <= plane < scan.n_planes:
+        raise ValueError(f"plane {plane} out of range for a scan of {scan.n_planes} planes")
+    if method == "thesis":
+        return detect_planar_thesis(scan, d, plane=plane, sensor_in_pipe=sensor_in_pipe, **options)
+    raise ValueError(f"planar method must be one of {PLANAR_METHODS}, got {method!r}")

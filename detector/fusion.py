@@ -1,0 +1,335 @@
+"""Multi-scan fusion: a tracker that turns per-scan detections into one confirmed structure.
+
+While the robot drives towards a structure it scans it many times; single scans can be wrong
+(noise, a first glimpse from far away) and, very close to the structure, the detector no longer
+sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). The tracker:
+
+- **Anchors estimates in the odometry frame.** Each detection arrives with the robot's believed
+  sensor pose (``sensor_position`` (3,), ``sensor_rotation`` (3, 3) world-from-sensor). Its
+  reference point becomes a world point (sensor origin + distance along the pipe axis) and each
+  way on a world direction. Estimates from different scans can then be compared and averaged,
+  and the fused structure is re-expressed relative to the latest pose (distance along the axis
+  from the current sensor origin, direction as atan2(z, y) in the current sensor frame).
+- **Weights nearer scans more** (thesis 5.3's trust factor): a scan's weight is its confidence
+  divided by ``max(distance, near_distance)^2`` (errors grow with distance), so a scan at
+  10 cm counts 16 times as much as one at 40 cm.
+- **Associates** a detection with the track when its kind family (closure, reducer, bend or
+  junction) agrees and its reference point lies within ``gate`` (+ 10 % of the distance) of the
+  track's. Ways on are matched by direction (within ``direction_gate``).
+- **Confirms with hysteresis.** Each consistent detection adds its confidence to the track's
+  evidence, each inconsistent or straight detection (while the structure should be visible)
+  removes ``miss_penalty``. A track is *confirmed* once its evidence reaches ``confirm_evidence``
+  from at least ``confirm_count`` consistent detections; it is dropped only when its evidence
+  falls to zero (a confirmed track first has to lose it all, a tentative one is replaced by a
+  better-supported newcomer).
+- **Hands over** near the structure: when the fused reference point is closer than
+  ``handover_distance`` (the detector's blind zone, about one diameter), detections that
+  disagree ("straight", a closure-like reading, or nothing) are ignored; the confirmed estimate
+  is kept and propagated by odometry (its world anchor stays, the reported distance shrinks as
+  the robot moves).
+- **Finishes** a track once the sensor has passed its reference point by ``pass_margin``; the
+  tracker is then empty, ready for the next structure.
+
+Units: metres and radians.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from detector.detection import Detection
+from detector.options import StructureOption
+
+_FAMILY = {"closure": "end", "reducer": "reducer", "bend": "turn", "junction": "turn"}
+
+
+@dataclass
+class _Way:
+    """One way on of a track, in the world frame, as weighted sums."""
+
+    vec_sum: NDArray[np.float64]  # weighted sum of unit outgoing directions (world)
+    diam_sum: float
+    weight: float
+    hits: int
+
+    @property
+    def direction(self) -> NDArray[np.float64]:
+        n = float(np.linalg.norm(self.vec_sum))
+        return self.vec_sum / n if n > 0 else np.array([1.0, 0.0, 0.0])
+
+    @property
+    def diameter(self) -> float:
+        return self.diam_sum / self.weight if self.weight > 0 else 0.0
+
+
+@dataclass
+class _Track:
+    family: str
+    ref_sum: NDArray[np.float64]
+    axis_sum: NDArray[np.float64]
+    weight: float
+    ways: list[_Way]
+    kind_weight: dict[str, float]
+    evidence: float = 0.0
+    hits: int = 0
+    confirmed: bool = False
+
+    @property
+    def reference(self) -> NDArray[np.float64]:
+        return self.ref_sum / self.weight
+
+    @property
+    def axis(self) -> NDArray[np.float64]:
+        n = float(np.linalg.norm(self.axis_sum))
+        return self.axis_sum / n if n > 0 else np.array([1.0, 0.0, 0.0])
+
+    @property
+    def kind(self) -> str:
+        return max(self.kind_weight.items(), key=lambda kv: kv[1])[0]
+
+
+@dataclass(frozen=True)
+class TrackState:
+    """What the tracker believes after an update.
+
+    Attributes:
+        confirmed: a structure is confirmed ahead.
+        detection: the fused detection relative to the latest sensor pose (``straight`` when no
+            structure is tracked).
+        confidence: in [0, 1], the track's evidence relative to the confirmation threshold.
+        n_updates: consistent detections fused into the current track.
+        handed_over: the structure is too close to be seen; the estimate is propagated by
+            odometry.
+        reference_world: (3,) fused reference point in the odometry frame, or None.
+    """
+
+    confirmed: bool
+    detection: Detection
+    confidence: float
+    n_updates: int
+    handed_over: bool = False
+    reference_world: NDArray[np.float64] | None = None
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+class StructureTracker:
+    """Fuses per-scan detections of the structure ahead (see module docstring).
+
+    Args:
+        confirm_count: consistent detections needed to confirm.
+        confirm_evidence: evidence (sum of confidences minus penalties) needed to confirm.
+        miss_penalty: evidence lost per inconsistent or straight detection.
+        gate: association distance of reference points, metres (+ 10 % of the distance).
+        direction_gate: association angle of ways on, radians.
+        near_distance: distances below this weigh like this one, metres.
+        handover_distance: closer than this, disagreeing detections are ignored, metres.
+        pass_margin: the track ends once the sensor is this far past the reference point, m.
+    """
+
+    def __init__(
+        self,
+        confirm_count: int = 3,
+        confirm_evidence: float = 1.5,
+        miss_penalty: float = 0.5,
+        gate: float = 0.05,
+        direction_gate: float = math.radians(25.0),
+        near_distance: float = 0.1,
+        handover_distance: float = 0.12,
+        pass_margin: float = 0.05,
+    ) -> None:
+        for name, value in (
+            ("confirm_evidence", confirm_evidence),
+            ("miss_penalty", miss_penalty),
+            ("gate", gate),
+            ("direction_gate", direction_gate),
+            ("near_distance", near_distance),
+            ("handover_distance", handover_distance),
+            ("pass_margin", pass_margin),
+        ):
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"StructureTracker.{name} must be positive, got {value!r}")
+        if int(confirm_count) < 1:
+            raise ValueError(f"StructureTracker.confirm_count must be >= 1, got {confirm_count}")
+        self.confirm_count = int(confirm_count)
+        self.confirm_evidence = float(confirm_evidence)
+        self.miss_penalty = float(miss_penalty)
+        self.gate = float(gate)
+        self.direction_gate = float(direction_gate)
+        self.near_distance = float(near_distance)
+        self.handover_distance = float(handover_distance)
+        self.pass_margin = float(pass_margin)
+        self._track: _Track | None = None
+        self._last_pose: tuple[NDArray, NDArray] | None = None
+
+    def reset(self) -> None:
+        """Forget the tracked structure."""
+        self._track = None
+        self._last_pose = None
+
+    # ---------------------------------------------------------------- update
+    def update(
+        self, detection: Detection, sensor_position: ArrayLike, sensor_rotation: ArrayLike
+    ) -> TrackState:
+        """Fuse one detection made at the given believed sensor pose (world-from-sensor)."""
+        pos = np.asarray(sensor_position, dtype=float).reshape(-1)
+        rot = np.asarray(sensor_rotation, dtype=float)
+        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+            raise ValueError(f"sensor_position must be 3 finite numbers, got {pos!r}")
+        if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
+            raise ValueError("sensor_rotation must be a finite 3x3 matrix")
+        if not isinstance(detection, Detection):
+            raise ValueError(f"detection must be a Detection, got {type(detection).__name__}")
+        self._last_pose = (pos, rot)
+        tr = self._track
+        # finished: the sensor passed the structure
+        if tr is not None and self._distance(tr, pos) < -self.pass_margin:
+            self._track = tr = None
+        handed_over = False
+        if detection.kind == "straight" or not detection.options:
+            if tr is not None:
+                if self._distance(tr, pos) <= self.handover_distance and tr.confirmed:
+                    handed_over = True
+                else:
+                    tr.evidence -= self.miss_penalty
+                    if tr.evidence <= 0.0:
+                        self._track = tr = None
+            return self._state(handed_over)
+        obs = self._observation(detection, pos, rot)
+        if tr is None:
+            self._track = self._new_track(obs)
+        elif self._consistent(tr, obs):
+            self._fuse(tr, obs)
+        else:
+            near = self._distance(tr, pos) <= self.handover_distance
+            if tr.confirmed and near:
+                handed_over = True  # too close to see it: keep the confirmed estimate
+            else:
+                tr.evidence -= self.miss_penalty
+                if tr.evidence <= 0.0 or (not tr.confirmed and obs["weight"] > tr.weight):
+                    self._track = self._new_track(obs)
+        tr = self._track
+        if tr is not None and not tr.confirmed:
+            tr.confirmed = tr.hits >= self.confirm_count and tr.evidence >= self.confirm_evidence
+        return self._state(handed_over)
+
+    # ---------------------------------------------------------------- internals
+    def _observation(self, det: Detection, pos: NDArray, rot: NDArray) -> dict[str, Any]:
+        axis_s = np.asarray(det.diagnostics.get("pipe_axis_sensor") or [1.0, 0.0, 0.0], float)
+        if axis_s.shape != (3,) or not np.all(np.isfinite(axis_s)):
+            axis_s = np.array([1.0, 0.0, 0.0])
+        axis_s = axis_s / np.linalg.norm(axis_s)
+        dist = float(np.mean([o.distance for o in det.options]))
+        axis_w = rot @ axis_s
+        ref = pos + dist * axis_w
+        ways = []
+        for o in det.options:
+            v = np.array(
+                [
+                    math.cos(o.angle),
+                    math.sin(o.angle) * math.cos(o.direction),
+                    math.sin(o.angle) * math.sin(o.direction),
+                ]
+            )
+            ways.append((rot @ v, o.diameter))
+        w = max(det.confidence, 1e-3) / max(abs(dist), self.near_distance) ** 2
+        return {
+            "family": _FAMILY.get(det.kind, det.kind),
+            "kind": det.kind,
+            "ref": ref,
+            "axis": axis_w,
+            "ways": ways,
+            "weight": w,
+            "confidence": det.confidence,
+            "distance": dist,
+        }
+
+    def _new_track(self, obs: dict[str, Any]) -> _Track:
+        w = obs["weight"]
+        return _Track(
+            family=obs["family"],
+            ref_sum=obs["ref"] * w,
+            axis_sum=obs["axis"] * w,
+            weight=w,
+            ways=[_Way(v * w, d * w, w, 1) for v, d in obs["ways"]],
+            kind_weight={obs["kind"]: w},
+            evidence=obs["confidence"],
+            hits=1,
+        )
+
+    def _consistent(self, tr: _Track, obs: dict[str, Any]) -> bool:
+        if tr.family != obs["family"]:
+            return False
+        gate = self.gate + 0.1 * abs(obs["distance"])
+        return float(np.linalg.norm(obs["ref"] - tr.reference)) <= gate
+
+    def _fuse(self, tr: _Track, obs: dict[str, Any]) -> None:
+        w = obs["weight"]
+        tr.ref_sum = tr.ref_sum + obs["ref"] * w
+        tr.axis_sum = tr.axis_sum + obs["axis"] * w
+        tr.weight += w
+        tr.kind_weight[obs["kind"]] = tr.kind_weight.get(obs["kind"], 0.0) + w
+        tr.evidence += obs["confidence"]
+        tr.hits += 1
+        for v, d in obs["ways"]:
+            best, best_ang = None, math.inf
+            for way in tr.ways:
+                ang = math.acos(max(-1.0, min(1.0, float(way.direction @ v))))
+                if ang < best_ang:
+                    best, best_ang = way, ang
+            if best is not None and best_ang <= self.direction_gate:
+                best.vec_sum = best.vec_sum + v * w
+                best.diam_sum += d * w
+                best.weight += w
+                best.hits += 1
+            else:
+                tr.ways.append(_Way(v * w, d * w, w, 1))
+
+    def _distance(self, tr: _Track, pos: NDArray) -> float:
+        return float((tr.reference - pos) @ tr.axis)
+
+    def _state(self, handed_over: bool) -> TrackState:
+        tr = self._track
+        if tr is None or self._last_pose is None:
+            return TrackState(False, Detection.straight(confidence=0.5), 0.0, 0, False, None)
+        pos, rot = self._last_pose
+        dist = self._distance(tr, pos)
+        # keep the ways seen in at least half of the track's detections (a way glimpsed once
+        # from far away is dropped once better scans disagree)
+        ways = [w for w in tr.ways if w.hits * 2 >= tr.hits or len(tr.ways) == 1]
+        if not ways:
+            ways = [max(tr.ways, key=lambda w: w.weight)]
+        kind = tr.kind
+        if kind in ("bend", "junction"):
+            kind = "junction" if len(ways) > 1 else "bend"
+        opts = []
+        conf = min(1.0, tr.evidence / self.confirm_evidence)
+        for way in ways:
+            v_s = rot.T @ way.direction
+            axis_s = rot.T @ tr.axis
+            angle = math.acos(max(-1.0, min(1.0, float(v_s @ axis_s))))
+            perp = v_s - (v_s @ axis_s) * axis_s
+            direction = (
+                math.atan2(float(perp[2]), float(perp[1])) if np.linalg.norm(perp) > 1e-6 else 0.0
+            )
+            if kind == "closure":
+                angle, direction = 0.0, 0.0
+            diameter = 0.0 if kind == "closure" else max(0.0, way.diameter)
+            opts.append(StructureOption(kind, dist, diameter, direction, angle, conf))
+        opts.sort(key=lambda o: (round(o.angle, 6), o.direction))
+        det = Detection(
+            kind,
+            opts,
+            conf,
+            {
+                "fused_scans": tr.hits,
+                "evidence": tr.evidence,
+                "handed_over": handed_over,
+                "track_weight": tr.weight,
+            },
+        )
+        return TrackState(tr.confirmed, det, conf, tr.hits, handed_over, tr.reference.copy())

@@ -1,0 +1,122 @@
+"""The scan as an unrolled grid: rows = azimuth around the sensor's forward axis, columns = beam
+angle away from forward.
+
+A plane at servo angle ``alpha`` holds two half-planes ("areas I and II" in the thesis): beams
+with ``beta > 0`` look towards roll ``alpha`` and beams with ``beta < 0`` towards
+``alpha + pi``. Stacking the half-planes by roll gives a ``(2P, K)`` grid whose neighbours are
+neighbours on the pipe wall, which the detectors use to find connected regions (openings,
+outlines) with :func:`label_regions`. Column ``k`` holds ``|beta| = k``-th smallest non-negative
+beam angle; the forward beam (``beta = 0``) appears in both half-planes. Rows wrap around
+(the last row neighbours the first) when the planes cover the half circle evenly.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from detector.scan import Scan
+
+
+@dataclass(frozen=True, eq=False)
+class ScanGrid:
+    """Index maps from the unrolled grid to the scan arrays.
+
+    Attributes:
+        plane: (2P, K) plane index of each cell.
+        beam: (2P, K) beam index of each cell (-1 where the half-plane has no such beam).
+        roll: (2P,) roll angle of each row, radians in [0, 2 pi).
+        wraps: whether the first and the last row are neighbours.
+    """
+
+    plane: NDArray[np.intp]
+    beam: NDArray[np.intp]
+    roll: NDArray[np.float64]
+    wraps: bool
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.plane.shape  # type: ignore[return-value]
+
+    def take(self, values: NDArray, fill: float | bool = np.nan) -> NDArray:
+        """Scatter a (P, B) per-beam array onto the grid; missing cells get ``fill``."""
+        out = values[self.plane, np.maximum(self.beam, 0)]
+        if np.any(self.beam < 0):
+            out = np.where(self.beam < 0, fill, out)
+        return out
+
+
+def build_grid(scan: Scan) -> ScanGrid:
+    """The unrolled grid of ``scan`` (see module docstring)."""
+    beta = scan.beam_angles
+    pos = np.flatnonzero(beta >= -1e-12)
+    neg = np.flatnonzero(beta <= 1e-12)
+    pos = pos[np.argsort(beta[pos], kind="stable")]
+    neg = neg[np.argsort(-beta[neg], kind="stable")]
+    k = max(pos.size, neg.size)
+    beams_pos = np.full(k, -1, dtype=np.intp)
+    beams_neg = np.full(k, -1, dtype=np.intp)
+    beams_pos[: pos.size] = pos
+    beams_neg[: neg.size] = neg
+    n_p = scan.n_planes
+    alpha = np.mod(scan.plane_angles, 2.0 * math.pi)
+    roll = np.concatenate([alpha, np.mod(alpha + math.pi, 2.0 * math.pi)])
+    plane = np.concatenate([np.arange(n_p), np.arange(n_p)])
+    beam = np.concatenate([np.tile(beams_pos, (n_p, 1)), np.tile(beams_neg, (n_p, 1))])
+    order = np.argsort(roll, kind="stable")
+    roll = roll[order]
+    plane_grid = np.repeat(plane[order][:, None], k, axis=1)
+    beam = beam[order]
+    wraps = False
+    if roll.size >= 3:
+        steps = np.diff(roll)
+        closing = roll[0] + 2.0 * math.pi - roll[-1]
+        med = float(np.median(steps))
+        wraps = bool(med > 0 and closing <= 1.5 * med + 1e-9)
+    return ScanGrid(plane_grid, beam, roll, wraps)
+
+
+def label_regions(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32], int]:
+    """Connected regions (8-neighbourhood) of a grid mask, joined across the row seam when the
+    grid wraps. Returns ``(labels, n)`` with labels 1..n and 0 for background."""
+    labels, n = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
+    if n == 0 or not wraps or mask.shape[0] < 3:
+        return labels.astype(np.int32), int(n)
+    first, last = labels[0], labels[-1]
+    parent = np.arange(n + 1)
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    cols = mask.shape[1]
+    for j in range(cols):
+        if last[j] == 0:
+            continue
+        for dj in (-1, 0, 1):
+            jj = j + dj
+            if 0 <= jj < cols and first[jj] != 0:
+                ra, rb = find(int(last[j])), find(int(first[jj]))
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+    roots = np.array([find(i) for i in range(n + 1)])
+    uniq, relabel = np.unique(roots, return_inverse=True)
+    out = relabel[labels].astype(np.int32)
+    return out, int(uniq.size - 1)
+
+
+def dilate(mask: NDArray[np.bool_], wraps: bool, iterations: int = 1) -> NDArray[np.bool_]:
+    """8-neighbourhood dilation of a grid mask, wrapping rows when the grid wraps."""
+    if iterations <= 0:
+        return mask.copy()
+    if wraps:
+        pad = np.concatenate([mask[-iterations:], mask, mask[:iterations]], axis=0)
+        out = ndimage.binary_dilation(pad, np.ones((3, 3), dtype=bool), iterations=iterations)
+        return out[iterations:-iterations]
+    return ndimage.binary_dilation(mask, np.ones((3, 3), dtype=bool), iterations=iterations)

@@ -1,0 +1,185 @@
+"""Point transforms: polar to Cartesian, the thesis's sensor-offset radius, and sensor-pose
+compensation into the local pipe-axis frame.
+
+Frames (REP-103, as in :mod:`detector.scan`):
+
+- *sensor frame*: x forward, y left, z up; a beam at in-plane angle ``beta`` on a plane rotated
+  by ``alpha`` about x points along ``(cos beta, sin beta cos alpha, sin beta sin alpha)``.
+- *pipe frame*: x along the local pipe axis (forward), origin on the axis at the axial position
+  of the sensor origin; y and z span the cross-section. When the sensor is perfectly centred
+  and aligned (thesis assumptions i and iii) the two frames coincide.
+
+:class:`SensorInPipe` holds the sensor pose in the pipe frame (``position`` of the sensor
+origin, ``rotation`` pipe-from-sensor); ``to_pipe`` maps sensor points into the pipe frame
+and ``direction_to_sensor`` maps a direction back, so option directions (atan2(z, y)) are
+reported in the sensor frame as DESIGN.md defines them. Units: metres and radians.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+
+def polar_to_cartesian(
+    ranges: ArrayLike, beam_angles: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """In-plane Cartesian coordinates of planar returns (thesis Algorithm 1 step A).
+
+    Args:
+        ranges: (..., B) ranges, metres (``inf`` for no return gives ``inf``/``nan``; filter
+            with the scan's ``valid`` mask first).
+        beam_angles: (B,) in-plane beam angles, radians, 0 = forward, positive = left/up.
+
+    Returns:
+        ``(forward, lateral)``: forward distance along the sensor x axis and the signed lateral
+        distance in the plane (positive on the ``beta > 0`` side), metres.
+    """
+    r = np.asarray(ranges, dtype=float)
+    b = np.asarray(beam_angles, dtype=float)
+    return r * np.cos(b), r * np.sin(b)
+
+
+def sensor_offset_radius(
+    lateral: ArrayLike,
+    plane_angle: ArrayLike,
+    offset_y: float = 0.0,
+    offset_z: float = 0.0,
+) -> NDArray[np.float64]:
+    """Radius of wall points about the pipe axis for an off-centre sensor (thesis eq. 2.2).
+
+    The thesis writes ``x_s = d cos(alpha)``, ``z_s = d sin(alpha)``,
+    ``r = sqrt(z_s^2 + (x_P + x_s)^2)`` for a sensor displaced by ``x_P`` along one axis of
+    the cross-section; this is the same with the displacement in both cross-section axes.
+
+    Args:
+        lateral: signed in-plane lateral distance ``d`` of each point, metres.
+        plane_angle: servo angle ``alpha`` of each point's plane, radians.
+        offset_y, offset_z: sensor origin relative to the pipe axis in the cross-section, m.
+
+    Returns:
+        The radius of each point about the pipe axis, metres.
+    """
+    d = np.asarray(lateral, dtype=float)
+    a = np.asarray(plane_angle, dtype=float)
+    ys = d * np.cos(a)
+    zs = d * np.sin(a)
+    return np.sqrt((offset_z + zs) ** 2 + (offset_y + ys) ** 2)
+
+
+@dataclass(frozen=True)
+class SensorInPipe:
+    """Pose of the sensor in the local pipe-axis frame.
+
+    Attributes:
+        position: (3,) sensor origin in the pipe frame, metres. Only the cross-section part
+            (y, z) matters for detection; x shifts every reported distance.
+        rotation: (3, 3) pipe-from-sensor rotation (columns: the sensor axes in the pipe frame).
+    """
+
+    position: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+    rotation: NDArray[np.float64] = field(default_factory=lambda: np.eye(3))
+
+    def __post_init__(self) -> None:
+        p = np.asarray(self.position, dtype=float).reshape(-1)
+        r = np.asarray(self.rotation, dtype=float)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            raise ValueError(f"SensorInPipe.position must be 3 finite numbers, got {p!r}")
+        if r.shape != (3, 3) or not np.all(np.isfinite(r)):
+            raise ValueError(f"SensorInPipe.rotation must be a finite 3x3 matrix, got {r!r}")
+        if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+            raise ValueError("SensorInPipe.rotation must be a proper rotation matrix")
+        object.__setattr__(self, "position", p)
+        object.__setattr__(self, "rotation", r)
+
+    @classmethod
+    def identity(cls) -> SensorInPipe:
+        """The thesis's assumption: sensor centred and aligned with the pipe axis."""
+        return cls()
+
+    @classmethod
+    def coerce(cls, value: Any) -> SensorInPipe:
+        """Accept a :class:`SensorInPipe`, a ``(position, rotation)`` pair or ``None``."""
+        if value is None:
+            return cls.identity()
+        if isinstance(value, SensorInPipe):
+            return value
+        if hasattr(value, "position") and hasattr(value, "rotation"):
+            return cls(np.asarray(value.position), np.asarray(value.rotation))
+        try:
+            position, rotation = value
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                "sensor_in_pipe must be a SensorInPipe, an object with .position/.rotation or a "
+                f"(position (3,), rotation (3, 3)) pair, got {type(value).__name__}"
+            ) from exc
+        return cls(np.asarray(position), np.asarray(rotation))
+
+    @classmethod
+    def from_offset_tilt(
+        cls, offset_y: float = 0.0, offset_z: float = 0.0, yaw: float = 0.0, pitch: float = 0.0
+    ) -> SensorInPipe:
+        """A sensor displaced in the cross-section and tilted by ``yaw`` (about z) then
+        ``pitch`` (about y), radians."""
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        cp, sp = math.cos(pitch), math.sin(pitch)
+        rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+        ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+        return cls(np.array([0.0, offset_y, offset_z]), rz @ ry)
+
+    @property
+    def is_identity(self) -> bool:
+        return bool(np.allclose(self.position, 0.0) and np.allclose(self.rotation, np.eye(3)))
+
+    def to_pipe(self, points: ArrayLike) -> NDArray[np.float64]:
+        """(N, 3) sensor-frame points into the pipe frame."""
+        p = np.asarray(points, dtype=float)
+        return p @ self.rotation.T + self.position
+
+    def to_sensor(self, points: ArrayLike) -> NDArray[np.float64]:
+        """(N, 3) pipe-frame points into the sensor frame."""
+        p = np.asarray(points, dtype=float)
+        return (p - self.position) @ self.rotation
+
+    def direction_to_sensor(self, vector: ArrayLike) -> NDArray[np.float64]:
+        """A pipe-frame direction expressed in the sensor frame."""
+        return np.asarray(vector, dtype=float) @ self.rotation
+
+    def compose(self, inner: SensorInPipe) -> SensorInPipe:
+        """``self`` maps frame A to the pipe frame; ``inner`` maps the sensor to frame A."""
+        return SensorInPipe(
+            self.rotation @ inner.position + self.position, self.rotation @ inner.rotation
+        )
+
+
+def option_direction(axis_pipe: ArrayLike, pose: SensorInPipe) -> tuple[float, float]:
+    """(angle, direction) of an outgoing axis given in the pipe frame.
+
+    ``angle`` is the deflection from the pipe axis (+x); ``direction`` is atan2(z, y) of the
+    axis's component perpendicular to the pipe axis, expressed in the sensor's y and z axes
+    (0 for a way straight on), radians. Matches the ground-truth definition.
+    """
+    v = np.asarray(axis_pipe, dtype=float)
+    n = float(np.linalg.norm(v))
+    if not math.isfinite(n) or n < 1e-12:
+        return 0.0, 0.0
+    v = v / n
+    angle = math.acos(max(-1.0, min(1.0, float(v[0]))))
+    perp = np.array([0.0, v[1], v[2]])
+    if np.linalg.norm(perp) < 1e-9:
+        return angle, 0.0
+    y_axis = pose.rotation[:, 1]
+    z_axis = pose.rotation[:, 2]
+    return angle, math.atan2(float(perp @ z_axis), float(perp @ y_axis))
+
+
+def cylindrical(points: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray]:
+    """(axial u, radius r, azimuth phi) of pipe-frame points; phi = atan2(z, y)."""
+    u = points[:, 0]
+    r = np.hypot(points[:, 1], points[:, 2])
+    phi = np.arctan2(points[:, 2], points[:, 1])
+    return u, r, phi

@@ -1,0 +1,133 @@
+"""The multi-scan tracker: confirmation with hysteresis, trust weighting of nearer scans,
+hand-over near the structure, re-expression relative to the latest pose, reset."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from detector import Detection, StructureOption
+from detector.fusion import StructureTracker
+
+EYE = np.eye(3)
+
+
+def bend(distance, angle=math.pi / 2, direction=0.0, conf=0.9, diameter=0.1):
+    return Detection(
+        "bend", [StructureOption("bend", distance, diameter, direction, angle, conf)], conf
+    )
+
+
+def straight():
+    return Detection.straight(confidence=0.9)
+
+
+def drive(tracker, ref_x, positions, make):
+    states = []
+    for x in positions:
+        states.append(tracker.update(make(ref_x - x), np.array([x, 0.0, 0.0]), EYE))
+    return states
+
+
+def test_confirms_after_consistent_detections_and_reports_relative_to_latest_pose():
+    tr = StructureTracker(confirm_count=3)
+    states = drive(tr, 1.0, [0.6, 0.62, 0.64, 0.66], lambda d: bend(d))
+    assert [s.confirmed for s in states] == [False, False, True, True]
+    last = states[-1]
+    assert last.n_updates == 4
+    assert last.detection.kind == "bend"
+    assert last.detection.options[0].distance == pytest.approx(0.34, abs=1e-9)
+    assert last.detection.options[0].angle == pytest.approx(math.pi / 2)
+    assert 0.0 < last.confidence <= 1.0
+
+
+def test_single_outlier_does_not_confirm_or_break_a_track():
+    tr = StructureTracker()
+    s = tr.update(bend(0.3), np.zeros(3), EYE)
+    assert not s.confirmed
+    # a straight reading far from the structure costs evidence but one miss keeps the track
+    drive(tr, 0.3, [0.01, 0.02], lambda d: bend(d))
+    s = tr.update(straight(), np.array([0.03, 0, 0]), EYE)
+    assert s.confirmed and s.detection.kind == "bend"
+    # many straight readings while it should be visible drop it (hysteresis)
+    for x in np.linspace(0.04, 0.06, 8):
+        s = tr.update(straight(), np.array([x, 0, 0]), EYE)
+    assert not s.confirmed and s.detection.kind == "straight"
+
+
+def test_nearer_scans_weigh_more():
+    tr = StructureTracker()
+    # far scan says the bend is 3 cm farther than it is; near scans are right
+    tr.update(bend(0.43), np.array([0.0, 0, 0]), EYE)  # reference at 0.43
+    for x in (0.25, 0.26, 0.27):
+        s = tr.update(bend(0.40 - x), np.array([x, 0, 0]), EYE)  # reference at 0.40
+    ref = s.reference_world[0]
+    assert abs(ref - 0.40) < abs(ref - 0.43)
+    assert abs(ref - 0.40) < 0.005  # 1/d^2: the 40 cm scan counts ~1/10 of a 14 cm one
+
+
+def test_handover_keeps_the_confirmed_estimate_and_propagates_it_by_odometry():
+    tr = StructureTracker(handover_distance=0.12)
+    drive(tr, 0.5, [0.1, 0.15, 0.2, 0.25], lambda d: bend(d, direction=1.0))
+    # too close: the detector now says straight or sees a closure-like wall
+    s1 = tr.update(straight(), np.array([0.42, 0, 0]), EYE)
+    closure = Detection("closure", [StructureOption("closure", 0.05, 0.0)], 0.8)
+    s2 = tr.update(closure, np.array([0.44, 0, 0]), EYE)
+    for s, x in ((s1, 0.42), (s2, 0.44)):
+        assert s.confirmed and s.handed_over
+        assert s.detection.kind == "bend"
+        assert s.detection.options[0].distance == pytest.approx(0.5 - x, abs=1e-9)
+        assert s.detection.options[0].direction == pytest.approx(1.0, abs=1e-9)
+
+
+def test_direction_follows_the_robot_roll():
+    tr = StructureTracker(confirm_count=1, confirm_evidence=0.5)
+    tr.update(bend(0.3, direction=0.0), np.zeros(3), EYE)  # bend to the left (+y world)
+    c, s = math.cos(math.pi / 2), math.sin(math.pi / 2)
+    rolled = np.array([[1, 0, 0], [0, c, -s], [0, s, c]], float)  # robot rolled +90 deg
+    st = tr.update(bend(0.28, direction=-math.pi / 2), np.array([0.02, 0, 0]), rolled)
+    o = st.detection.options[0]
+    assert o.direction == pytest.approx(-math.pi / 2, abs=1e-6)
+    assert st.n_updates == 2
+
+
+def test_junction_ways_are_fused_and_passing_ends_the_track():
+    def junction(d):
+        return Detection(
+            "junction",
+            [
+                StructureOption("junction", d, 0.1, 0.0, 0.0, 0.9),
+                StructureOption("junction", d, 0.08, 2.0, math.pi / 2, 0.9),
+            ],
+            0.9,
+        )
+
+    tr = StructureTracker()
+    states = drive(tr, 0.4, [0.0, 0.05, 0.1], junction)
+    assert states[-1].confirmed
+    assert len(states[-1].detection.options) == 2
+    assert states[-1].detection.options[1].diameter == pytest.approx(0.08)
+    s = tr.update(straight(), np.array([0.5, 0, 0]), EYE)  # 10 cm past the junction
+    assert not s.confirmed and s.detection.kind == "straight"
+
+
+def test_a_different_structure_replaces_a_tentative_track():
+    tr = StructureTracker()
+    tr.update(bend(0.4), np.zeros(3), EYE)
+    closure = Detection("closure", [StructureOption("closure", 0.2, 0.0)], 0.9)
+    s = tr.update(closure, np.zeros(3), EYE)
+    assert s.detection.kind == "closure"
+
+
+def test_reset_and_validation():
+    tr = StructureTracker()
+    drive(tr, 0.4, [0.0, 0.05, 0.1], lambda d: bend(d))
+    tr.reset()
+    s = tr.update(straight(), np.zeros(3), EYE)
+    assert not s.confirmed and s.n_updates == 0
+    with pytest.raises(ValueError, match="sensor_position"):
+        tr.update(straight(), np.array([np.nan, 0, 0]), EYE)
+    with pytest.raises(ValueError, match="gate"):
+        StructureTracker(gate=-1.0)
