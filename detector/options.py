@@ -18,7 +18,7 @@ be compared field by field. Definitions follow DESIGN.md (SI units in the API):
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 KINDS: tuple[str, ...] = ("straight", "reducer", "closure", "bend", "junction")
@@ -69,7 +69,14 @@ class StructureOption:
         return replace(self, confidence=confidence)
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return {
+            "kind": self.kind,
+            "distance": self.distance,
+            "diameter": self.diameter,
+            "direction": self.direction,
+            "angle": self.angle,
+            "confidence": self.confidence,
+        }
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> StructureOption:
