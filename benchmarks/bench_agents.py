@@ -1,0 +1,174 @@
+"""Agent comparison on held-out networks, environment throughput, and the cost of detection.
+
+1. Per agent on ``--episodes`` held-out networks (fast fidelity, improved detector's measured
+   error model): success rate, jams and decisions per episode, path length over the shortest
+   drivable route. Agents: RoutePlanner, GoalGreedy, LeftHand, Random, and the learned
+   MaskablePPO policy (``--model``, or trained here first for ``--train-minutes``; its training
+   wall time is reported).
+2. Throughput in decisions/s on one core: fast fidelity (random valid actions), and full
+   fidelity (MuJoCo robot, rotating LiDAR, detector) on ``--full-episodes`` episodes.
+3. RoutePlanner in full fidelity with ``detector="improved"`` against ``"ground_truth"``: the
+   success gap is what detection errors cost.
+
+The reference measured in the same run is the fast environment's throughput, so full-fidelity
+speed is also printed as a ratio to it.
+
+Usage: python benchmarks/bench_agents.py [--episodes 200] [--model runs/ppo/best/best_model.zip]
+       [--train-minutes 28] [--full-episodes 20] [--skip-full]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+import pipe_env  # noqa: F401
+from agents.evaluate import EVAL_POOL_SEED, evaluate
+from agents.train import DEFAULT_CONFIG, TrainConfig, train
+
+torch.set_num_threads(1)
+
+
+def throughput(fidelity: str, episodes: int, env_kwargs: dict, seed: int = 0) -> dict:
+    """Decisions per second with random valid actions, resets included."""
+    env = gym.make("pipenav/PipeNav-v0", fidelity=fidelity, **env_kwargs)
+    rng = np.random.default_rng(seed)
+    steps = 0
+    sim = 0.0
+    t0 = time.perf_counter()
+    for ep in range(episodes):
+        obs, info = env.reset(seed=seed + ep)
+        done = False
+        while not done:
+            action = int(rng.choice(np.flatnonzero(info["action_mask"])))
+            obs, _, term, trunc, info = env.step(action)
+            steps += 1
+            done = term or trunc
+        sim += info["sim_time"]
+    wall = time.perf_counter() - t0
+    env.close()
+    return {
+        "decisions": steps,
+        "wall_s": round(wall, 2),
+        "decisions_per_s": round(steps / wall, 1),
+        "sim_s_per_wall_s": round(sim / wall, 1),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--episodes", type=int, default=200)
+    parser.add_argument("--model", default=None, help="a trained MaskablePPO .zip")
+    parser.add_argument("--train-minutes", type=float, default=28.0)
+    parser.add_argument("--train-out", default="runs/bench_ppo")
+    parser.add_argument("--full-episodes", type=int, default=20)
+    parser.add_argument("--skip-full", action="store_true")
+    parser.add_argument("--json", default=None)
+    args = parser.parse_args()
+
+    cfg = TrainConfig.from_yaml(DEFAULT_CONFIG)
+    env_kwargs = {k: v for k, v in cfg.env_kwargs.items() if k not in ("network_pool", "pool_seed")}
+    report: dict = {"episodes": args.episodes, "eval_pool_seed": EVAL_POOL_SEED, "env": env_kwargs}
+    model = args.model
+    if model is None:
+        cfg.max_minutes = args.train_minutes
+        summary = train(cfg, args.train_out, progress_bar=False)
+        report["training"] = summary
+        model = (
+            summary["best_model"]
+            if Path(summary["best_model"]).exists()
+            else summary["final_model"]
+        )
+        print(
+            f"trained MaskablePPO: {summary['timesteps']} decisions in "
+            f"{summary['wall_seconds'] / 60:.1f} min -> {model}",
+            flush=True,
+        )
+    rows = {}
+    for agent in ("route_planner", "goal_greedy", "left_hand", "random", model):
+        r = evaluate(agent, args.episodes, env_kwargs=env_kwargs)
+        name = "maskable_ppo" if agent == model else agent
+        rows[name] = r.to_dict()
+        print(f"evaluated {name}: success {r.success_rate:.3f}", flush=True)
+    report["agents"] = rows
+    print(
+        f"\n## Agents on {args.episodes} held-out networks (fast fidelity, "
+        f"detector={env_kwargs.get('detector')})\n"
+    )
+    print("| agent | success | jams/episode | decisions/episode | path / shortest (median) |")
+    print("|---|---|---|---|---|")
+    for name, r in rows.items():
+        print(
+            f"| {name} | {r['success_rate']:.3f} | {r['jams_per_episode']:.2f} | "
+            f"{r['decisions_per_episode']:.1f} | {r['path_over_shortest']:.2f} |"
+        )
+    ppo, greedy, planner = rows["maskable_ppo"], rows["goal_greedy"], rows["route_planner"]
+    print(
+        f"\nlearned vs GoalGreedy success: {ppo['success_rate']:.3f} vs "
+        f"{greedy['success_rate']:.3f} -> {'met' if ppo['success_rate'] >= greedy['success_rate'] else 'NOT met'}"
+    )
+    ratio = ppo["success_rate"] / planner["success_rate"] if planner["success_rate"] else math.nan
+    print(
+        f"learned / RoutePlanner success: {ratio:.3f} (target >= 0.90) -> "
+        f"{'met' if ratio >= 0.9 else 'NOT met'}"
+    )
+    if "training" in report:
+        print(
+            f"training wall time: {report['training']['wall_seconds'] / 60:.1f} min "
+            f"(target <= 30), {report['training']['timesteps']} decisions"
+        )
+
+    fast = throughput("fast", 200, {**env_kwargs, "network_pool": 50})
+    report["throughput"] = {"fast": fast}
+    print(f"\n## Throughput (one core, random valid actions, resets included)\n")
+    print("| fidelity | decisions | wall s | decisions/s | sim s / wall s | vs fast |")
+    print("|---|---|---|---|---|---|")
+    print(
+        f"| fast | {fast['decisions']} | {fast['wall_s']} | {fast['decisions_per_s']} | "
+        f"{fast['sim_s_per_wall_s']} | 1.00 |"
+    )
+    if not args.skip_full:
+        full_kwargs = {
+            **env_kwargs,
+            "network_config": {"n_fittings": 6, "planar": False, "allow_loops": True},
+        }
+        full = throughput("full", args.full_episodes, full_kwargs)
+        report["throughput"]["full"] = full
+        print(
+            f"| full | {full['decisions']} | {full['wall_s']} | {full['decisions_per_s']} | "
+            f"{full['sim_s_per_wall_s']} | "
+            f"{full['decisions_per_s'] / fast['decisions_per_s']:.4f} |"
+        )
+        print(f"\n## RoutePlanner in full fidelity, {args.full_episodes} held-out networks\n")
+        print("| detector | success | jams/episode | decisions/episode |")
+        print("|---|---|---|---|")
+        gap = {}
+        for det in ("ground_truth", "improved"):
+            r = evaluate(
+                "route_planner",
+                args.full_episodes,
+                env_kwargs={**full_kwargs, "fidelity": "full", "detector": det},
+            )
+            gap[det] = r.to_dict()
+            print(
+                f"| {det} | {r.success_rate:.3f} | {r.jams_per_episode:.2f} | "
+                f"{r.decisions_per_episode:.1f} |"
+            )
+        report["detection_cost"] = gap
+        print(
+            f"\nsuccess lost to detection errors: "
+            f"{gap['ground_truth']['success_rate'] - gap['improved']['success_rate']:+.3f}"
+        )
+    if args.json:
+        Path(args.json).write_text(json.dumps(report, indent=2))
+
+
+if __name__ == "__main__":
+    main()
