@@ -110,9 +110,10 @@ def main() -> None:
             f"{r['decisions_per_episode']:.1f} | {r['path_over_shortest']:.2f} |"
         )
     ppo, greedy, planner = rows["maskable_ppo"], rows["goal_greedy"], rows["route_planner"]
+    beats = ppo["success_rate"] >= greedy["success_rate"]
     print(
         f"\nlearned vs GoalGreedy success: {ppo['success_rate']:.3f} vs "
-        f"{greedy['success_rate']:.3f} -> {'met' if ppo['success_rate'] >= greedy['success_rate'] else 'NOT met'}"
+        f"{greedy['success_rate']:.3f} -> {'met' if beats else 'NOT met'}"
     )
     ratio = ppo["success_rate"] / planner["success_rate"] if planner["success_rate"] else math.nan
     print(
@@ -127,7 +128,7 @@ def main() -> None:
 
     fast = throughput("fast", 200, {**env_kwargs, "network_pool": 50})
     report["throughput"] = {"fast": fast}
-    print(f"\n## Throughput (one core, random valid actions, resets included)\n")
+    print("\n## Throughput (one core, random valid actions, resets included)\n")
     print("| fidelity | decisions | wall s | decisions/s | sim s / wall s | vs fast |")
     print("|---|---|---|---|---|---|")
     print(
