@@ -38,7 +38,7 @@ torch.set_num_threads(1)
 
 def throughput(fidelity: str, episodes: int, env_kwargs: dict, seed: int = 0) -> dict:
     """Decisions per second with random valid actions, resets included."""
-    env = gym.make("pipenav/PipeNav-v0", fidelity=fidelity, **env_kwargs)
+    env = gym.make("pipenav/PipeNav-v0", **{**env_kwargs, "fidelity": fidelity})
     rng = np.random.default_rng(seed)
     steps = 0
     sim = 0.0

@@ -285,7 +285,6 @@ class _DecisionEnv(gym.Env):
             return self._finish_step(terms, events)
         self.decisions += 1
         assert self.decision is not None
-        before = self._progress_measure()
         choice: StructureOption | str = (
             BACK_OUT if action == K_OPTIONS - 1 else self.decision.options[action]
         )
@@ -306,7 +305,7 @@ class _DecisionEnv(gym.Env):
         else:
             self.decision, adv = self._advance()
             events.update(adv)
-        terms.update(self._progress_terms(before))
+        terms.update(self._progress_terms())
         return self._finish_step(terms, events)
 
     def _finish_step(self, terms: dict[str, float], events: dict[str, Any]):
@@ -327,7 +326,7 @@ class _DecisionEnv(gym.Env):
         """Drive to the next decision the agent must take (single ways auto-executed)."""
         events: dict[str, Any] = {"auto_structures": 0}
         for _ in range(MAX_AUTO_STRUCTURES):
-            dec, out = self.plant.advance(self._goal_point())
+            dec, out = self.plant.advance(self._goal_target())
             self._record(out)
             if out.status == "goal":
                 self.terminated = True
@@ -443,6 +442,10 @@ class _DecisionEnv(gym.Env):
     def _goal_point(self) -> NDArray[np.float64] | None:
         return None
 
+    def _goal_target(self) -> Any:
+        """What the plant drives towards: the goal point (or its cached edge position)."""
+        return self._goal_point()
+
     def _observation(self) -> dict[str, NDArray[np.float32]]:
         pose = self.plant.odometry_pose()
         roll = _roll_of(pose)
@@ -487,7 +490,7 @@ class _DecisionEnv(gym.Env):
     def _progress_measure(self) -> float:
         return 0.0
 
-    def _progress_terms(self, before: float) -> dict[str, float]:
+    def _progress_terms(self) -> dict[str, float]:
         return {}
 
     # --------------------------------------------------------------- rendering
@@ -592,6 +595,7 @@ class PipeNavEnv(_DecisionEnv):
         if not self.network.goals:
             raise ValueError("PipeNav needs a network with at least one goal")
         self.goal = np.asarray(self.network.goals[0], dtype=float)
+        self.goal_edge = goal_edge_position(self.network, self.goal)
         start = self.network.start_pose
         assert start is not None
         r = route(self.network, start, self.goal)
@@ -604,12 +608,13 @@ class PipeNavEnv(_DecisionEnv):
     def _sync_progress(self) -> None:
         self._last_distance = self._progress_measure()
 
-    def _progress_measure(self) -> float:
-        return edge_geodesic(
-            self.network, self.plant.edge_position(), goal_edge_position(self.network, self.goal)
-        )
+    def _goal_target(self) -> Any:
+        return self.goal_edge if self.fidelity == "fast" else self.goal
 
-    def _progress_terms(self, before: float) -> dict[str, float]:
+    def _progress_measure(self) -> float:
+        return edge_geodesic(self.network, self.plant.edge_position(), self.goal_edge)
+
+    def _progress_terms(self) -> dict[str, float]:
         now = self._progress_measure()
         terms = {"progress": float(self._last_distance - now)}
         self._last_distance = now
@@ -712,7 +717,7 @@ class PipeExploreEnv(_DecisionEnv):
     def _progress_measure(self) -> float:
         return self._covered_total
 
-    def _progress_terms(self, before: float) -> dict[str, float]:
+    def _progress_terms(self) -> dict[str, float]:
         new = self._covered_total - self._last_cover
         self._last_cover = self._covered_total
         return {"coverage": float(new)}

@@ -35,7 +35,13 @@ def frame_from_forward(forward: ArrayLike, up_hint: ArrayLike | None = None) -> 
     ``up_hint`` defaults to world +z; when ``forward`` is (nearly) vertical the hint falls back to
     world +x so that the frame stays well defined. This is the "roll zero" convention.
     """
-    x = unit(forward, "forward")
+    if type(forward) is np.ndarray and forward.shape == (3,) and forward.dtype == np.float64:
+        n = math.sqrt(float(forward @ forward))  # fast path for the common numpy input
+        if not (n > 1e-12 and math.isfinite(n)):
+            raise ValueError(f"forward must be a finite non-zero 3-vector, got {forward.tolist()}")
+        x = forward / n
+    else:
+        x = unit(forward, "forward")
     hint = WORLD_UP if up_hint is None else unit(up_hint, "up_hint")
     if abs(float(x @ hint)) > _VERTICAL_COS:
         hint = (

@@ -252,8 +252,11 @@ class KinematicPlant:
         out.path += [start, end]
 
     # ------------------------------------------------------------------ driving
-    def advance(self, goal: NDArray[np.float64] | None = None) -> tuple[Decision | None, Outcome]:
-        """Drive forward to the next decision point, or to ``goal`` if it comes first."""
+    def advance(
+        self, goal: NDArray[np.float64] | EdgePosition | None = None
+    ) -> tuple[Decision | None, Outcome]:
+        """Drive forward to the next decision point, or to ``goal`` (a point, or its edge
+        position) if it comes first."""
         out = Outcome()
         st = self.state
         node = st.towards
@@ -289,10 +292,10 @@ class KinematicPlant:
         )
         return self.decision, out
 
-    def _goal_ahead(self, goal: NDArray, st: EdgeState, move: float) -> float | None:
+    def _goal_ahead(self, goal: NDArray | EdgePosition, st: EdgeState, move: float) -> float | None:
         """Distance ahead to the goal if it lies on this edge within ``move`` (plus the
         trigger distance, since the robot would see it), else None."""
-        gp = goal_edge_position(self.network, goal)
+        gp = goal if isinstance(goal, EdgePosition) else goal_edge_position(self.network, goal)
         if gp.run_id != st.run_id:
             return None
         r = self.network.run_by_id[st.run_id]
