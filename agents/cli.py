@@ -128,10 +128,17 @@ def _train(args: argparse.Namespace) -> int:
 
 def _eval(args: argparse.Namespace) -> int:
     from agents.evaluate import evaluate
+    from agents.train import DEFAULT_CONFIG, TrainConfig
 
-    kwargs: dict[str, Any] = {"detector": args.detector, "fidelity": args.fidelity}
+    # default: the training distribution of the packaged config
+    kwargs: dict[str, Any] = dict(TrainConfig.from_yaml(DEFAULT_CONFIG).env_kwargs)
+    kwargs.update(detector=args.detector, fidelity=args.fidelity)
     if args.network_config:
-        kwargs["network_config"] = json.loads(args.network_config)
+        try:
+            kwargs["network_config"] = json.loads(args.network_config)
+        except json.JSONDecodeError as exc:
+            _print(f"error: --network-config is not JSON ({exc})")
+            return EXIT_USAGE
     result = evaluate(args.agent, args.episodes, env_kwargs=kwargs)
     _print(json.dumps(result.to_dict(), indent=2))
     if args.json:
@@ -143,7 +150,11 @@ def _eval(args: argparse.Namespace) -> int:
 def _drive(args: argparse.Namespace) -> int:
     from agents.console import OperatorConsole
 
-    console = OperatorConsole.from_args(args)
+    try:
+        console = OperatorConsole.from_args(args)
+    except (ValueError, OSError) as exc:  # bad --params JSON, layout or network file
+        _print(f"error: {exc}")
+        return EXIT_USAGE
     return console.run()
 
 
@@ -228,7 +239,11 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--episodes", type=int, default=200)
     ev.add_argument("--detector", default="improved")
     ev.add_argument("--fidelity", default="fast", choices=["full", "fast"])
-    ev.add_argument("--network-config", default=None, help="NetworkConfig as JSON")
+    ev.add_argument(
+        "--network-config",
+        default=None,
+        help="NetworkConfig as JSON (default: the training distribution)",
+    )
     ev.add_argument("--json", default=None)
     ev.set_defaults(func=_eval)
 

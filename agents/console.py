@@ -57,7 +57,13 @@ class OperatorConsole:
             "lidar": args.lidar,
         }
         if args.layout:
-            net = make_layout(args.layout, **json.loads(args.params))
+            try:
+                params = json.loads(args.params)
+            except json.JSONDecodeError as exc:
+                raise ValueError(f"--params is not JSON ({exc}): {args.params!r}") from None
+            if not isinstance(params, dict):
+                raise ValueError(f"--params must be a JSON object, got {args.params!r}")
+            net = make_layout(args.layout, **params)
             if not net.goals:
                 end = [f for f in net.fittings if f.kind == "closure" and f.id != "entry"]
                 goal = net.geometry[end[-1].id]

@@ -1,13 +1,17 @@
 """Evaluate an agent (scripted or a trained MaskablePPO policy) on held-out networks.
 
 Metrics per agent: success rate, jams per episode, decisions per episode, and path length over
-the shortest drivable route (median, successful episodes). Networks come from a pool seed that
-training never uses, so the same ``n_episodes`` and ``pool_seed`` give the same networks.
+the shortest drivable route (median over successful episodes). The held-out networks are
+``pool_network(config, EVAL_POOL_SEED, i)`` for i = 0, 1, ...: a pool seed that training uses
+for neither its episodes nor its model selection (``VALIDATION_POOL_SEED``), so the same
+``n_episodes`` give the same networks. A learned policy is evaluated with sb3-contrib's
+``evaluate_policy`` (action masks on, deterministic actions).
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -19,9 +23,12 @@ import pipe_env  # noqa: F401  (registers the environment ids)
 from agents.scripted import SCRIPTED_AGENTS, make_agent
 from pipe_env.envs import pool_network
 from pipe_env.generator import NetworkConfig
+from pipe_env.network import PipeNetwork
 
-#: Held-out networks for evaluation: a pool seed that training configs do not use.
+#: Held-out networks for reported evaluations.
 EVAL_POOL_SEED = 1_000_003
+#: Networks for model selection during training (never the reported held-out ones).
+VALIDATION_POOL_SEED = 2_000_003
 
 
 @dataclass
@@ -37,6 +44,24 @@ class EvalResult:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+class SequentialNetworks(gym.Wrapper):
+    """Resets its environment on the given networks in order (cycling), for evaluations that
+    must see exactly those networks whatever calls ``reset``."""
+
+    def __init__(self, env: gym.Env, networks: list[PipeNetwork]) -> None:
+        super().__init__(env)
+        self.networks = networks
+        self.index = 0
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        network = self.networks[self.index % len(self.networks)]
+        self.index += 1
+        return self.env.reset(seed=seed, options={**(options or {}), "network": network})
+
+    def action_masks(self) -> np.ndarray:
+        return self.env.unwrapped.action_masks()
 
 
 class PolicyAgent:
@@ -55,9 +80,38 @@ class PolicyAgent:
 
     def act(self, observation: dict, info: dict[str, Any]) -> int:
         action, _ = self.model.predict(
-            observation, action_masks=info["action_mask"], deterministic=True
+            observation,
+            action_masks=np.asarray(info["action_mask"], dtype=bool),
+            deterministic=True,
         )
         return int(action)
+
+
+def held_out_networks(
+    config: NetworkConfig, n: int, pool_seed: int = EVAL_POOL_SEED
+) -> list[PipeNetwork]:
+    return [pool_network(config, pool_seed, i) for i in range(n)]
+
+
+def _summarise(agent: str, infos: list[dict[str, Any]], wall: float) -> EvalResult:
+    arr = np.array(
+        [(i["is_success"], i["jams"], i["decisions"], i["sim_time"]) for i in infos], dtype=float
+    )
+    ratios = [
+        i["travelled"] / i["shortest_route"]
+        for i in infos
+        if i["is_success"] and i.get("shortest_route", 0) > 0
+    ]
+    return EvalResult(
+        agent=str(agent),
+        episodes=len(infos),
+        success_rate=float(arr[:, 0].mean()),
+        jams_per_episode=float(arr[:, 1].mean()),
+        decisions_per_episode=float(arr[:, 2].mean()),
+        path_over_shortest=float(np.median(ratios)) if ratios else math.nan,
+        sim_seconds_per_episode=float(arr[:, 3].mean()),
+        wall_seconds=round(wall, 2),
+    )
 
 
 def evaluate(
@@ -68,46 +122,61 @@ def evaluate(
     pool_seed: int = EVAL_POOL_SEED,
 ) -> EvalResult:
     """Run ``agent`` (a scripted name or a model .zip path) on ``n_episodes`` held-out networks."""
-    import time
-
     kwargs = dict(env_kwargs or {})
+    kwargs.pop("network_pool", None)
+    kwargs.pop("pool_seed", None)
     config = kwargs.pop("network_config", None)
     cfg = (
         NetworkConfig.from_dict(config) if isinstance(config, dict) else (config or NetworkConfig())
     )
-    env = gym.make(env_id, network_config=cfg, **kwargs)
+    networks = held_out_networks(cfg, n_episodes, pool_seed)
+    env = SequentialNetworks(gym.make(env_id, network_config=cfg, **kwargs), networks)
+    t0 = time.perf_counter()
     if agent in SCRIPTED_AGENTS:
         actor: Any = make_agent(agent, env)
+        infos = []
+        for i in range(n_episodes):
+            obs, info = env.reset(seed=pool_seed + i)
+            actor.reset()
+            done = False
+            while not done:
+                obs, _, term, trunc, info = env.step(actor.act(obs, info))
+                done = term or trunc
+            infos.append(info)
     elif str(agent).endswith(".zip") and Path(agent).exists():
-        actor = PolicyAgent(agent, env)
+        infos = _evaluate_policy(agent, env, n_episodes, pool_seed)
     else:
         raise ValueError(
             f"agent {agent!r} is neither a scripted agent {sorted(SCRIPTED_AGENTS)} "
             "nor an existing model .zip"
         )
-    rows = []
-    t0 = time.perf_counter()
-    for i in range(n_episodes):
-        network = pool_network(cfg, pool_seed, i)
-        obs, info = env.reset(seed=pool_seed + i, options={"network": network})
-        actor.reset()
-        done = False
-        while not done:
-            obs, _, term, trunc, info = env.step(actor.act(obs, info))
-            done = term or trunc
-        shortest = info.get("shortest_route", math.nan)
-        ratio = info["travelled"] / shortest if info["is_success"] and shortest > 0 else math.nan
-        rows.append((info["is_success"], info["jams"], info["decisions"], ratio, info["sim_time"]))
-    wall = time.perf_counter() - t0
-    arr = np.array(rows, dtype=float)
-    ratios = arr[:, 3][np.isfinite(arr[:, 3])]
-    return EvalResult(
-        agent=str(agent),
-        episodes=n_episodes,
-        success_rate=float(arr[:, 0].mean()),
-        jams_per_episode=float(arr[:, 1].mean()),
-        decisions_per_episode=float(arr[:, 2].mean()),
-        path_over_shortest=float(np.median(ratios)) if len(ratios) else math.nan,
-        sim_seconds_per_episode=float(arr[:, 4].mean()),
-        wall_seconds=round(wall, 2),
+    env.close()
+    return _summarise(agent, infos, time.perf_counter() - t0)
+
+
+def _evaluate_policy(path: str, env: gym.Env, n_episodes: int, seed: int) -> list[dict]:
+    import torch
+    from sb3_contrib import MaskablePPO
+    from sb3_contrib.common.maskable.evaluation import evaluate_policy
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    torch.set_num_threads(1)
+    model = MaskablePPO.load(str(path), device="cpu")
+    venv = DummyVecEnv([lambda: env])
+    venv.seed(seed)
+    finals: list[dict] = []
+
+    def keep_final_info(local: dict, _global: dict) -> None:
+        if local["dones"][local["i"]]:
+            finals.append(dict(local["infos"][local["i"]]))
+
+    evaluate_policy(
+        model,
+        venv,
+        n_eval_episodes=n_episodes,
+        deterministic=True,
+        use_masking=True,
+        callback=keep_final_info,
+        warn=False,
     )
+    return finals[:n_episodes]

@@ -136,7 +136,26 @@ def _expect(source: str, key: str, value: Any, types: type | tuple, allowed: str
 
 
 def parse_scenario(data: Any, source: str) -> Scenario:
-    """Validate a scenario mapping (from YAML) and return a :class:`Scenario`."""
+    """Validate a scenario mapping (from YAML) and return a :class:`Scenario`.
+
+    Every problem is a :class:`ScenarioError` naming ``source`` and the key; nothing else
+    escapes, whatever the mapping holds.
+    """
+    try:
+        return _parse_scenario(data, source)
+    except ScenarioError:
+        raise
+    except Exception as exc:  # a value of a shape no check anticipated: still name the file
+        raise ScenarioError(f"{source}: invalid scenario ({type(exc).__name__}: {exc})") from None
+
+
+def _choice(source: str, key: str, value: Any, allowed: tuple[str, ...]) -> str:
+    if not isinstance(value, str) or value not in allowed:
+        raise _fail(source, key, f"got {value!r}; allowed: {allowed}")
+    return value
+
+
+def _parse_scenario(data: Any, source: str) -> Scenario:
     if not isinstance(data, dict):
         raise ScenarioError(
             f"{source}: a scenario must be a mapping of keys, got {type(data).__name__}"
@@ -148,17 +167,13 @@ def parse_scenario(data: Any, source: str) -> Scenario:
     name = data.get("name", stem)
     _expect(source, "name", name, str, "a string")
     mode = data.get("mode", "navigate")
-    if mode not in MODES:
-        raise _fail(source, "mode", f"got {mode!r}; allowed: {MODES}")
+    _choice(source, "mode", mode, MODES)
     env = data.get("env", "PipeNav-v0")
-    if env not in ENVS:
-        raise _fail(source, "env", f"got {env!r}; allowed: {ENVS}")
+    _choice(source, "env", env, ENVS)
     detector = data.get("detector", "improved")
-    if detector not in DETECTORS:
-        raise _fail(source, "detector", f"got {detector!r}; allowed: {DETECTORS}")
+    _choice(source, "detector", detector, DETECTORS)
     fidelity = data.get("fidelity", "full")
-    if fidelity not in FIDELITIES:
-        raise _fail(source, "fidelity", f"got {fidelity!r}; allowed: {FIDELITIES}")
+    _choice(source, "fidelity", fidelity, FIDELITIES)
     agent = data.get("agent", "route_planner")
     _expect(source, "agent", agent, str, "a scripted agent name or a model .zip path")
     from agents.scripted import SCRIPTED_AGENTS
@@ -303,7 +318,7 @@ def _validate_network(net: Any, source: str) -> None:
     if "layout" in net:
         from pipe_env.layouts import LAYOUTS
 
-        if net["layout"] not in LAYOUTS:
+        if not isinstance(net["layout"], str) or net["layout"] not in LAYOUTS:
             raise _fail(
                 source, "network.layout", f"got {net['layout']!r}; allowed: {sorted(LAYOUTS)}"
             )
@@ -330,7 +345,7 @@ def _validate_sensor(sensor: Any, source: str) -> None:
     if extra:
         raise _fail(source, f"sensor.{extra[0]}", f"unknown key; allowed: {sorted(SENSOR_KEYS)}")
     preset = sensor.get("preset", "ideal")
-    if preset not in PRESETS:
+    if not isinstance(preset, str) or preset not in PRESETS:
         raise _fail(source, "sensor.preset", f"got {preset!r}; allowed: {sorted(PRESETS)}")
     overrides = sensor.get("overrides", {})
     if not isinstance(overrides, dict):
@@ -416,7 +431,9 @@ def load_scenario(path: str | Path) -> Scenario:
         raise ScenarioError(
             f"{p}: not valid YAML{where}: {getattr(exc, 'problem', None) or exc}"
         ) from None
-    return parse_scenario(data, str(p))
+    scenario = parse_scenario(data, str(p))
+    build_network(scenario)  # layout/generator parameters and goals are checked here too
+    return scenario
 
 
 def packaged_scenario_dir() -> Path:
@@ -463,7 +480,9 @@ def build_network(sc: Scenario) -> Any:
         if "goal" in sc.data:
             net = net.with_goals([_goal_point(net, sc.data["goal"], sc.source)])
         net.validate()
-    except (ValueError, TypeError) as exc:
+    except ScenarioError:
+        raise
+    except (ValueError, TypeError, KeyError, OSError) as exc:
         raise _fail(sc.source, "network", str(exc)) from None
     return net
 
@@ -543,7 +562,11 @@ class ScenarioResult:
         return [c for c in self.criteria if not c.passed]
 
     def replay_command(self) -> str:
-        return f"pipenav scenarios run '{self.scenario}' --seed {self.seed}"
+        cmd = f"pipenav scenarios run '{self.scenario}' --seed {self.seed}"
+        folder = Path(self.source).parent
+        if folder.resolve() != packaged_scenario_dir().resolve():
+            cmd += f" --dir '{folder}'"
+        return cmd
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -569,9 +592,7 @@ def run_scenario(sc: Scenario, seed: int) -> ScenarioResult:
             _run_detect(sc, net, seed) if sc.mode == "detect" else _run_navigate(sc, net, seed)
         )
         error = None
-    except ScenarioError:
-        raise
-    except Exception as exc:  # a crash is a failed scenario with its reason, not a traceback
+    except Exception as exc:  # a crash or a bad parameter is a failed run with its reason
         t1 = time.perf_counter()
         metrics, error = {}, f"{type(exc).__name__}: {exc}"
     t2 = time.perf_counter()

@@ -12,8 +12,9 @@ returning an action index (the options table row; the last row backs out).
   the right on each return, back out at dead ends.
 - :class:`RandomAgent`: a uniformly random valid action.
 
-Junction memory (GoalGreedy, LeftHand) is keyed by the odometry position of the decision,
-rounded to ``memory_resolution`` metres, since the agents do not know the true fitting ids.
+GoalGreedy and LeftHand remember nothing themselves: they read the ``taken`` column of the
+options table, the robot's own odometry log of the ways it already took from here
+(:mod:`pipe_env.way_log`), and prefer ways not taken yet.
 """
 
 from __future__ import annotations
@@ -25,11 +26,15 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
-from pipe_env.envs import K_OPTIONS
-from pipe_env.plant import option_vector
+from pipe_env.envs import K_OPTIONS, OPTION_FEATURES
+from pipe_env.network import ROBOT_DIAMETER_RANGE
+from pipe_env.plant import ExecutionTolerance, option_vector
 from pipe_env.routing import route
 
 BACK = K_OPTIONS - 1
+TAKEN = OPTION_FEATURES.index("taken")
+#: A detected way counts as the planned one within this angle (the executor's match limit).
+MATCH_ANGLE = ExecutionTolerance().match
 
 
 def _mask(info: dict[str, Any], env: gym.Env) -> NDArray[np.bool_]:
@@ -79,7 +84,7 @@ class RoutePlanner(_Agent):
         goal = env.network.goals[0] if env.network.goals else None
         if goal is None:
             return int(np.flatnonzero(mask)[0])
-        planned = route(env.network, env.plant.pose(), goal)
+        planned = route(env.network, env.plant.pose(), goal, diameter_range=ROBOT_DIAMETER_RANGE)
         if planned is None or not planned.nodes or planned.nodes[0] != dec.node_id:
             return BACK
         run_out = planned.runs[1]
@@ -92,35 +97,24 @@ class RoutePlanner(_Agent):
             sep = math.acos(max(-1.0, min(1.0, float(v @ want))))
             if sep < best_sep:
                 best, best_sep = i, sep
-        return best
+        # no detected way near the planned one: back off and let the robot sense again
+        return best if best_sep <= MATCH_ANGLE else BACK
 
 
-class _JunctionMemory(_Agent):
-    def __init__(self, env: gym.Env, memory_resolution: float = 0.1) -> None:
-        super().__init__(env)
-        self.resolution = memory_resolution
-        self.tried: dict[tuple[int, ...], list[int]] = {}
-
-    def reset(self) -> None:
-        self.tried = {}
-
-    def _key(self, info: dict[str, Any]) -> tuple[int, ...]:
-        p = np.asarray(info.get("odometry_position", np.zeros(3)), dtype=float)
-        return tuple(int(v) for v in np.round(p / self.resolution))
-
-    def _choose(self, ranked: list[int], info: dict[str, Any]) -> int:
-        """First ranked option not yet tried here; back out when all were."""
-        key = self._key(info)
-        tried = self.tried.setdefault(key, [])
-        for i in ranked:
-            if i not in tried:
-                tried.append(i)
-                return i
-        return BACK
+def _prefer_untaken(ranked: list[int], observation: dict[str, NDArray]) -> int:
+    """The first ranked row the robot has not taken from here yet; else the least taken one,
+    unless backing out was taken less."""
+    taken = np.asarray(observation["options"], dtype=float)[:, TAKEN]
+    for i in ranked:
+        if taken[i] == 0.0:
+            return i
+    least = min(ranked, key=lambda i: taken[i])
+    return least if taken[least] < taken[BACK] else BACK
 
 
-class GoalGreedy(_JunctionMemory):
-    """The option pointing most towards the goal (robot frame, from odometry)."""
+class GoalGreedy(_Agent):
+    """The option pointing most towards the goal (robot frame, from odometry), preferring ways
+    not taken from here before."""
 
     def act(self, observation: dict[str, NDArray], info: dict[str, Any]) -> int:
         mask = _mask(info, self.env)
@@ -134,11 +128,11 @@ class GoalGreedy(_JunctionMemory):
             return valid[0]
         score = vecs[valid] @ (goal / norm)
         ranked = [valid[i] for i in np.argsort(-score, kind="stable")]
-        return self._choose(ranked, info)
+        return _prefer_untaken(ranked, observation)
 
 
-class LeftHand(_JunctionMemory):
-    """Wall follower: the leftmost way first, then the next to the right on each return."""
+class LeftHand(_Agent):
+    """Wall follower: the leftmost way not taken from here yet, then the next to the right."""
 
     def act(self, observation: dict[str, NDArray], info: dict[str, Any]) -> int:
         mask = _mask(info, self.env)
@@ -148,7 +142,7 @@ class LeftHand(_JunctionMemory):
         vecs = _option_vectors(observation)
         yaw_left = np.arctan2(vecs[valid, 1], vecs[valid, 0])  # + to the left
         ranked = [valid[i] for i in np.argsort(-yaw_left, kind="stable")]
-        return self._choose(ranked, info)
+        return _prefer_untaken(ranked, observation)
 
 
 SCRIPTED_AGENTS = {

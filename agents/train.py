@@ -99,7 +99,9 @@ def train(cfg: TrainConfig, out: str | Path, progress_bar: bool = True) -> dict[
     (out / "config.yaml").write_text(yaml.safe_dump(asdict(cfg), sort_keys=False))
     vec_cls = SubprocVecEnv if cfg.vec_env == "subproc" and cfg.n_envs > 1 else DummyVecEnv
     venv = vec_cls(make_env_fns(cfg))
-    eval_cfg = {"episodes": 50, "every_timesteps": 50_000, "pool_seed": 1_000_003}
+    from agents.evaluate import VALIDATION_POOL_SEED
+
+    eval_cfg = {"episodes": 50, "every_timesteps": 50_000, "pool_seed": VALIDATION_POOL_SEED}
     eval_cfg.update(cfg.eval)
     eval_env = DummyVecEnv(make_env_fns(cfg, pool_seed=int(eval_cfg["pool_seed"]), n=1))
     ppo_kwargs = dict(cfg.ppo)

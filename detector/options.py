@@ -99,6 +99,12 @@ class StructureOption:
         )
 
 
+def option_order(option: StructureOption) -> tuple[int, float]:
+    """Sort key of the options of one structure: the way straight on first, then the others by
+    roll direction. Noise in the deflection angle cannot swap two branches this way."""
+    return (0 if option.is_straight_on else 1, option.direction)
+
+
 def direction_name(direction: float) -> str:
     """Nearest of eight compass-like names for a roll direction (0 = left, pi/2 = up)."""
     names = ["left", "up-left", "up", "up-right", "right", "down-right", "down", "down-left"]

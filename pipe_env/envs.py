@@ -19,9 +19,9 @@ Observation (a flat ``Dict``, fixed shapes, finite bounds):
 
 - ``options`` (K, 14): per row ``valid``, kind one-hot (straight, reducer, closure, bend,
   junction, back out), ``distance`` (m), ``diameter`` (m), ``cos`` and ``sin`` of the direction,
-  ``angle`` (rad), ``confidence``, and ``taken``: how often the robot's own log (odometry) says
-  it took this way from here before (0, 1/3, 2/3, 1 for 3 or more; the back-out row counts back
-  outs from here);
+  ``angle`` (rad), ``confidence``, and ``taken``: how often the robot's own log says it took
+  this way from here before (:mod:`pipe_env.way_log`; 0, 1/3, 2/3, 1 for 3 or more; the
+  back-out row counts back-outs from here);
 - ``goal`` (3,): the goal in the robot frame from noisy odometry (m, clipped to +-20; PipeNav);
 - ``proprio`` (3,): clamped diameter (m), cos and sin of the robot's roll;
 - ``scan`` (16, 32), optional (``scan_image=True``): a low-resolution range image of the last
@@ -66,9 +66,11 @@ from pipe_env.plant import (
     drivable,
     goal_edge_position,
     match_option,
+    option_vector,
 )
 from pipe_env.routing import MAX_TURN, edge_geodesic, edge_length, locate, route, turn_angle
 from pipe_env.sensing_model import DETECTOR_ERROR_MODELS
+from pipe_env.way_log import WayLog
 
 K_OPTIONS = 6
 OPTION_FEATURES = (
@@ -94,8 +96,7 @@ MAX_AUTO_STRUCTURES = 64
 
 _LOW = np.array([0, 0, 0, 0, 0, 0, 0, -1.0, 0.0, -1, -1, 0.0, 0.0, 0.0], dtype=np.float32)
 _HIGH = np.array([1, 1, 1, 1, 1, 1, 1, 5.0, 0.3, 1, 1, math.pi, 1.0, 1.0], dtype=np.float32)
-#: The robot's log of ways taken: decisions within this many metres (odometry) are "here".
-MEMORY_RESOLUTION = 0.1
+#: ``taken`` saturates at this many times (see :mod:`pipe_env.way_log`).
 MAX_TAKEN = 3
 
 
@@ -195,10 +196,21 @@ class _DecisionEnv(gym.Env):
         self.action_space = spaces.Discrete(K_OPTIONS)
         self.network: PipeNetwork | None = None
         self.plant: Any = None
-        self.decision: Decision | None = None
+        self._decision: Decision | None = None
+        self._decision_serial = 0
         self._renderer: Any = None
         self._world_for_render: Any = None
         self._mask_cache: tuple[Any, NDArray[np.bool_]] | None = None
+
+    @property
+    def decision(self) -> Decision | None:
+        """The decision pending for the agent (None when the episode has ended)."""
+        return self._decision
+
+    @decision.setter
+    def decision(self, value: Decision | None) -> None:
+        self._decision = value
+        self._decision_serial += 1
 
     # ----------------------------------------------------------------- episode
     def _new_network(self) -> PipeNetwork:
@@ -252,11 +264,12 @@ class _DecisionEnv(gym.Env):
         self.structures = 0
         self.invalid_actions = 0
         self.terminated = False
+        self.truncated = False
         self.success = False
         self._waypoints: list[Any] = [getattr(self.plant, "state", None)]
         self.decision_points: list[NDArray[np.float64]] = []
         self.detection_errors: list[dict[str, float]] = []
-        self._taken: dict[tuple[int, ...], dict[tuple[int, int] | str, int]] = {}
+        self.way_log = WayLog()
         self._episode_reset()
         self.decision, self._reset_events = self._advance()
         self._sync_progress()
@@ -271,7 +284,7 @@ class _DecisionEnv(gym.Env):
         if self.plant is None:
             raise RuntimeError("call reset() before step()")
         action = int(action)
-        if self.terminated:  # e.g. a fixed network whose goal is reached before any decision
+        if self.terminated or self.truncated:  # e.g. a goal reached before any decision
             return self._finish_step({}, {"after_termination": True})
         if not 0 <= action < K_OPTIONS:
             raise ValueError(f"action {action} is outside Discrete({K_OPTIONS})")
@@ -288,10 +301,9 @@ class _DecisionEnv(gym.Env):
         choice: StructureOption | str = (
             BACK_OUT if action == K_OPTIONS - 1 else self.decision.options[action]
         )
-        log = self._taken.setdefault(self._here(), {})
-        key = _way_key(choice)
-        log[key] = log.get(key, 0) + 1
-        outcome = self.plant.execute(choice)
+        odo = self.plant.odometry_pose()
+        self.way_log.record(odo.position, self._world_way(choice, odo))
+        outcome = self.plant.execute(choice, self._goal_target())
         self._record(outcome)
         events["outcome"] = outcome.status
         if outcome.status == "jammed":
@@ -300,8 +312,13 @@ class _DecisionEnv(gym.Env):
             terms["jam"] = self.reward_jam
             if self.jams >= self.max_jams:
                 self.terminated = True
+            else:  # the robot backed off the structure and senses it again
+                self.decision, _ = self.plant.resense()
+                self._after_sensing(self.decision)
         elif outcome.status == "blocked":
             events["blocked"] = True
+        elif outcome.status == "goal":
+            self._reach_goal(events)
         else:
             self.decision, adv = self._advance()
             events.update(adv)
@@ -311,11 +328,24 @@ class _DecisionEnv(gym.Env):
     def _finish_step(self, terms: dict[str, float], events: dict[str, Any]):
         reward = float(sum(terms.values()))
         info = self._info(events, terms)
-        truncated = False
-        return self._observation(), reward, bool(self.terminated), truncated, info
+        return self._observation(), reward, bool(self.terminated), bool(self.truncated), info
+
+    def _reach_goal(self, events: dict[str, Any]) -> None:
+        self.terminated = True
+        self.success = True
+        self.decision = None
+        events["goal_reached"] = True
+
+    @staticmethod
+    def _world_way(choice: StructureOption | str, odo: Pose) -> NDArray[np.float64] | None:
+        """A chosen way as a world direction from the odometry heading (None: back out)."""
+        return None if isinstance(choice, str) else odo.rotation @ option_vector(choice)
 
     def _record(self, outcome: Outcome) -> None:
-        self._waypoints.extend(outcome.path)
+        if self._waypoints and outcome.path and outcome.path[0] == self._waypoints[-1]:
+            self._waypoints.extend(outcome.path[1:])
+        else:
+            self._waypoints.extend(outcome.path)
 
     @property
     def path(self) -> NDArray[np.float64]:
@@ -329,9 +359,7 @@ class _DecisionEnv(gym.Env):
             dec, out = self.plant.advance(self._goal_target())
             self._record(out)
             if out.status == "goal":
-                self.terminated = True
-                self.success = True
-                events["goal_reached"] = True
+                self._reach_goal(events)
                 return None, events
             assert dec is not None
             self.structures += 1
@@ -346,9 +374,12 @@ class _DecisionEnv(gym.Env):
             if not single:
                 self.decision_points.append(dec.pose.position)
                 return dec, events
-            outcome = self.plant.execute(ways[0])
+            outcome = self.plant.execute(ways[0], self._goal_target())
             self._record(outcome)
             events["auto_structures"] += 1
+            if outcome.status == "goal":
+                self._reach_goal(events)
+                return None, events
             if outcome.status != "done":
                 events["auto_" + outcome.status] = True
                 if outcome.status == "jammed":
@@ -359,7 +390,7 @@ class _DecisionEnv(gym.Env):
                 self.plant.decision = dec
                 self.decision_points.append(dec.pose.position)
                 return dec, events
-        self.terminated = True
+        self.truncated = True  # a pathological chain of single ways: stop, it is not an outcome
         events["truncated_auto"] = True
         return None, events
 
@@ -393,7 +424,7 @@ class _DecisionEnv(gym.Env):
     # ------------------------------------------------------------ observation
     def action_masks(self) -> NDArray[np.bool_]:
         """Which actions the robot would attempt now (MaskablePPO reads this on the env)."""
-        key = (id(self.decision), self.terminated)
+        key = (self._decision_serial, self.terminated, self.truncated)
         if self._mask_cache is not None and self._mask_cache[0] == key:
             return self._mask_cache[1].copy()
         mask = self._compute_mask()
@@ -402,7 +433,7 @@ class _DecisionEnv(gym.Env):
 
     def _compute_mask(self) -> NDArray[np.bool_]:
         mask = np.zeros(K_OPTIONS, dtype=bool)
-        if self.decision is None or self.terminated:
+        if self.decision is None or self.terminated or self.truncated:
             mask[K_OPTIONS - 1] = True  # nothing to choose; backing out is always possible
             return mask
         for i, o in enumerate(self.decision.options[: K_OPTIONS - 1]):
@@ -410,16 +441,13 @@ class _DecisionEnv(gym.Env):
         mask[K_OPTIONS - 1] = True
         return mask
 
-    def _here(self) -> tuple[int, ...]:
-        """The robot's log key for its current place (odometry rounded to the memory grid)."""
-        p = self.plant.odometry_pose().position
-        return tuple(int(round(v / MEMORY_RESOLUTION)) for v in p)
-
     def _options_table(self) -> NDArray[np.float32]:
         table = np.zeros((K_OPTIONS, len(OPTION_FEATURES)), dtype=np.float32)
         mask = self.action_masks()
-        log = self._taken.get(self._here(), {}) if self.plant is not None else {}
-        table[K_OPTIONS - 1, 13] = min(log.get(BACK_OUT, 0), MAX_TAKEN) / MAX_TAKEN
+        odo = self.plant.odometry_pose()
+        table[K_OPTIONS - 1, 13] = min(self.way_log.count(odo.position, None), MAX_TAKEN) / (
+            MAX_TAKEN
+        )
         if self.decision is not None:
             for i, o in enumerate(self.decision.options[: K_OPTIONS - 1]):
                 row = table[i]
@@ -430,7 +458,8 @@ class _DecisionEnv(gym.Env):
                 row[9], row[10] = math.cos(o.direction), math.sin(o.direction)
                 row[11] = clamp(o.angle, 0.0, math.pi)
                 row[12] = clamp(o.confidence, 0.0, 1.0)
-                row[13] = min(log.get(_way_key(o), 0), MAX_TAKEN) / MAX_TAKEN
+                taken = self.way_log.count(odo.position, self._world_way(o, odo))
+                row[13] = min(taken, MAX_TAKEN) / MAX_TAKEN
         back = table[K_OPTIONS - 1]
         back[0] = float(mask[K_OPTIONS - 1])
         back[6] = 1.0
@@ -481,7 +510,7 @@ class _DecisionEnv(gym.Env):
             "fidelity": self.fidelity,
             "detector": self.detector,
             "detection_error": dict(self.detection_errors[-1]) if self.detection_errors else {},
-            "action_mask": self.action_masks(),
+            "action_mask": self.action_masks().astype(np.int8),
             "odometry_position": self.plant.odometry_pose().position.copy(),
         }
         info.update({k: v for k, v in events.items()})
@@ -557,16 +586,6 @@ class _DecisionEnv(gym.Env):
         return state
 
 
-def _way_key(choice: StructureOption | str) -> tuple[int, int] | str:
-    """A way on identified coarsely by its angle (22.5 deg) and direction (45 deg) buckets."""
-    if isinstance(choice, str):
-        return choice
-    return (
-        int(round(choice.angle / (math.pi / 8))),
-        int(round(choice.direction / (math.pi / 4))) % 8 if choice.angle > 0.17 else 0,
-    )
-
-
 def pool_network(config: NetworkConfig, pool_seed: int, index: int) -> PipeNetwork:
     """Network ``index`` of the pool ``pool_seed`` (the same for every process and run)."""
     return generate_network(config, np.random.default_rng([pool_seed, index]))
@@ -583,12 +602,19 @@ def _roll_of(pose: Pose) -> float:
 class PipeNavEnv(_DecisionEnv):
     """Reach a goal in a generated pipe network (see module docstring)."""
 
-    def __init__(
-        self, *args: Any, reward_goal: float = 10.0, goal_tolerance: float = 0.05, **kwargs: Any
-    ) -> None:
+    def __init__(self, *args: Any, reward_goal: float = 10.0, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        if (
+            isinstance(reward_goal, bool)
+            or not isinstance(reward_goal, (int, float))
+            or not (0.0 <= reward_goal <= 1000.0)
+        ):
+            raise ValueError(
+                f"reward_goal={reward_goal!r} is not allowed; use a number in [0, 1000]"
+            )
         self.reward_goal = float(reward_goal)
-        self.goal_tolerance = float(goal_tolerance)
+        if self.fixed_network is None and self.network_config.n_goals < 1:
+            raise ValueError("PipeNav needs goals: network_config.n_goals must be >= 1")
 
     def _episode_reset(self) -> None:
         assert self.network is not None
@@ -677,10 +703,10 @@ class PipeExploreEnv(_DecisionEnv):
 
     def _record(self, outcome: Outcome) -> None:
         super()._record(outcome)
+        if outcome.status == "back_out":
+            return  # reversing over pipe already seen
         waypoints = outcome.path
-        for a, b in zip(waypoints[::2], waypoints[1::2]):
-            if outcome.status == "back_out":
-                continue  # reversing over pipe already seen
+        for a, b in zip(waypoints[:-1], waypoints[1:]):
             if a.run_id == b.run_id:
                 self._cover(a.run_id, min(a.s, b.s), max(a.s, b.s))
             else:  # through a fitting: to its centre on one run, from it on the next
@@ -703,7 +729,10 @@ class PipeExploreEnv(_DecisionEnv):
                 merged.append((lo, hi))
         self.covered[run_id] = merged
         self._covered_total = sum(
-            hi - lo for run, s in self.covered.items() if run in self.reachable_runs for lo, hi in s
+            hi - lo
+            for run in sorted(self.covered)
+            if run in self.reachable_runs
+            for lo, hi in self.covered[run]
         )
 
     def _advance(self) -> tuple[Decision | None, dict[str, Any]]:
@@ -748,4 +777,5 @@ def reachable_runs(network: PipeNetwork, max_turn: float = MAX_TURN) -> tuple[fl
             if state not in seen:
                 seen.add(state)
                 frontier.append(state)
-    return float(sum(edge_length(network, r) for r in seen_runs)), seen_runs
+    # summed in a fixed order: set order varies between processes (hash seeds)
+    return float(sum(edge_length(network, r) for r in sorted(seen_runs))), seen_runs

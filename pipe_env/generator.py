@@ -99,8 +99,48 @@ class NetworkConfig:
         def bad(name: str, value: Any, allowed: str) -> ValueError:
             return ValueError(f"NetworkConfig.{name} = {value!r} is invalid; allowed: {allowed}")
 
-        if not isinstance(self.n_fittings, (int, np.integer)) or not 1 <= self.n_fittings <= 200:
+        def is_int(v: Any) -> bool:
+            return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+
+        def is_num(v: Any) -> bool:
+            return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+
+        if not is_int(self.n_fittings) or not 1 <= self.n_fittings <= 200:
             raise bad("n_fittings", self.n_fittings, "an integer in [1, 200]")
+        for name in ("planar", "allow_loops"):
+            if not isinstance(getattr(self, name), bool):
+                raise bad(name, getattr(self, name), "true or false")
+        for name in ("n_goals", "max_retries"):
+            if not is_int(getattr(self, name)):
+                raise bad(name, getattr(self, name), "an integer")
+        for name in (
+            "diameter_range",
+            "run_length_range",
+            "bend_angle_range",
+            "bend_radius_range",
+            "taper_length_range",
+        ):
+            v = getattr(self, name)
+            if not (isinstance(v, (tuple, list)) and len(v) == 2 and all(is_num(x) for x in v)):
+                raise bad(name, v, "two numbers (lo, hi)")
+            object.__setattr__(self, name, (float(v[0]), float(v[1])))
+        for name in (
+            "branch_same_diameter",
+            "loop_probability",
+            "first_run_length",
+            "start_offset",
+            "bend_angle_step",
+            "roll_step",
+            "min_diameter_change",
+        ):
+            if not is_num(getattr(self, name)):
+                raise bad(name, getattr(self, name), "a number")
+        if self.max_extent is not None and not is_num(self.max_extent):
+            raise bad("max_extent", self.max_extent, "None or a number (m)")
+        if not isinstance(self.kind_weights, Mapping) or not all(
+            is_num(w) for w in dict(self.kind_weights).values()
+        ):
+            raise bad("kind_weights", self.kind_weights, f"a mapping of {KIND_CHOICES} to numbers")
         weights = dict(self.kind_weights)
         unknown = sorted(set(weights) - set(KIND_CHOICES))
         if unknown:

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from detector.options import StructureOption
+from detector.options import StructureOption, option_order
 from pipe_env.geometry import Pose, clamp
 from pipe_env.routing import locate
 
@@ -76,7 +76,7 @@ def options_at(
             continue
         angle, direction = option_angles(travel, p.axis, pose)
         options.append(StructureOption(kind, distance, p.diameter, direction, angle))
-    options.sort(key=lambda o: (round(o.angle, 6), o.direction))
+    options.sort(key=option_order)
     return options
 
 

@@ -11,6 +11,7 @@ option of a layout reports exactly the parameters it was built with.
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any
 
 import numpy as np
@@ -26,7 +27,11 @@ X = np.array([1.0, 0.0, 0.0])
 
 
 def _check(name: str, value: float, lo: float, hi: float, unit: str) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and lo <= value <= hi):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ValueError(
+            f"layout parameter {name}={value!r} must be a number in [{lo}, {hi}] {unit}"
+        )
+    if not (math.isfinite(value) and lo <= value <= hi):
         raise ValueError(f"layout parameter {name}={value!r} is outside [{lo}, {hi}] {unit}")
 
 
@@ -154,6 +159,7 @@ def mitre_bend(
     """A sharp (mitre) bend turning ``angle`` towards roll ``direction``, ``distance`` m ahead."""
     _check("diameter", diameter, 0.02, 0.25, "m")
     _check("angle", angle, math.radians(30), math.radians(90), "rad")
+    _check("direction", direction, -2 * math.pi, 2 * math.pi, "rad")
     out = direction_from_angles(angle, direction)
     return _assemble(
         "mitre_bend",
@@ -181,6 +187,7 @@ def long_bend(
     _check("diameter", diameter, 0.02, 0.25, "m")
     _check("angle", angle, math.radians(30), math.radians(90), "rad")
     _check("radius_factor", radius_factor, 1.0, 3.0, "D")
+    _check("direction", direction, -2 * math.pi, 2 * math.pi, "rad")
     out = direction_from_angles(angle, direction)
     return _assemble(
         "long_bend",
@@ -215,6 +222,7 @@ def t_junction(
     _check("diameter", diameter, 0.02, 0.25, "m")
     db = diameter if branch_diameter is None else branch_diameter
     _check("branch_diameter", db, 0.02, diameter, "m")
+    _check("direction", direction, -2 * math.pi, 2 * math.pi, "rad")
     side = direction_from_angles(math.pi / 2, direction)
     meta = {
         "diameter": diameter,
@@ -250,6 +258,7 @@ def y_junction(
     _check("diameter", diameter, 0.02, 0.25, "m")
     db = diameter if branch_diameter is None else branch_diameter
     _check("branch_diameter", db, 0.02, diameter, "m")
+    _check("direction", direction, -2 * math.pi, 2 * math.pi, "rad")
     meta = {
         "diameter": diameter,
         "branch_diameter": db,
@@ -283,6 +292,7 @@ def cross_junction(
     _check("diameter", diameter, 0.02, 0.25, "m")
     db = diameter if branch_diameter is None else branch_diameter
     _check("branch_diameter", db, 0.02, diameter, "m")
+    _check("direction", direction, -2 * math.pi, 2 * math.pi, "rad")
     side = direction_from_angles(math.pi / 2, direction)
     outs = [(X.copy(), diameter), (side, db), (-side, db)]
     meta = {

@@ -90,6 +90,19 @@ class Fitting:
                 f"fitting {self.id!r}: position must be three finite numbers, got {self.position!r}"
             )
         object.__setattr__(self, "position", pos)
+        if not isinstance(self.kind, str):
+            raise ValueError(f"fitting {self.id!r}: kind must be a string, got {self.kind!r}")
+        if self.style is not None and not isinstance(self.style, str):
+            raise ValueError(f"fitting {self.id!r}: style must be a string, got {self.style!r}")
+        for key in ("bend_radius", "taper_length"):
+            value = getattr(self, key)
+            if value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+                raise ValueError(
+                    f"fitting {self.id!r}: {key} must be a number in metres, got {value!r}"
+                )
+            object.__setattr__(self, key, float(value))
         if self.kind == "bend" and self.style is None:
             object.__setattr__(self, "style", "mitre")
 
@@ -114,6 +127,8 @@ class Run:
         for key in ("id", "a", "b"):
             object.__setattr__(self, key, str(getattr(self, key)))
         try:
+            if isinstance(self.diameter, (bool, str)):
+                raise TypeError
             object.__setattr__(self, "diameter", float(self.diameter))
         except (TypeError, ValueError) as exc:
             raise ValueError(
@@ -148,7 +163,10 @@ class PipeNetwork:
         object.__setattr__(self, "runs", tuple(self.runs))
         goals = []
         for i, g in enumerate(self.goals):
-            arr = np.asarray(g, dtype=float)
+            try:
+                arr = np.asarray(g, dtype=float)
+            except (TypeError, ValueError):
+                arr = np.full(1, np.nan)
             if arr.shape != (3,) or not np.all(np.isfinite(arr)):
                 raise ValueError(f"goals[{i}] must be three finite numbers (m), got {g!r}")
             goals.append(tuple(float(v) for v in arr))
@@ -207,6 +225,8 @@ class PipeNetwork:
 
     # -------------------------------------------------------------- validation
     def _validate_topology(self) -> None:
+        if not self.runs:
+            raise ValueError("a network needs at least one run (and its two fittings)")
         ids: set[str] = set()
         for f in self.fittings:
             if f.id in ids:
@@ -339,8 +359,12 @@ class PipeNetwork:
                 f"found {len(pairs)}"
             )
         main = pairs[0]
-        if abs(g.ports[main[0]].diameter - g.ports[main[1]].diameter) > 1e-9:
-            raise ValueError(f"{label}: the run through must keep one diameter")
+        for i, j in pairs:
+            if abs(g.ports[i].diameter - g.ports[j].diameter) > 1e-9:
+                raise ValueError(
+                    f"{label}: the run through ({g.ports[i].run_id!r}, {g.ports[j].run_id!r}) must "
+                    f"keep one diameter, got {g.ports[i].diameter} and {g.ports[j].diameter} m"
+                )
         branch_idx = [i for i in range(len(g.ports)) if i not in main]
         want = 45.0 if f.kind == "wye" else 90.0
         for i in branch_idx:
@@ -489,6 +513,9 @@ class PipeNetwork:
         unknown = sorted(set(d) - allowed)
         if unknown:
             raise ValueError(f"network has unknown keys {unknown}; allowed: {sorted(allowed)}")
+        for key in ("fittings", "runs", "goals"):
+            if not isinstance(d.get(key, []), list):
+                raise ValueError(f"network {key!r} must be a list, got {d.get(key)!r}")
         fittings = [_make(Fitting, f, "fittings", i) for i, f in enumerate(d.get("fittings", []))]
         runs = [_make(Run, r, "runs", i) for i, r in enumerate(d.get("runs", []))]
         start = None

@@ -33,7 +33,6 @@ from pipe_env.network import ROBOT_DIAMETER_RANGE, PipeNetwork
 from pipe_env.routing import (
     MAX_TURN,
     EdgePosition,
-    edge_geodesic,
     edge_length,
     edge_path,
     edge_position,
@@ -103,8 +102,16 @@ class Outcome:
     status: str = "done"  # done | jammed | blocked | goal | back_out
     distance: float = 0.0
     sim_time: float = 0.0
-    path: list[EdgeState] = field(default_factory=list)  # waypoints (see Plant.positions)
+    #: consecutive waypoints of the motion (see ``positions``)
+    path: list[EdgeState] = field(default_factory=list)
     note: str = ""
+
+
+#: Sensed values are noisy: a true 90 deg way may be sensed at 91 deg. The robot attempts ways
+#: sensed up to this much beyond its turn limit (fittings turn at most 90 deg, thesis
+#: assumption ii) and diameters this far outside its range; execution checks the truth.
+SENSED_ANGLE_MARGIN = math.radians(10.0)
+SENSED_DIAMETER_MARGIN = 0.001
 
 
 def drivable(
@@ -112,11 +119,15 @@ def drivable(
     diameter_range: tuple[float, float] = ROBOT_DIAMETER_RANGE,
     max_turn: float = MAX_TURN,
 ) -> bool:
-    """Whether the robot would attempt this way on (inside its diameter range, turn <= 90 deg)."""
+    """Whether the robot would attempt this sensed way on: inside its diameter range and turn
+    limit, with the sensing margins above."""
     if option.kind in ("closure", "straight"):
         return False
     lo, hi = diameter_range
-    return lo <= option.diameter <= hi and option.angle <= max_turn
+    return (
+        lo - SENSED_DIAMETER_MARGIN <= option.diameter <= hi + SENSED_DIAMETER_MARGIN
+        and option.angle <= max_turn + SENSED_ANGLE_MARGIN
+    )
 
 
 def option_vector(option: StructureOption) -> NDArray[np.float64]:
@@ -143,6 +154,7 @@ class KinematicPlant:
         speed: driving speed for simulated time, m/s.
         decision_time: simulated seconds spent sensing and confirming per structure.
         odometry_noise: odometry position error per metre driven (std, m/m).
+        jam_time: simulated seconds a jam costs (stall, detection of it, reversing).
     """
 
     fidelity = "fast"
@@ -157,6 +169,7 @@ class KinematicPlant:
         decision_time: float = 12.0,
         odometry_noise: float = 0.01,
         error_model: DetectionErrorModel | None = None,
+        jam_time: float = 10.0,
     ) -> None:
         if network.start_pose is None:
             raise ValueError("the network has no start_pose; the robot needs one")
@@ -172,6 +185,10 @@ class KinematicPlant:
         self.speed = float(speed)
         self.decision_time = float(decision_time)
         self.odometry_noise = float(odometry_noise)
+        self.jam_time = float(jam_time)
+        start = network.start_pose
+        ep, towards = locate(network, start)
+        self._start_state = EdgeState(ep.run_id, ep.s, towards)
         self.reset(np.random.default_rng(0))
 
     # ------------------------------------------------------------------ state
@@ -179,11 +196,13 @@ class KinematicPlant:
         """Put the robot at the network's start pose."""
         self.rng = rng
         self._pose_memo: tuple[EdgeState, Pose] | None = None
-        start = self.network.start_pose
-        assert start is not None
-        ep, towards = locate(self.network, start)
-        self.state = EdgeState(ep.run_id, ep.s, towards)
-        self.junctions: list[tuple[EdgeState, str]] = []  # (state at decision, node id)
+        self.state = self._start_state
+        #: junctions passed: (state at the decision, node id, index into ``forward_path``)
+        self.junctions: list[tuple[EdgeState, str, int]] = []
+        #: the forward drive since the start: waypoints and cumulative distance (m); backing
+        #: out reverses along it
+        self.forward_path: list[EdgeState] = [self.state]
+        self.forward_odometer: list[float] = [0.0]
         #: one record per detection: true distance to the structure, estimate and truth
         self.detection_log: list[dict] = []
         self.decision: Decision | None = None
@@ -238,7 +257,7 @@ class KinematicPlant:
         return EdgeState(st.run_id, clamp(s, 0.0, edge_length(self.network, r.id)), st.towards)
 
     def _record_motion(
-        self, distance: float, out: Outcome, start: EdgeState, end: EdgeState
+        self, distance: float, out: Outcome, start: EdgeState, end: EdgeState, path: bool = True
     ) -> None:
         d = abs(distance)
         self.travelled += d
@@ -249,7 +268,8 @@ class KinematicPlant:
         self.odometry_error = self.odometry_error + self.rng.normal(
             0.0, self.odometry_noise * math.sqrt(d) if d > 0 else 0.0, size=3
         )
-        out.path += [start, end]
+        if path:
+            out.path += [start, end]
 
     # ------------------------------------------------------------------ driving
     def advance(
@@ -271,25 +291,38 @@ class KinematicPlant:
             if to_goal is not None:
                 end = self._move(st, to_goal)
                 self._record_motion(to_goal, out, st, end)
+                self._forward(end, to_goal)
                 self.state = end
                 out.status = "goal"
                 return None, out
         end = self._move(st, move)
         self._record_motion(move, out, st, end)
+        self._forward(end, move)
         self.state = end
+        self.decision = self._sense(node, st.run_id, out)
+        return self.decision, out
+
+    def _forward(self, end: EdgeState, distance: float) -> None:
+        self.forward_path.append(end)
+        self.forward_odometer.append(self.forward_odometer[-1] + abs(distance))
+
+    def _sense(self, node: str, entry_run: str, out: Outcome) -> Decision:
+        """Sense the structure ahead from the current pose (one fused detection)."""
         pose = self.pose()
-        truth = options_at(self.network, node, st.run_id, pose)
+        truth = options_at(self.network, node, entry_run, pose)
         sensed = self.error_model.apply(truth, self.rng)
-        self.detection_log.append(
-            detection_record(
-                self.sim_time, node, truth, sensed, sensed[0].kind if sensed else "straight"
-            )
-        )
+        kind = sensed[0].kind if sensed else "straight"
+        self.detection_log.append(detection_record(self.sim_time, node, truth, sensed, kind))
         out.sim_time += self.decision_time
         self.sim_time += self.decision_time
-        self.decision = Decision(
-            sensed, sensed[0].kind if sensed else "straight", truth, node, st.run_id, pose
-        )
+        return Decision(sensed, kind, truth, node, entry_run, pose)
+
+    def resense(self) -> tuple[Decision, Outcome]:
+        """Sense the structure ahead again from where the robot stands (after a jam)."""
+        if self.decision is None:
+            raise RuntimeError("resense() needs a pending decision")
+        out = Outcome()
+        self.decision = self._sense(self.decision.node_id, self.decision.entry_run, out)
         return self.decision, out
 
     def _goal_ahead(self, goal: NDArray | EdgePosition, st: EdgeState, move: float) -> float | None:
@@ -305,8 +338,21 @@ class KinematicPlant:
         return None
 
     # ---------------------------------------------------------------- executing
-    def execute(self, choice: StructureOption | str) -> Outcome:
-        """Take the chosen detected way on, or back out (``BACK_OUT``)."""
+    def execute(
+        self, choice: StructureOption | str, goal: NDArray | EdgePosition | None = None
+    ) -> Outcome:
+        """Take the chosen detected way on, or back out (``BACK_OUT``). A jam leaves the robot
+        before the structure (it stalled there and backed off) and costs ``jam_time``; a
+        ``goal`` just past the fitting on the way taken ends the move there."""
+        out = self._execute(choice, goal)
+        if out.status == "jammed":
+            out.sim_time += self.jam_time
+            self.sim_time += self.jam_time
+        return out
+
+    def _execute(
+        self, choice: StructureOption | str, goal: NDArray | EdgePosition | None
+    ) -> Outcome:
         if self.decision is None:
             raise RuntimeError("execute() needs a decision; call advance() first")
         dec = self.decision
@@ -351,36 +397,44 @@ class KinematicPlant:
             out.status, out.note = "jammed", "turn sharper than the robot can take"
             return out
         if len(runs) > 1 and not (self.junctions and self.junctions[-1][1] == node):
-            self.junctions.append((self.state, node))
+            self.junctions.append((self.state, node, len(self.forward_path) - 1))
         start = self.state
         into = self._ahead(start)
         length = edge_length(self.network, run_out.id)
         past = min(g.port(run_out.id).leg + 0.05, 0.5 * length)
+        if goal is not None:  # a goal between the fitting and where the move would end
+            gp = goal if isinstance(goal, EdgePosition) else goal_edge_position(self.network, goal)
+            from_node = gp.s if run_out.a == node else length - gp.s
+            if gp.run_id == run_out.id and 0.0 <= from_node <= past:
+                past = from_node
+                out.status = "goal"
         s_new = past if run_out.a == node else length - past
+        entry = self.network.run_by_id[start.run_id]
+        at_node = EdgeState(
+            start.run_id, edge_length(self.network, entry.id) if node == entry.b else 0.0, node
+        )
         self.state = EdgeState(run_out.id, s_new, run_out.other(node))
-        self._record_motion(into + past, out, start, self.state)
+        self._record_motion(into + past, out, start, self.state, path=False)
+        out.path += [start, at_node, self.state]
+        self._forward(at_node, into)
+        self._forward(self.state, past)
         self.decision = None
         return out
 
     def _back_out(self, dec: Decision) -> Outcome:
+        """Reverse along the forward path to the last junction passed (to the one before it when
+        deciding at that junction again), or to the start."""
         out = Outcome(status="back_out")
-        # backing out at a junction already passed goes to the junction before it
         while self.junctions and self.junctions[-1][1] == dec.node_id:
             self.junctions.pop()
-        if self.junctions:
-            target, _ = self.junctions[-1]
-        else:
-            start = self.network.start_pose
-            assert start is not None
-            ep, towards = locate(self.network, start)
-            target = EdgeState(ep.run_id, ep.s, towards)
-        length = edge_length(self.network, target.run_id)
-        dist = edge_geodesic(
-            self.network, self.edge_position(), EdgePosition(target.run_id, target.s, length)
-        )
-        begin = self.state
+        index = self.junctions[-1][2] if self.junctions else 0
+        target = self.junctions[-1][0] if self.junctions else self._start_state
+        dist = self.forward_odometer[-1] - self.forward_odometer[index]
+        out.path += self.forward_path[index:][::-1]
+        self._record_motion(dist, out, self.state, target, path=False)
+        del self.forward_path[index + 1 :]
+        del self.forward_odometer[index + 1 :]
         self.state = target
-        self._record_motion(dist, out, begin, target)
         self.decision = None
         return out
 

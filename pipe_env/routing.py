@@ -23,8 +23,9 @@ if TYPE_CHECKING:
     from pipe_env.geometry import Pose
     from pipe_env.network import PipeNetwork
 
-#: Largest deflection the robot can drive through at one fitting, radians.
-MAX_TURN = math.radians(90.0) + 1e-6
+#: Largest deflection the robot can drive through at one fitting, radians: 90 deg plus the
+#: angular tolerance with which networks are validated (a tee branch may be 90.5 deg).
+MAX_TURN = math.radians(90.5) + 1e-6
 
 
 @dataclass(frozen=True)
@@ -124,7 +125,8 @@ def edge_position(network: PipeNetwork, cp: CentrelinePoint) -> EdgePosition:
         assert node is not None
         half = 0.5 * piece.length
         run_id = piece.v0[2] if cp.s <= half else piece.v1[2]
-        from_node = cp.s if cp.s <= half else piece.length - cp.s
+        # the edge starts at the arc's midpoint (see edge_path) and runs out to the port
+        from_node = abs(cp.s - half)
         r = network.run_by_id[run_id]
         total = edge_length(network, run_id)
         return EdgePosition(run_id, from_node if node == r.a else total - from_node, total)
@@ -150,15 +152,21 @@ def locate(network: PipeNetwork, pose: Pose) -> tuple[EdgePosition, str]:
 
 
 def route(
-    network: PipeNetwork, pose: Pose, goal: ArrayLike, max_turn: float = MAX_TURN
+    network: PipeNetwork,
+    pose: Pose,
+    goal: ArrayLike,
+    max_turn: float = MAX_TURN,
+    diameter_range: tuple[float, float] | None = None,
 ) -> Route | None:
     """Shortest drivable route from ``pose`` (driving forward) to the point nearest ``goal``.
 
-    Returns None when the goal cannot be reached without a deflection above ``max_turn``.
+    Returns None when the goal cannot be reached without a deflection above ``max_turn`` or,
+    with ``diameter_range`` (m), without entering a pipe outside it (the robot's clamping
+    range; default: the network's own range, i.e. no restriction).
     """
     start, towards = locate(network, pose)
     goal_pos = edge_position(network, network.centreline.nearest(np.asarray(goal, float)))
-    return route_between(network, start, towards, goal_pos, max_turn)
+    return route_between(network, start, towards, goal_pos, max_turn, diameter_range)
 
 
 def route_between(
@@ -167,8 +175,10 @@ def route_between(
     towards: str,
     goal: EdgePosition,
     max_turn: float = MAX_TURN,
+    diameter_range: tuple[float, float] | None = None,
 ) -> Route | None:
     """Dijkstra core of :func:`route` on edge positions."""
+    lo, hi = diameter_range if diameter_range is not None else (0.0, math.inf)
     r0 = network.run_by_id[start.run_id]
     best_len = math.inf
     best: tuple[tuple[str, ...], tuple[str, ...]] | None = None
@@ -191,6 +201,8 @@ def route_between(
             if run_out.id == run_in:
                 continue
             if turn_angle(network, node, run_in, run_out.id) > max_turn:
+                continue
+            if not lo <= run_out.diameter <= hi:
                 continue
             if run_out.id == goal.run_id:
                 extra = goal.s if node == run_out.a else goal.length - goal.s

@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from detector.options import KINDS, StructureOption
+from detector.options import KINDS, StructureOption, option_order
 
 
 @dataclass(frozen=True)
@@ -94,7 +94,7 @@ class DetectionErrorModel:
                     confidence=0.5 * self.confidence,
                 )
             )
-        out.sort(key=lambda o: (round(o.angle, 6), o.direction))
+        out.sort(key=option_order)
         return out
 
     def _perturb(self, o: StructureOption, kind: str, z: np.ndarray) -> StructureOption:

@@ -155,3 +155,19 @@ def test_eval_and_plot_commands(tmp_path: Path) -> None:
     plot = pipenav("plot", str(tmp_path / "demo" / "episode.json"), "--out", str(tmp_path / "p"))
     assert plot.returncode == 0, plot.stderr
     assert (tmp_path / "p" / "map.png").exists() and (tmp_path / "p" / "detection.png").exists()
+
+
+def test_bad_layout_parameters_and_values_are_usage_errors(tmp_path: Path) -> None:
+    write(tmp_path, "too_wide", {"network": {"layout": "t_junction", "params": {"diameter": 0.5}}})
+    proc = pipenav("scenarios", "run", "--dir", str(tmp_path))
+    assert proc.returncode == 2 and "Traceback" not in proc.stdout + proc.stderr
+    assert "too_wide.yaml: key 'network': layout parameter diameter=0.5 is outside" in proc.stdout
+    (tmp_path / "too_wide.yaml").unlink()
+    write(tmp_path, "unhashable", {"network": {"layout": [1]}, "sensor": {"preset": ["ideal"]}})
+    proc = pipenav("scenarios", "list", "--dir", str(tmp_path))
+    assert proc.returncode == 2 and "Traceback" not in proc.stdout + proc.stderr
+    assert "unhashable.yaml: key 'network.layout'" in proc.stdout
+    bad = pipenav(
+        "drive", "--layout", "t_junction", "--params", "{diameter: 1}", "--fidelity", "fast"
+    )
+    assert bad.returncode == 2 and "--params is not JSON" in bad.stdout

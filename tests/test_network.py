@@ -177,3 +177,36 @@ def test_inner_diameter_in_a_reducer_taper() -> None:
     assert net.inner_diameter_at([0.1, 0, 0]) == pytest.approx(0.08)
     assert net.inner_diameter_at([0.05, 0, 0]) == pytest.approx(0.09)
     assert net.inner_diameter_at([0.5, 0, 0]) == pytest.approx(0.06)
+
+
+def test_cross_needs_one_diameter_per_run_through() -> None:
+    net = layouts.cross_junction(0.1, 0.08)
+    d = net.to_dict()
+    d["runs"][3]["diameter"] = 0.07  # one side branch narrower than its opposite
+    with pytest.raises(ValueError, match=r"run through .* must keep one diameter"):
+        PipeNetwork.from_dict(d)
+
+
+def test_from_dict_type_errors_are_named() -> None:
+    d = hand_written()
+    d["goals"] = 5
+    with pytest.raises(ValueError, match=r"network 'goals' must be a list"):
+        PipeNetwork.from_dict(d)
+    d = hand_written()
+    d["fittings"][1].update(style="long", bend_radius="x")
+    with pytest.raises(ValueError, match=r"fitting 'b': bend_radius must be a number"):
+        PipeNetwork.from_dict(d)
+    with pytest.raises(ValueError, match=r"at least one run"):
+        PipeNetwork.from_dict({"version": 1, "fittings": [], "runs": []})
+
+
+def test_edge_positions_inside_a_long_bend_round_trip() -> None:
+    from pipe_env.routing import edge_path, edge_position
+
+    net = layouts.long_bend(0.1, math.pi / 2, radius_factor=3.0)
+    arc = next(p for p in net.centreline.pieces if p.kind == "arc")
+    for frac in (0.05, 0.25, 0.45, 0.55, 0.95):
+        p, _ = arc.point_tangent(frac * arc.length)
+        ep = edge_position(net, net.centreline.nearest(p))
+        q, _ = edge_path(net, ep.run_id).point_tangent(ep.s)
+        assert np.linalg.norm(q - p) < 1e-9, frac

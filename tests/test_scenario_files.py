@@ -10,7 +10,13 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agents.scenarios import ScenarioError, load_scenario, packaged_scenario_dir, parse_scenario
+from agents.scenarios import (
+    ScenarioError,
+    build_network,
+    load_scenario,
+    packaged_scenario_dir,
+    parse_scenario,
+)
 
 GOOD = (packaged_scenario_dir() / "tee_run_90mm.yaml").read_text()
 
@@ -74,6 +80,7 @@ def test_mangled_yaml_never_raises_anything_but_scenario_errors(data: st.DataObj
         return  # load_scenario reports these as ScenarioError, tested above
     try:
         sc = parse_scenario(raw, "fuzz.yaml")
+        build_network(sc)  # what loading a scenario also does: layouts, goals, generators
     except ScenarioError as exc:
         assert str(exc).startswith("fuzz.yaml")
         return

@@ -1,0 +1,49 @@
+"""The robot's own log of which way it took where, from odometry.
+
+An operator (or a policy) returning to a junction wants to know which ways were already tried.
+The robot knows only its odometry, so the log keys decisions by odometry position: a decision
+within ``radius`` metres of a logged one is the same place, and a way whose outgoing axis (in
+the world frame, from the odometry heading) is within ``match_angle`` of a logged one is the
+same way. Backing out is logged as its own way. Odometry drifts by about 1 % of the distance
+driven, well inside the radius for the distances between revisits here.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+
+class WayLog:
+    """Counts of ways taken, keyed by odometry position and world direction (see module doc)."""
+
+    def __init__(self, radius: float = 0.3, match_angle: float = math.radians(25.0)) -> None:
+        self.radius = float(radius)
+        self.cos_match = math.cos(match_angle)
+        self._pos: list[NDArray[np.float64]] = []
+        self._vec: list[NDArray[np.float64] | None] = []
+
+    def __len__(self) -> int:
+        return len(self._pos)
+
+    def record(self, position: NDArray[np.float64], way: NDArray[np.float64] | None) -> None:
+        """Log taking ``way`` (a unit world vector, or None for backing out) at ``position``."""
+        self._pos.append(np.asarray(position, dtype=float).copy())
+        self._vec.append(None if way is None else np.asarray(way, dtype=float).copy())
+
+    def count(self, position: NDArray[np.float64], way: NDArray[np.float64] | None) -> int:
+        """How often ``way`` was taken within ``radius`` of ``position``."""
+        if not self._pos:
+            return 0
+        p = np.asarray(position, dtype=float)
+        near = np.linalg.norm(np.array(self._pos) - p, axis=1) < self.radius
+        n = 0
+        for i in np.flatnonzero(near):
+            v = self._vec[i]
+            if way is None or v is None:
+                n += int(way is None and v is None)
+            elif float(v @ way) >= self.cos_match:
+                n += 1
+        return n
