@@ -665,9 +665,10 @@ def _run_navigate(sc: Scenario, net: Any, seed: int) -> dict[str, Any]:
         note(info)
         done = term or trunc
     plant = env.unwrapped.plant
-    for w in env.unwrapped._waypoints:
-        if w is not None:
-            runs_visited.add(w.run_id)
+    for p in env.unwrapped.path:
+        run = net.nearest_centreline_point(p).run_id
+        if run is not None:
+            runs_visited.add(run)
     env.close()
     return {
         "is_success": bool(info["is_success"]),

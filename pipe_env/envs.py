@@ -266,7 +266,7 @@ class _DecisionEnv(gym.Env):
         self.terminated = False
         self.truncated = False
         self.success = False
-        self._waypoints: list[Any] = [getattr(self.plant, "state", None)]
+        self._waypoints: list[Any] = [self.plant.waypoint()]
         self.decision_points: list[NDArray[np.float64]] = []
         self.detection_errors: list[dict[str, float]] = []
         self.way_log = WayLog()
@@ -342,7 +342,7 @@ class _DecisionEnv(gym.Env):
         return None if isinstance(choice, str) else odo.rotation @ option_vector(choice)
 
     def _record(self, outcome: Outcome) -> None:
-        if self._waypoints and outcome.path and outcome.path[0] == self._waypoints[-1]:
+        if self._waypoints and outcome.path and outcome.path[0] is self._waypoints[-1]:
             self._waypoints.extend(outcome.path[1:])
         else:
             self._waypoints.extend(outcome.path)

@@ -225,6 +225,10 @@ class KinematicPlant:
         self._pose_memo = (st, pose)
         return pose
 
+    def waypoint(self) -> EdgeState:
+        """The robot's current place as a path waypoint."""
+        return self.state
+
     def positions(self, waypoints: list[EdgeState]) -> NDArray[np.float64]:
         """World positions (N, 3) of edge-state waypoints, metres."""
         pts = [edge_path(self.network, w.run_id).point_tangent(w.s)[0] for w in waypoints]
