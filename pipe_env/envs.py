@@ -17,11 +17,12 @@ is offered again, the reward is ``reward_invalid`` and ``info["invalid_action"]`
 
 Observation (a flat ``Dict``, fixed shapes, finite bounds):
 
-- ``options`` (K, 14): per row ``valid``, kind one-hot (straight, reducer, closure, bend,
+- ``options`` (K, 15): per row ``valid``, kind one-hot (straight, reducer, closure, bend,
   junction, back out), ``distance`` (m), ``diameter`` (m), ``cos`` and ``sin`` of the direction,
   ``angle`` (rad), ``confidence``, and ``taken``: how often the robot's own log says it took
   this way from here before (:mod:`pipe_env.way_log`; 0, 1/3, 2/3, 1 for 3 or more; the
-  back-out row counts back-outs from here);
+  back-out row counts back-outs from here); ``goal_alignment``: cosine between the way's
+  outgoing axis and the direction to the goal, both from odometry (0 without a goal);
 - ``goal`` (3,): the goal in the robot frame from noisy odometry (m, clipped to +-20; PipeNav);
 - ``proprio`` (3,): clamped diameter (m), cos and sin of the robot's roll;
 - ``scan`` (16, 32), optional (``scan_image=True``): a low-resolution range image of the last
@@ -88,14 +89,15 @@ OPTION_FEATURES = (
     "angle",
     "confidence",
     "taken",
+    "goal_alignment",
 )
 SCAN_SHAPE = (16, 32)
 FIDELITIES = ("fast", "full")
 GOAL_CLIP = 20.0
 MAX_AUTO_STRUCTURES = 64
 
-_LOW = np.array([0, 0, 0, 0, 0, 0, 0, -1.0, 0.0, -1, -1, 0.0, 0.0, 0.0], dtype=np.float32)
-_HIGH = np.array([1, 1, 1, 1, 1, 1, 1, 5.0, 0.3, 1, 1, math.pi, 1.0, 1.0], dtype=np.float32)
+_LOW = np.array([0, 0, 0, 0, 0, 0, 0, -1.0, 0.0, -1, -1, 0.0, 0.0, 0.0, -1], dtype=np.float32)
+_HIGH = np.array([1, 1, 1, 1, 1, 1, 1, 5.0, 0.3, 1, 1, math.pi, 1.0, 1.0, 1], dtype=np.float32)
 #: ``taken`` saturates at this many times (see :mod:`pipe_env.way_log`).
 MAX_TAKEN = 3
 
@@ -448,6 +450,14 @@ class _DecisionEnv(gym.Env):
         table[K_OPTIONS - 1, 13] = min(self.way_log.count(odo.position, None), MAX_TAKEN) / (
             MAX_TAKEN
         )
+        goal = self._goal_point()
+        to_goal = None
+        if goal is not None:
+            rel = goal - odo.position
+            norm = float(np.linalg.norm(rel))
+            to_goal = rel / norm if norm > 1e-9 else None
+            if to_goal is not None:  # backing out heads the other way
+                table[K_OPTIONS - 1, 14] = clamp(-float(odo.forward @ to_goal), -1.0, 1.0)
         if self.decision is not None:
             for i, o in enumerate(self.decision.options[: K_OPTIONS - 1]):
                 row = table[i]
@@ -458,8 +468,11 @@ class _DecisionEnv(gym.Env):
                 row[9], row[10] = math.cos(o.direction), math.sin(o.direction)
                 row[11] = clamp(o.angle, 0.0, math.pi)
                 row[12] = clamp(o.confidence, 0.0, 1.0)
-                taken = self.way_log.count(odo.position, self._world_way(o, odo))
+                way = self._world_way(o, odo)
+                taken = self.way_log.count(odo.position, way)
                 row[13] = min(taken, MAX_TAKEN) / MAX_TAKEN
+                if to_goal is not None:
+                    row[14] = clamp(float(way @ to_goal), -1.0, 1.0)
         back = table[K_OPTIONS - 1]
         back[0] = float(mask[K_OPTIONS - 1])
         back[6] = 1.0

@@ -1,0 +1,367 @@
+"""Full fidelity: the MuJoCo robot, the rotating LiDAR, the detector and the primitives' executor.
+
+:class:`PhysicalPlant` implements the plant interface of :mod:`pipe_env.plant` for real:
+
+- ``advance``: the robot drives forward in stop-and-scan steps of ``scan_interval`` metres (the
+  thesis's position-controlled servo sweep at each stop). Every sweep goes to the detector with
+  the clamped diameter read from the robot's encoders; the detections are fused by
+  :class:`detector.fusion.StructureTracker` with the robot's own sensor pose. The robot stops
+  when a structure is confirmed with its reference point within the trigger distance, when the
+  goal is reached, or - failing safe - when the sensor goes blind (too few returns to see the
+  pipe ahead: the LS02 in a small pipe). A blind stop is offered as a dead end.
+- ``execute``: the chosen option becomes a primitive sequence
+  (:func:`primitives.sequences.for_option`) that the executor runs with real contacts; a jam
+  makes the robot back off to where it decided and sense again; backing out reverses along the
+  driven path to the last junction.
+
+With ``detector="ground_truth"`` the robot still drives and turns physically, but the options
+come from the plant drawing at the pose where a real detector would have confirmed them (the
+oracle ablation of the detection).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+import detector as detection
+from detector.fusion import StructureTracker
+from detector.options import StructureOption, option_order
+from detector.scan import Scan
+from pipe_env.geometry import Pose
+from pipe_env.ground_truth import fitting_ahead, options_at
+from pipe_env.lidar import LidarSpec
+from pipe_env.network import PipeNetwork
+from pipe_env.plant import BACK_OUT, Decision, Outcome, detection_record
+from pipe_env.routing import EdgePosition, edge_position, locate
+
+#: Fewer valid returns than this in a sweep means the sensor cannot see the pipe ahead.
+BLIND_RETURNS = 60
+#: Consecutive blind sweeps before the robot stops (fail safe).
+BLIND_SWEEPS = 2
+#: Longest drive without a decision before the robot stops to let the agent decide, metres.
+MAX_DRIVE = 4.0
+#: The goal counts as reached within this distance along the network, metres.
+GOAL_TOLERANCE = 0.05
+SCAN_IMAGE_SHAPE = (16, 32)
+
+
+def scan_image(scan: Scan, shape: tuple[int, int] = SCAN_IMAGE_SHAPE) -> NDArray[np.float32]:
+    """A low-resolution range image: planes x beams binned to ``shape``, the nearest return per
+    bin divided by the sensor's maximum range; 1 where a bin has no return."""
+    max_range = float(scan.spec.get("max_range", 2.0))
+    r = np.where(scan.valid, np.minimum(scan.ranges / max_range, 1.0), 1.0)
+    rows = np.array_split(np.arange(r.shape[0]), shape[0])
+    cols = np.array_split(np.arange(r.shape[1]), shape[1])
+    out = np.ones(shape, dtype=np.float32)
+    for i, ri in enumerate(rows):
+        if len(ri) == 0:
+            continue
+        block = r[ri]
+        for j, cj in enumerate(cols):
+            if len(cj):
+                out[i, j] = float(block[:, cj].min())
+    return out
+
+
+class PhysicalPlant:
+    """Full-fidelity plant (see module docstring).
+
+    Args:
+        network: the network (with a start pose).
+        detector: ``"improved"``, ``"thesis"`` or ``"ground_truth"``.
+        trigger_distance: stop when a confirmed structure's reference point is this close, m.
+        lidar: the sensor model.
+        misalignment: true sensor pose relative to its nominal mount (None: perfect).
+        scan_image: keep a low-resolution range image of the last sweep.
+        lidar_backend: ``"analytic"`` (exact, fast; default) or ``"mujoco"`` ray casting.
+        scan_interval: metres driven between sweeps.
+    """
+
+    fidelity = "full"
+
+    def __init__(
+        self,
+        network: PipeNetwork,
+        detector: str = "improved",
+        trigger_distance: float = 0.2,
+        lidar: LidarSpec | str = "ideal",
+        misalignment: Pose | None = None,
+        scan_image: bool = False,
+        lidar_backend: str = "analytic",
+        scan_interval: float = 0.05,
+        robot_config: Any = None,
+    ) -> None:
+        from primitives.executor import Executor
+
+        if network.start_pose is None:
+            raise ValueError("the network has no start_pose; the robot needs one")
+        if detector not in ("improved", "thesis", "ground_truth"):
+            raise ValueError(
+                f"detector {detector!r} is unknown; allowed: improved, thesis, ground_truth"
+            )
+        self.network = network
+        self.detector = detector
+        self.trigger_distance = float(trigger_distance)
+        self.keep_image = bool(scan_image)
+        self.scan_interval = float(scan_interval)
+        lidar_kwargs: dict[str, Any] = {"backend": lidar_backend}
+        if misalignment is not None:
+            lidar_kwargs["misalignment"] = misalignment
+        self.executor = Executor.for_network(
+            network, robot_config=robot_config, lidar=lidar, **lidar_kwargs
+        )
+        self.world = self.executor.world
+        self.robot = self.executor.robot
+        self.reset(np.random.default_rng(0))
+
+    # ------------------------------------------------------------------ state
+    def reset(self, rng: np.random.Generator) -> None:
+        """Put the robot back at the network's start pose, clamped, with fresh logs."""
+        start = self.network.start_pose
+        assert start is not None
+        if getattr(self, "_started", False):
+            self.executor.place(start, float(self.network.inner_diameter_at(start.position)))
+        self._started = True
+        self.rng = rng
+        self.tracker = StructureTracker()
+        self.decision: Decision | None = None
+        self.detection_log: list[dict] = []
+        self.last_scan: Scan | None = None
+        self.scan_image: NDArray[np.float32] | None = None
+        self.travelled = 0.0
+        self.sim_time = 0.0
+        self._odometry_error = np.zeros(3)
+        self._positions: list[NDArray[np.float64]] = [self.pose().position]
+        #: junctions passed: (odometer at the decision, node id); odometer: forward distance
+        self.junctions: list[tuple[float, str]] = []
+        self._odometer = 0.0
+
+    def pose(self) -> Pose:
+        """True sensor pose of the robot."""
+        return self.robot.sensor_pose()
+
+    def odometry_pose(self) -> Pose:
+        """The sensor pose the robot believes (drift of ~1 % of the distance driven)."""
+        p = self.pose()
+        return Pose.trusted(p.position + self._odometry_error, p.rotation)
+
+    @property
+    def clamped_diameter(self) -> float:
+        return float(self.robot.clamped_diameter(self.rng))
+
+    @property
+    def state(self):
+        """Edge state (run, position, heading) of the true sensor pose."""
+        from pipe_env.plant import EdgeState
+
+        ep, towards = locate(self.network, self.pose())
+        return EdgeState(ep.run_id, ep.s, towards)
+
+    def edge_position(self) -> EdgePosition:
+        ep, _ = locate(self.network, self.pose())
+        return ep
+
+    def waypoint(self) -> NDArray[np.float64]:
+        """The robot's current place as a path waypoint (the sensor position, m)."""
+        return self.pose().position.copy()
+
+    def positions(self, waypoints: list[Any]) -> NDArray[np.float64]:
+        return np.array([np.asarray(w, dtype=float) for w in waypoints]).reshape(-1, 3)
+
+    def _account(self, outcome: Any, out: Outcome) -> None:
+        """Fold an executor outcome into the plant's clocks and the path."""
+        d = abs(float(outcome.travelled))
+        self.travelled += d
+        self.sim_time += float(outcome.duration)
+        out.distance += d
+        out.sim_time += float(outcome.duration)
+        self._odometry_error = self._odometry_error + self.rng.normal(
+            0.0, 0.01 * math.sqrt(d) if d > 0 else 0.0, size=3
+        )
+        positions = outcome.telemetry["sensor_position"] if len(outcome.telemetry) else []
+        step = max(1, len(positions) // 40)
+        out.path += [np.asarray(p, dtype=float) for p in positions[::step]]
+        out.path.append(self.pose().position.copy())
+
+    # ------------------------------------------------------------------ sensing
+    def _truth(self, pose: Pose) -> tuple[str, str, list[StructureOption]]:
+        node, entry = fitting_ahead(self.network, pose)
+        return node, entry, options_at(self.network, node, entry, pose)
+
+    def _goal_reached(self, goal: Any) -> bool:
+        if goal is None:
+            return False
+        gp = (
+            goal
+            if isinstance(goal, EdgePosition)
+            else edge_position(
+                self.network, self.network.centreline.nearest(np.asarray(goal, dtype=float))
+            )
+        )
+        here = self.edge_position()
+        if here.run_id != gp.run_id:
+            return False
+        return abs(here.s - gp.s) <= GOAL_TOLERANCE + 0.5 * self.scan_interval
+
+    def _on_scan_factory(self, goal: Any):
+        blind = [0]
+        verdict: dict[str, Any] = {"why": None}
+
+        def on_scan(scan: Scan, state: Any) -> str:
+            self.last_scan = scan
+            if self.keep_image:
+                self.scan_image = scan_image(scan)
+            pose = self.pose()
+            node, entry, truth = self._truth(pose)
+            if self._goal_reached(goal):
+                verdict["why"] = "goal"
+                return "stop"
+            if self.detector == "ground_truth":
+                ref = truth[0].distance if truth else math.inf
+                kind = truth[0].kind if truth else "straight"
+                self.detection_log.append(detection_record(self.sim_time, node, truth, truth, kind))
+                if ref <= self.trigger_distance + 0.5 * self.scan_interval:
+                    verdict["why"] = "confirmed"
+                    return "stop"
+                return "continue"
+            det = detection.detect(scan, float(state.clamped_diameter), method=self.detector)
+            track = self.tracker.update(det, scan.nominal_positions[-1], scan.nominal_rotations[-1])
+            fused = track.detection if track.confirmed else det
+            self.detection_log.append(
+                detection_record(self.sim_time, node, truth, list(fused.options), fused.kind)
+            )
+            blind[0] = blind[0] + 1 if scan.n_valid < BLIND_RETURNS else 0
+            if blind[0] >= BLIND_SWEEPS:
+                verdict["why"] = "blind"
+                return "stop"
+            if track.confirmed and track.detection.options:
+                nearest = min(o.distance for o in track.detection.options)
+                if nearest <= self.trigger_distance + 0.5 * self.scan_interval:
+                    verdict["why"] = "confirmed"
+                    return "stop"
+            return "continue"
+
+        return on_scan, verdict
+
+    def advance(self, goal: Any = None) -> tuple[Decision | None, Outcome]:
+        """Drive and scan until a structure is confirmed, the goal is reached, or blind."""
+        out = Outcome()
+        on_scan, verdict = self._on_scan_factory(goal)
+        outcome = self.executor.drive_until(
+            on_scan, MAX_DRIVE, scan_interval=self.scan_interval, rng=self.rng
+        )
+        self._account(outcome, out)
+        self._odometer += abs(float(outcome.travelled))
+        why = verdict["why"]
+        if why == "goal":
+            out.status = "goal"
+            return None, out
+        if outcome.status == "jammed":
+            out.status = "jammed"
+            out.note = f"jammed while driving: {outcome.reason}"
+        self.decision = self._decision(why)
+        return self.decision, out
+
+    def _decision(self, why: str | None) -> Decision:
+        pose = self.pose()
+        node, entry, truth = self._truth(pose)
+        if why == "blind":
+            dist = truth[0].distance if truth else 0.0
+            options = [StructureOption("closure", max(dist, 0.0), 0.0, confidence=0.0)]
+            return Decision(options, "closure", truth, node, entry, pose)
+        if self.detector == "ground_truth":
+            return Decision(
+                list(truth), truth[0].kind if truth else "straight", truth, node, entry, pose
+            )
+        state = self.tracker.state() if hasattr(self.tracker, "state") else None
+        fused = state.detection if state is not None else None
+        if fused is None or not fused.options:
+            last = self.detection_log[-1] if self.detection_log else None
+            options = [StructureOption(**o) for o in last["options"]] if last else []
+            kind = last["kind"] if last else "straight"
+        else:
+            options, kind = list(fused.options), fused.kind
+        options.sort(key=option_order)
+        return Decision(options, kind, truth, node, entry, pose)
+
+    def resense(self) -> tuple[Decision, Outcome]:
+        """Sweep once more where the robot stands and decide on the fused result."""
+        out = Outcome()
+        on_scan, verdict = self._on_scan_factory(None)
+        if self.executor.lidar is not None:
+            from primitives.sequences import Sequence
+            from primitives.steps import Scan as ScanStep
+
+            outcome = self.executor.run(
+                Sequence("resense", (ScanStep(),)), on_scan=on_scan, rng=self.rng
+            )
+            self._account(outcome, out)
+        self.decision = self._decision(verdict["why"])
+        return self.decision, out
+
+    # ---------------------------------------------------------------- executing
+    def execute(self, choice: StructureOption | str, goal: Any = None) -> Outcome:
+        """Run the sequence of the chosen option, or back out (``BACK_OUT``)."""
+        from primitives.sequences import back_out, for_option
+
+        if self.decision is None:
+            raise RuntimeError("execute() needs a decision; call advance() first")
+        dec = self.decision
+        out = Outcome()
+        if isinstance(choice, str):
+            if choice != BACK_OUT:
+                raise ValueError(
+                    f"choice must be a StructureOption or {BACK_OUT!r}, got {choice!r}"
+                )
+            return self._back_out(dec)
+        odometer_at_decision = self._odometer
+        sequence = for_option(choice, incoming_diameter=self.clamped_diameter)
+        outcome = self.executor.run(sequence, rng=self.rng)
+        self._account(outcome, out)
+        self._odometer += abs(float(outcome.travelled))
+        status = outcome.status
+        if status == "jammed":
+            # back off to where the robot decided, as an operator would, then sense again
+            back = self.executor.run(
+                back_out(max(self._odometer - odometer_at_decision, 0.0)), rng=self.rng
+            )
+            self._account(back, out)
+            self._odometer = odometer_at_decision
+            out.status, out.note = "jammed", outcome.reason
+            return out
+        if status in ("blocked", "dead_end"):
+            out.status, out.note = "blocked", outcome.reason
+            return out
+        ways = [r for r in self.network.runs_at[dec.node_id] if r.id != dec.entry_run]
+        if len(ways) > 1 and not (self.junctions and self.junctions[-1][1] == dec.node_id):
+            self.junctions.append((odometer_at_decision, dec.node_id))
+        self.tracker.reset()
+        self.decision = None
+        if self._goal_reached(goal):
+            out.status = "goal"
+        return out
+
+    def _back_out(self, dec: Decision) -> Outcome:
+        from primitives.sequences import back_out
+
+        out = Outcome(status="back_out")
+        while self.junctions and self.junctions[-1][1] == dec.node_id:
+            self.junctions.pop()
+        target = self.junctions[-1][0] if self.junctions else 0.0
+        distance = max(self._odometer - target, 0.0)
+        if distance > 1e-3:
+            outcome = self.executor.run(back_out(distance), rng=self.rng)
+            self._account(outcome, out)
+            if outcome.status != "done":
+                out.note = f"backing out ended {outcome.status}: {outcome.reason}"
+        self._odometer = target
+        self.tracker.reset()
+        self.decision = None
+        return out
+
+    def close(self) -> None:
+        pass
