@@ -5,8 +5,9 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.pipenav-installed
 export MUJOCO_GL ?= osmesa
 PYTEST_ARGS ?=
+JOBS ?= auto
 
-.PHONY: install demo test test-slow test-all lint bench clean
+.PHONY: install demo test test-scenarios test-slow test-all lint bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -23,11 +24,16 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/pipenav demo --out results/demo
 
+# The default suite: everything but the slow tests and the scenario suite.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -m "not slow" $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -q -m "not slow and not scenarios" $(PYTEST_ARGS)
+
+# The packaged autonomy scenarios as tests, one per scenario and seed, on all cores.
+test-scenarios: $(STAMP)
+	$(BIN)/python -m pytest -q -m scenarios -n $(JOBS) $(PYTEST_ARGS)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -q -m "slow" $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -q -m "slow and not scenarios" -n $(JOBS) $(PYTEST_ARGS)
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
