@@ -677,7 +677,8 @@ def _run_navigate(sc: Scenario, net: Any, seed: int) -> dict[str, Any]:
         "sim_time_s": round(float(info["sim_time"]), 3),
         "travelled_m": round(float(info["travelled"]), 4),
         "back_outs": back_outs,
-        "coverage": round(float(info.get("coverage", math.nan)), 4),
+        # None outside PipeExplore (JSON has no NaN)
+        "coverage": round(float(info["coverage"]), 4) if "coverage" in info else None,
         "max_detection_error": {k: round(v, 5) for k, v in errors.items()},
         "classification": round(float(np.mean(kinds_ok)), 4) if kinds_ok else None,
         "runs_visited": sorted(runs_visited),
@@ -786,7 +787,7 @@ def evaluate_criteria(sc: Scenario, m: dict[str, Any]) -> list[CriterionResult]:
             "did not back out",
         )
     if "min_coverage" in c:
-        cov = m.get("coverage", 0.0)
+        cov = m.get("coverage") or 0.0
         check("min_coverage", cov >= c["min_coverage"], cov, c["min_coverage"], "too little")
     if "min_classification" in c:
         cl = m.get("classification")
