@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from detector.detection import Detection
 from detector.grid import ScanGrid, build_grid, label_regions
 from detector.options import StructureOption
-from detector.robust import mad_sigma, robust_gauss_newton, tukey_weights
+from detector.robust import mad_sigma, robust_gauss_newton, tukey_cost, tukey_weights
 from detector.scan import Scan
 from detector.transforms import SensorInPipe, option_direction
 
@@ -73,6 +73,8 @@ class ImprovedConfig:
         prior_offset, prior_tilt: prior standard deviation of the pipe-axis refinement.
         straight_on_coverage: fraction of the circumference on which the wall must be seen
             beyond a junction for a straight-on option.
+        radius_lr_per_branch: likelihood-ratio threshold (per outgoing pipe) above which a
+            free outgoing radius replaces the clamped one.
     """
 
     tol_floor: float = 0.002
@@ -87,6 +89,7 @@ class ImprovedConfig:
     prior_offset: float = 0.01
     prior_tilt: float = math.radians(3.0)
     straight_on_coverage: float = 0.5
+    radius_lr_per_branch: float = 12.0
 
 
 DEFAULT_CONFIG = ImprovedConfig()
@@ -706,7 +709,9 @@ def _branches(
     u_all = pts[..., 0]
     u_hi = float(np.percentile(u_all[lobe_mask], 95)) + 2.0 * big_r if lobe_mask.any() else 0.0
     near_inside = keep & ~lobe_mask & (u_all <= u_hi)
-    lobe_idx = _subsample(np.flatnonzero(lobe_mask.reshape(-1)), cfg.fit_points // 2)
+    lobe_idx = np.concatenate(
+        [_subsample(np.flatnonzero(lb.mask.reshape(-1)), cfg.fit_points // 2) for lb in lobes]
+    )
     near_idx = _subsample(np.flatnonzero(near_inside.reshape(-1)), cfg.fit_points // 2)
     sub_idx = np.concatenate([lobe_idx, near_idx])
     if any_roll:
@@ -769,6 +774,35 @@ def _branches(
         c_final=c_fin,
         jacobian=lambda v: _line_resjac(p_all, v, n_l, True)[1],
     )
+    # --- the outgoing radii: the clamped radius (a standard fitting) unless the returns
+    # call for another one. A free radius is poorly observed from a partial view of an
+    # opening under range noise, so it is kept only when it fits significantly better
+    # (likelihood ratio against the residual noise, a few units per extra parameter).
+    x_eq = x.copy()
+    x_eq[3::3] = big_r
+    lo_eq, up_eq = lower.copy(), upper.copy()
+    lo_eq[3::3] = big_r
+    up_eq[3::3] = big_r
+    x_eq, res_eq, w_eq = robust_gauss_newton(
+        lambda v: _line_resjac(p_all, v, n_l, False)[0],
+        x_eq,
+        np.full(x_eq.size, 1e-5),
+        c=2.0 * c_fin,
+        iterations=8,
+        lower=lo_eq,
+        upper=up_eq,
+        c_final=c_fin,
+        jacobian=lambda v: _line_resjac(p_all, v, n_l, True)[1],
+    )
+    cost_free = tukey_cost(res, c_fin)
+    cost_eq = tukey_cost(res_eq, c_fin)
+    n_in = max(int((w > 0.1).sum()), 1)
+    sigma2 = max(2.0 * cost_free / n_in, noise_med**2)
+    lr = 2.0 * (cost_eq - cost_free) / sigma2
+    diag.update(radius_lr=float(lr), radius_free=[float(v) for v in x[3::3]])
+    if lr <= cfg.radius_lr_per_branch * n_l:
+        x, res, w = x_eq, res_eq, w_eq
+    diag["radius_model"] = "clamped" if x is x_eq else "free"
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     support = int((w > 0.1).sum())
     diag.update(fit_rms=rms, fit_support=support, fit_points=int(p_all.shape[0]))

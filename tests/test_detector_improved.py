@@ -7,13 +7,13 @@ import math
 
 import numpy as np
 import pytest
+from detector_scans import match, rot_tilt, scan_layout, wrap
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from detector import Detection, SensorInPipe, detect, detect_planar
 from detector.scan import Scan
 from pipe_env.geometry import Pose
-from tests.detector_scans import match, rot_tilt, scan_layout, wrap
 
 REPRESENTATIVE = [
     ("mitre_bend", 0.3, {"diameter": 0.1, "angle": math.pi / 2, "direction": 2.0}),
