@@ -48,7 +48,7 @@ from numpy.typing import NDArray
 
 from detector.detection import Detection
 from detector.grid import ScanGrid, build_grid, label_regions
-from detector.options import StructureOption
+from detector.options import StructureOption, option_order
 from detector.robust import mad_sigma, robust_gauss_newton, tukey_cost, tukey_weights
 from detector.scan import Scan
 from detector.transforms import SensorInPipe, option_direction
@@ -841,7 +841,7 @@ def _branches(
         StructureOption(kind, o.distance, o.diameter, o.direction, o.angle, o.confidence)
         for o in options
     ]
-    options.sort(key=lambda o: (round(o.angle, 6), o.direction))
+    options.sort(key=option_order)
     return Detection(kind, options, conf, diag)
 
 

@@ -168,7 +168,8 @@ def test_random_scans_never_nan(n_planes, n_beams, seed, p_missing, scale, diame
     scan = _scan(r, beams, planes)
     for method in ("improved", "thesis"):
         _assert_sane(detect(scan, diameter, method))
-    _assert_sane(detect_planar(scan, diameter))
+    for method in ("thesis", "improved"):
+        _assert_sane(detect_planar(scan, diameter, method))
 
 
 def _cylinder_scan(radius, noise, rng, n_planes=30, n_beams=121, wall_at=None):
