@@ -106,12 +106,18 @@ class PipeCloud:
     sigma_r: NDArray[np.float64]  # (G, K) radial noise of each return
     pose: SensorInPipe
     pts: NDArray[np.float64] = field(init=False)  # (G, K, 3) pipe frame
+    thin: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(init=False, default=None)
 
     def set_pose(self, pose: SensorInPipe) -> None:
         self.pose = pose
-        pts = np.zeros_like(self.sensor_pts)
-        pts[self.valid] = self.sensor_pts[self.valid] @ pose.rotation.T + pose.position
+        flat = self.sensor_pts.reshape(-1, 3)
+        pts = (flat @ pose.rotation.T + pose.position).reshape(self.sensor_pts.shape)
+        pts *= self.valid[..., None]  # 0 where invalid
         self.pts = pts
+
+    def restore(self, pose: SensorInPipe, pts: NDArray[np.float64]) -> None:
+        """Go back to a pose whose points were computed before."""
+        self.pose, self.pts = pose, pts
 
 
 def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig) -> PipeCloud:
@@ -322,9 +328,11 @@ def detect_improved(
         cloud = _prepare(scan, pose0, bias, config)
         if refine_axis:
             candidates = [(pose0, {})]
+            pts_of = [cloud.pts]
             pose1, info1 = _refine_axis(cloud, big_r, config)
             candidates.append((pose1, info1))
             cloud.set_pose(pose1)
+            pts_of.append(cloud.pts)
             # second pass: all of the intact wall before the structure
             u_start = _structure_start(cloud, big_r, config)
             pose2, info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
@@ -334,14 +342,17 @@ def detect_improved(
             # keep the pose that explains the most wall returns before the structure (a fit
             # pulled by the structure's own returns, e.g. tilted onto one side of a taper,
             # explains fewer of them)
-            cloud.set_pose(pose0)
+            cloud.restore(pose0, pts_of[0])
             u_near = min(u_start, _structure_start(cloud, big_r, config))
             scores = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
             best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
             pose, info = candidates[best]
             diag.update(info)
             diag["axis_pass"] = best
-            cloud.set_pose(pose)
+            if best < len(pts_of):
+                cloud.restore(pose, pts_of[best])
+            else:
+                cloud.set_pose(pose)
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
@@ -354,10 +365,14 @@ def _wall_count(
 ) -> int:
     """Returns within the wall tolerance of the clamped radius under ``pose``, counting those
     nearer than ``u_max`` along the axis (all of them when fewer than 100 are)."""
-    sp = cloud.sensor_pts[cloud.valid][::3]
+    if cloud.thin is None:  # every third valid return and its tolerance, computed once
+        cloud.thin = (
+            cloud.sensor_pts[cloud.valid][::3],
+            cfg.tol_floor + cfg.noise_k * cloud.sigma_r[cloud.valid][::3],
+        )
+    sp, tol = cloud.thin
     pts = sp @ pose.rotation.T + pose.position
     r = np.hypot(pts[:, 1], pts[:, 2])
-    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_r[cloud.valid][::3]
     ok = np.abs(r - big_r) <= tol
     near = pts[:, 0] < u_max
     if np.count_nonzero(near) >= 40:
