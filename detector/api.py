@@ -2,7 +2,8 @@
 
 ``method="thesis"`` runs the faithful reproduction of the thesis algorithms (Algorithm 2 for
 sweeps, :mod:`detector.spatial`; Algorithm 1 for planes, :mod:`detector.planar`);
-``method="improved"`` (the default for sweeps) runs :mod:`detector.improved`. Both return a
+``method="improved"`` (the default for sweeps) runs :mod:`detector.improved` for sweeps and
+:mod:`detector.planar_improved` for planes. Both return a
 :class:`~detector.detection.Detection` and never NaN.
 """
 
@@ -14,13 +15,14 @@ from typing import Any
 from detector.detection import Detection
 from detector.improved import detect_improved
 from detector.planar import detect_planar_thesis
+from detector.planar_improved import detect_planar_improved
 from detector.scan import Scan
 from detector.spatial import detect_spatial_thesis
 
 #: Methods of :func:`detect`.
 METHODS: tuple[str, ...] = ("thesis", "improved")
 #: Methods of :func:`detect_planar`.
-PLANAR_METHODS: tuple[str, ...] = ("thesis",)
+PLANAR_METHODS: tuple[str, ...] = ("thesis", "improved")
 
 
 def _check(scan: Any, clamped_diameter: Any) -> float:
@@ -75,12 +77,14 @@ def detect_planar(
     sensor_in_pipe: Any = None,
     **options: Any,
 ) -> Detection:
-    """The structure ahead from one scan plane (thesis Algorithm 1).
+    """The structure ahead from one scan plane: thesis Algorithm 1 (``method="thesis"``, the
+    default) or the improved line-fitting method (``method="improved"``,
+    :mod:`detector.planar_improved`).
 
     Args:
         scan: a scan; plane ``plane`` is used (a single-plane scan by default).
         clamped_diameter: inner diameter of the current pipe, m.
-        method: ``"thesis"``.
+        method: ``"thesis"`` or ``"improved"``.
         plane: index of the plane in ``scan``.
         sensor_in_pipe: known sensor pose in the pipe frame; ``None``: centred and aligned.
     """
@@ -89,4 +93,8 @@ def detect_planar(
         raise ValueError(f"plane {plane} out of range for a scan of {scan.n_planes} planes")
     if method == "thesis":
         return detect_planar_thesis(scan, d, plane=plane, sensor_in_pipe=sensor_in_pipe, **options)
+    if method == "improved":
+        return detect_planar_improved(
+            scan, d, plane=plane, sensor_in_pipe=sensor_in_pipe, **options
+        )
     raise ValueError(f"planar method must be one of {PLANAR_METHODS}, got {method!r}")

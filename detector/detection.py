@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from detector.options import KINDS, StructureOption
+from detector.options import KINDS, StructureOption, option_order
 
 
 def clean_diagnostics(value: Any) -> Any:
@@ -44,8 +44,10 @@ class Detection:
 
     Attributes:
         kind: one of ``KINDS``.
-        options: the ways on past the structure (empty for ``straight``); distances along the
-            current pipe axis from the sensor origin, metres; angles in radians.
+        options: the ways on past the structure (empty for ``straight``), sorted by
+            :func:`~detector.options.option_order` (straight on first, then by roll direction);
+            distances along the current pipe axis from the sensor origin, metres; angles in
+            radians.
         confidence: in [0, 1]: how much the method trusts its answer.
         diagnostics: method-specific numbers (plain Python types, never NaN).
     """
@@ -69,7 +71,7 @@ class Detection:
         if not math.isfinite(c):
             raise ValueError(f"Detection.confidence must be finite, got {self.confidence!r}")
         object.__setattr__(self, "confidence", min(1.0, max(0.0, c)))
-        object.__setattr__(self, "options", opts)
+        object.__setattr__(self, "options", sorted(opts, key=option_order))
         object.__setattr__(self, "diagnostics", clean_diagnostics(dict(self.diagnostics)))
 
     @classmethod

@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from detector.detection import Detection
-from detector.options import StructureOption
+from detector.options import StructureOption, option_order
 
 _FAMILY = {"closure": "end", "reducer": "reducer", "bend": "turn", "junction": "turn"}
 
@@ -320,7 +320,7 @@ class StructureTracker:
                 angle, direction = 0.0, 0.0
             diameter = 0.0 if kind == "closure" else max(0.0, way.diameter)
             opts.append(StructureOption(kind, dist, diameter, direction, angle, conf))
-        opts.sort(key=lambda o: (round(o.angle, 6), o.direction))
+        opts.sort(key=option_order)
         det = Detection(
             kind,
             opts,

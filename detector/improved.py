@@ -48,8 +48,8 @@ from numpy.typing import NDArray
 
 from detector.detection import Detection
 from detector.grid import ScanGrid, build_grid, label_regions
-from detector.options import StructureOption
-from detector.robust import mad_sigma, robust_gauss_newton, tukey_weights
+from detector.options import StructureOption, option_order
+from detector.robust import mad_sigma, robust_gauss_newton, tukey_cost, tukey_weights
 from detector.scan import Scan
 from detector.transforms import SensorInPipe, option_direction
 
@@ -73,6 +73,8 @@ class ImprovedConfig:
         prior_offset, prior_tilt: prior standard deviation of the pipe-axis refinement.
         straight_on_coverage: fraction of the circumference on which the wall must be seen
             beyond a junction for a straight-on option.
+        radius_lr_per_branch: likelihood-ratio threshold (per outgoing pipe) above which a
+            free outgoing radius replaces the clamped one.
     """
 
     tol_floor: float = 0.002
@@ -87,6 +89,7 @@ class ImprovedConfig:
     prior_offset: float = 0.01
     prior_tilt: float = math.radians(3.0)
     straight_on_coverage: float = 0.5
+    radius_lr_per_branch: float = 12.0
 
 
 DEFAULT_CONFIG = ImprovedConfig()
@@ -103,12 +106,18 @@ class PipeCloud:
     sigma_r: NDArray[np.float64]  # (G, K) radial noise of each return
     pose: SensorInPipe
     pts: NDArray[np.float64] = field(init=False)  # (G, K, 3) pipe frame
+    thin: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(init=False, default=None)
 
     def set_pose(self, pose: SensorInPipe) -> None:
         self.pose = pose
-        pts = np.zeros_like(self.sensor_pts)
-        pts[self.valid] = self.sensor_pts[self.valid] @ pose.rotation.T + pose.position
+        flat = self.sensor_pts.reshape(-1, 3)
+        pts = (flat @ pose.rotation.T + pose.position).reshape(self.sensor_pts.shape)
+        pts *= self.valid[..., None]  # 0 where invalid
         self.pts = pts
+
+    def restore(self, pose: SensorInPipe, pts: NDArray[np.float64]) -> None:
+        """Go back to a pose whose points were computed before."""
+        self.pose, self.pts = pose, pts
 
 
 def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig) -> PipeCloud:
@@ -319,9 +328,11 @@ def detect_improved(
         cloud = _prepare(scan, pose0, bias, config)
         if refine_axis:
             candidates = [(pose0, {})]
+            pts_of = [cloud.pts]
             pose1, info1 = _refine_axis(cloud, big_r, config)
             candidates.append((pose1, info1))
             cloud.set_pose(pose1)
+            pts_of.append(cloud.pts)
             # second pass: all of the intact wall before the structure
             u_start = _structure_start(cloud, big_r, config)
             pose2, info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
@@ -331,14 +342,17 @@ def detect_improved(
             # keep the pose that explains the most wall returns before the structure (a fit
             # pulled by the structure's own returns, e.g. tilted onto one side of a taper,
             # explains fewer of them)
-            cloud.set_pose(pose0)
+            cloud.restore(pose0, pts_of[0])
             u_near = min(u_start, _structure_start(cloud, big_r, config))
             scores = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
             best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
             pose, info = candidates[best]
             diag.update(info)
             diag["axis_pass"] = best
-            cloud.set_pose(pose)
+            if best < len(pts_of):
+                cloud.restore(pose, pts_of[best])
+            else:
+                cloud.set_pose(pose)
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
@@ -351,10 +365,14 @@ def _wall_count(
 ) -> int:
     """Returns within the wall tolerance of the clamped radius under ``pose``, counting those
     nearer than ``u_max`` along the axis (all of them when fewer than 100 are)."""
-    sp = cloud.sensor_pts[cloud.valid][::3]
+    if cloud.thin is None:  # every third valid return and its tolerance, computed once
+        cloud.thin = (
+            cloud.sensor_pts[cloud.valid][::3],
+            cfg.tol_floor + cfg.noise_k * cloud.sigma_r[cloud.valid][::3],
+        )
+    sp, tol = cloud.thin
     pts = sp @ pose.rotation.T + pose.position
     r = np.hypot(pts[:, 1], pts[:, 2])
-    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_r[cloud.valid][::3]
     ok = np.abs(r - big_r) <= tol
     near = pts[:, 0] < u_max
     if np.count_nonzero(near) >= 40:
@@ -706,7 +724,9 @@ def _branches(
     u_all = pts[..., 0]
     u_hi = float(np.percentile(u_all[lobe_mask], 95)) + 2.0 * big_r if lobe_mask.any() else 0.0
     near_inside = keep & ~lobe_mask & (u_all <= u_hi)
-    lobe_idx = _subsample(np.flatnonzero(lobe_mask.reshape(-1)), cfg.fit_points // 2)
+    lobe_idx = np.concatenate(
+        [_subsample(np.flatnonzero(lb.mask.reshape(-1)), cfg.fit_points // 2) for lb in lobes]
+    )
     near_idx = _subsample(np.flatnonzero(near_inside.reshape(-1)), cfg.fit_points // 2)
     sub_idx = np.concatenate([lobe_idx, near_idx])
     if any_roll:
@@ -769,6 +789,35 @@ def _branches(
         c_final=c_fin,
         jacobian=lambda v: _line_resjac(p_all, v, n_l, True)[1],
     )
+    # --- the outgoing radii: the clamped radius (a standard fitting) unless the returns
+    # call for another one. A free radius is poorly observed from a partial view of an
+    # opening under range noise, so it is kept only when it fits significantly better
+    # (likelihood ratio against the residual noise, a few units per extra parameter).
+    x_eq = x.copy()
+    x_eq[3::3] = big_r
+    lo_eq, up_eq = lower.copy(), upper.copy()
+    lo_eq[3::3] = big_r
+    up_eq[3::3] = big_r
+    x_eq, res_eq, w_eq = robust_gauss_newton(
+        lambda v: _line_resjac(p_all, v, n_l, False)[0],
+        x_eq,
+        np.full(x_eq.size, 1e-5),
+        c=2.0 * c_fin,
+        iterations=8,
+        lower=lo_eq,
+        upper=up_eq,
+        c_final=c_fin,
+        jacobian=lambda v: _line_resjac(p_all, v, n_l, True)[1],
+    )
+    cost_free = tukey_cost(res, c_fin)
+    cost_eq = tukey_cost(res_eq, c_fin)
+    n_in = max(int((w > 0.1).sum()), 1)
+    sigma2 = max(2.0 * cost_free / n_in, noise_med**2)
+    lr = 2.0 * (cost_eq - cost_free) / sigma2
+    diag.update(radius_lr=float(lr), radius_free=[float(v) for v in x[3::3]])
+    if lr <= cfg.radius_lr_per_branch * n_l:
+        x, res, w = x_eq, res_eq, w_eq
+    diag["radius_model"] = "clamped" if x is x_eq else "free"
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     support = int((w > 0.1).sum())
     diag.update(fit_rms=rms, fit_support=support, fit_points=int(p_all.shape[0]))
@@ -807,7 +856,7 @@ def _branches(
         StructureOption(kind, o.distance, o.diameter, o.direction, o.angle, o.confidence)
         for o in options
     ]
-    options.sort(key=lambda o: (round(o.angle, 6), o.direction))
+    options.sort(key=option_order)
     return Detection(kind, options, conf, diag)
 
 

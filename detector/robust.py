@@ -119,3 +119,10 @@ def robust_gauss_newton(
             break
     w = tukey_weights(r, cf)
     return x, r, w
+
+
+def tukey_cost(res: NDArray[np.float64], c: float) -> float:
+    """Total Tukey biweight loss ``sum rho_c(r)`` (``r^2 / 2`` near 0, ``c^2 / 6`` beyond ``c``),
+    in squared residual units."""
+    u2 = np.minimum(np.square(res / c), 1.0)
+    return float(np.sum((c * c / 6.0) * (1.0 - (1.0 - u2) ** 3)))

@@ -62,7 +62,7 @@ from numpy.typing import NDArray
 from detector.detection import Detection
 from detector.ellipse import fit_ellipse
 from detector.grid import build_grid, dilate, label_regions
-from detector.options import StructureOption
+from detector.options import StructureOption, option_order
 from detector.scan import Scan
 from detector.transforms import SensorInPipe, option_direction
 
@@ -210,7 +210,7 @@ def detect_spatial_thesis(
     if straight_on:
         dist = float(np.mean([o.distance for o in options]))
         options.append(StructureOption("junction", dist, clamped_diameter, 0.0, 0.0, 1.0))
-    options.sort(key=lambda o: (round(o.angle, 6), o.direction))
+    options.sort(key=option_order)
     diag["time_s"] = time.perf_counter() - t0
     return Detection(kind, options, 1.0, diag)
 

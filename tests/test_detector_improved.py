@@ -7,13 +7,13 @@ import math
 
 import numpy as np
 import pytest
+from detector_scans import match, rot_tilt, scan_layout, wrap
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from detector import Detection, SensorInPipe, detect, detect_planar
 from detector.scan import Scan
 from pipe_env.geometry import Pose
-from tests.detector_scans import match, rot_tilt, scan_layout, wrap
 
 REPRESENTATIVE = [
     ("mitre_bend", 0.3, {"diameter": 0.1, "angle": math.pi / 2, "direction": 2.0}),
@@ -168,7 +168,8 @@ def test_random_scans_never_nan(n_planes, n_beams, seed, p_missing, scale, diame
     scan = _scan(r, beams, planes)
     for method in ("improved", "thesis"):
         _assert_sane(detect(scan, diameter, method))
-    _assert_sane(detect_planar(scan, diameter))
+    for method in ("thesis", "improved"):
+        _assert_sane(detect_planar(scan, diameter, method))
 
 
 def _cylinder_scan(radius, noise, rng, n_planes=30, n_beams=121, wall_at=None):

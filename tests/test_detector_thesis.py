@@ -6,10 +6,10 @@ from __future__ import annotations
 import math
 
 import pytest
+from detector_scans import match, scan_layout, wrap
 
 from detector import detect, detect_planar
 from detector.planar import gap_detection
-from tests.detector_scans import match, scan_layout, wrap
 
 
 @pytest.mark.parametrize("distance", [0.35, 0.25, 0.15])

@@ -1,0 +1,382 @@
+"""The improved single-plane detector (``detect_planar(..., method="improved")``).
+
+Where thesis Algorithm 1 (:mod:`detector.planar`) thresholds forward jumps and reads the gap
+size as the diameter, this method fits lines, using the clamped diameter:
+
+1. **Plane frame.** The plane's returns are mapped into the pipe frame (known pose, else centred
+   and aligned) and expressed as ``(u, v)``: ``u`` along the pipe axis, ``v`` signed across it
+   in the plane (positive on the ``beta > 0`` side, roll ``alpha``).
+2. **Walls.** A robust line is fitted to the wall returns of each side (``|v|`` near the clamped
+   radius, before the structure); their mean offset and slope give the in-plane sensor offset
+   and tilt, which are removed (the thesis assumes both zero).
+3. **Classes.** Returns are ``wall`` (``| |v| - R | <= tol``), ``beyond`` (farther from the
+   axis) or ``inside``; ``tol`` follows the sensor noise model in ``scan.spec``.
+4. **Openings.** A side with enough beyond returns has an outgoing pipe: a robust orthogonal line
+   through them is that pipe's far wall; its direction gives the deflection angle. The far wall
+   of a turn seen head on (inside returns, nearly parallel) gives the second wall and the
+   outgoing diameter; without it the outgoing pipe has the clamped diameter. The outgoing axis
+   is the mid-line (or the far wall moved in by the radius); where it crosses the incoming axis
+   is the distance. Two openings, or a pipe that visibly goes on, make a junction.
+5. **No opening.** Inside returns on one line across the axis are a closure (end wall) at
+   their mean ``u``; otherwise a reducer: the most frequent inner ``|v|`` is the new radius and
+   a robust line ``|v|(u)`` through the taper gives where it starts. Beyond returns on both
+   sides and nothing inside: an expansion.
+
+Never NaN: degenerate inputs give ``straight`` with a low confidence. Metres and radians.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from detector.detection import Detection
+from detector.options import StructureOption
+from detector.robust import mad_sigma, robust_gauss_newton, tukey_cost, tukey_weights
+from detector.scan import Scan
+from detector.transforms import SensorInPipe
+
+#: Fewest beyond returns on a side for an opening.
+MIN_OPENING_POINTS = 3
+#: Fewest anomalous returns for anything but ``straight``.
+MIN_ANOMALY_POINTS = 4
+
+
+def robust_tls_line(
+    u: NDArray[np.float64], v: NDArray[np.float64], iterations: int = 8
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float, NDArray[np.float64]]:
+    """Robust orthogonal line fit (Tukey-reweighted total least squares).
+
+    Returns ``(point, direction, rms, weights)``: a point on the line, its unit direction
+    ``(du, dv)`` with ``du >= 0``, the weighted RMS orthogonal residual (m) and the final
+    weights.
+    """
+    p = np.stack([u, v], axis=1)
+    w = np.ones(u.size)
+    c = np.zeros(2)
+    d = np.array([1.0, 0.0])
+    res = np.zeros(u.size)
+    for _ in range(iterations):
+        sw = float(w.sum())
+        if sw < 2.0:
+            break
+        c = (w[:, None] * p).sum(axis=0) / sw
+        q = p - c
+        cov = (w[:, None] * q).T @ q
+        _, vec = np.linalg.eigh(cov)
+        d = vec[:, 1]
+        n = np.array([-d[1], d[0]])
+        res = q @ n
+        s = max(mad_sigma(res[w > 0]) if np.any(w > 0) else 0.0, 2e-4)
+        w = tukey_weights(res, 4.685 * s)
+    if d[0] < 0.0:
+        d = -d
+    rms = float(np.sqrt(np.sum(w * res**2) / max(float(w.sum()), 1e-9)))
+    return c, d, rms, w
+
+
+def _robust_yx(x: NDArray, y: NDArray) -> tuple[float, float]:
+    """Robust ``y = a + b x`` (Tukey IRLS); ``(median(y), 0)`` when ``x`` does not vary."""
+    w = np.ones_like(x)
+    a, b = float(np.median(y)), 0.0
+    for _ in range(6):
+        sw = float(w.sum())
+        if sw <= 0.0:
+            break
+        xm = float((w * x).sum() / sw)
+        ym = float((w * y).sum() / sw)
+        sxx = float((w * (x - xm) ** 2).sum())
+        if sxx <= 1e-12:
+            break
+        b = float((w * (x - xm) * (y - ym)).sum() / sxx)
+        a = ym - b * xm
+        res = y - (a + b * x)
+        w = tukey_weights(res, 4.685 * max(mad_sigma(res), 2e-4))
+    return a, b
+
+
+def _radius_mode(r: NDArray) -> float:
+    bins = np.floor(r / 0.001).astype(np.int64)
+    lo = int(bins.min())
+    cnt = np.convolve(np.bincount(bins - lo), np.ones(3), mode="same")
+    peak = (int(np.argmax(cnt)) + lo + 0.5) * 0.001
+    near = np.abs(r - peak) <= 0.002
+    return float(np.median(r[near])) if near.any() else peak
+
+
+def _confidence(n: int, rms: float, tol: float) -> float:
+    c = (1.0 - math.exp(-n / 10.0)) * math.exp(-((rms / max(tol, 1e-6)) ** 2) / 4.0)
+    return float(min(1.0, max(0.0, c)))
+
+
+def detect_planar_improved(
+    scan: Scan,
+    clamped_diameter: float,
+    plane: int = 0,
+    sensor_in_pipe: object = None,
+    tol_floor: float = 0.002,
+    noise_k: float = 3.0,
+    refine_axis: bool = True,
+) -> Detection:
+    """The improved method on plane ``plane`` of ``scan`` (see the module docstring).
+
+    Args:
+        scan: a scan; only plane ``plane`` is used.
+        clamped_diameter: inner diameter from the clamping encoders, metres.
+        plane: index of the plane.
+        sensor_in_pipe: known sensor pose in the pipe frame; ``None``: centred and aligned.
+        tol_floor: smallest wall tolerance, metres.
+        noise_k: tolerance = ``tol_floor`` + ``noise_k`` x the radial range noise.
+        refine_axis: remove the in-plane offset and tilt fitted to the walls.
+    """
+    t0 = time.perf_counter()
+    diag: dict[str, Any] = {"method": "improved-planar", "plane_angle": 0.0, "n_points": 0}
+    try:
+        det = _detect(
+            scan, float(clamped_diameter), plane, sensor_in_pipe, tol_floor, noise_k,
+            refine_axis, diag,
+        )  # fmt: skip
+    except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
+        diag["error"] = f"{type(exc).__name__}: {exc}"
+        det = Detection.straight(confidence=0.0, **diag)
+    return det.with_diagnostics(time_s=time.perf_counter() - t0)
+
+
+def _detect(
+    scan: Scan,
+    d_clamped: float,
+    plane: int,
+    sensor_in_pipe: object,
+    tol_floor: float,
+    noise_k: float,
+    refine_axis: bool,
+    diag: dict[str, Any],
+) -> Detection:
+    big_r = 0.5 * d_clamped
+    pose = SensorInPipe.coerce(sensor_in_pipe)
+    alpha = float(scan.plane_angles[plane])
+    diag["plane_angle"] = alpha
+    valid = scan.valid[plane]
+    beta = scan.beam_angles[valid]
+    ranges = scan.ranges[plane][valid] - float((scan.spec or {}).get("bias", 0.0))
+    diag["n_points"] = int(beta.size)
+    if beta.size < MIN_ANOMALY_POINTS:
+        diag["reason"] = "too few returns"
+        return Detection.straight(confidence=0.0, **diag)
+    pts = pose.to_pipe(scan.directions()[plane][valid] * ranges[:, None])
+    e_lat = np.array([0.0, math.cos(alpha), math.sin(alpha)])
+    u = pts[:, 0].copy()
+    v = pts @ e_lat
+    # per-return radial tolerance from the sensor model
+    spec = scan.spec or {}
+    sig = math.hypot(float(spec.get("noise_sigma", 0.0)), float(spec.get("range_resolution", 0.0)))
+    sig_r = np.hypot(sig, float(spec.get("noise_sigma_rel", 0.0)) * ranges) * np.abs(np.sin(beta))
+    sig_r += ranges * float(spec.get("angular_jitter", 0.0)) * np.abs(np.cos(beta))
+    tol = tol_floor + noise_k * sig_r
+    # --- in-plane offset and tilt from the two walls
+    if refine_axis:
+        fits = []
+        for sgn in (1.0, -1.0):
+            m = (np.sign(v) == sgn) & (np.abs(np.abs(v) - big_r) < 0.3 * big_r)
+            if m.sum() >= 6:
+                order = np.argsort(u[m])
+                um, vm = u[m][order], v[m][order]
+                um, vm = um[: max(6, int(0.6 * um.size))], vm[: max(6, int(0.6 * vm.size))]
+                if float(um[-1] - um[0]) > 0.02:
+                    fits.append((sgn, *_robust_yx(um, vm)))
+        if len(fits) == 2:
+            off = 0.5 * (fits[0][1] + fits[1][1])
+            slope = 0.5 * (fits[0][2] + fits[1][2])
+            if abs(off) < 0.5 * big_r and abs(slope) < math.tan(math.radians(8.0)):
+                ang = math.atan(slope)
+                ca, sa = math.cos(ang), math.sin(ang)
+                u, v = ca * u + sa * (v - off), -sa * u + ca * (v - off)
+                diag.update(plane_offset=off, plane_tilt_deg=math.degrees(ang))
+    a = np.abs(v)
+    e = a - big_r
+    wall = np.abs(e) <= tol
+    beyond = e > tol
+    inside = e < -tol
+    diag.update(n_wall=int(wall.sum()), n_beyond=int(beyond.sum()), n_inside=int(inside.sum()))
+    if beyond.sum() + inside.sum() < MIN_ANOMALY_POINTS:
+        conf = min(1.0, float(wall.sum()) / 40.0)
+        return Detection.straight(confidence=conf, **diag)
+    tol_med = float(np.median(tol))
+    sides = []
+    for sgn in (1.0, -1.0):
+        m = beyond & (np.sign(v) == sgn)
+        deep = m & (e > max(0.006, 0.1 * big_r))
+        if m.sum() >= MIN_OPENING_POINTS and deep.sum() >= 2:
+            sides.append((sgn, m))
+    if sides and not (
+        len(sides) == 2 and inside.sum() < 0.3 * beyond.sum() and _parallel(u, v, sides)
+    ):
+        return _openings(u, v, a, big_r, sides, inside, wall, alpha, tol_med, diag)
+    return _axisymmetric(u, a, big_r, inside, beyond, tol_med, diag)
+
+
+def _parallel(u: NDArray, v: NDArray, sides: list) -> bool:
+    """Both openings' far walls run along the axis (an expansion, not two branches)."""
+    for _, m in sides:
+        _, d, _, _ = robust_tls_line(u[m], v[m])
+        if math.degrees(math.acos(min(1.0, abs(float(d[0]))))) > 20.0:
+            return False
+    return True
+
+
+def _openings(
+    u: NDArray,
+    v: NDArray,
+    a: NDArray,
+    big_r: float,
+    sides: list,
+    inside: NDArray,
+    wall: NDArray,
+    alpha: float,
+    tol: float,
+    diag: dict[str, Any],
+) -> Detection:
+    options: list[StructureOption] = []
+    dists = []
+    confs = []
+    gap_diag = []
+    for sgn, m in sides:
+        # the outgoing pipe: two walls at +-rho about an axis through (L, 0) deflected by
+        # theta towards this side; its returns are the side's beyond returns and the inside
+        # returns past the opening's start (the far wall of a turn seen head on)
+        uc = u[m] * big_r / np.maximum(a[m], 1e-9)  # where the beams left the incoming wall
+        u0 = float(np.percentile(uc, 2))
+        sel = m | (inside & (u >= u0))
+        pu, pv = u[sel], v[sel] * sgn
+        fit = _fit_outgoing(pu, pv, big_r, u0, tol)
+        if fit is None:
+            continue
+        big_l, theta, rho, rms, n_sup = fit
+        if not (math.isfinite(big_l) and -0.5 <= big_l <= 3.0):
+            continue
+        conf = _confidence(n_sup, rms, max(tol, 1e-3))
+        direction = alpha if sgn > 0 else alpha + math.pi
+        options.append(StructureOption("bend", big_l, 2.0 * rho, direction, theta, conf))
+        dists.append(big_l)
+        confs.append(conf)
+        gap_diag.append({"side": sgn, "rms": rms, "support": n_sup, "rho": rho})
+    diag["openings"] = gap_diag
+    if not options:
+        diag["reason"] = "no opening gave a physical outgoing axis"
+        return Detection.straight(confidence=0.1, **diag)
+    big_l = float(np.mean(dists))
+    # straight on: the incoming walls seen again well beyond the structure, or a far centre
+    central = np.abs(v) <= 0.2 * big_r
+    far_wall = wall & (u > big_l + 2.0 * big_r)
+    goes_on = bool(far_wall.sum() >= 3) or (
+        bool(central.any()) and float(np.max(u[central])) > big_l + 3.0 * big_r
+    )
+    if goes_on:
+        options.append(StructureOption("junction", big_l, 2.0 * big_r, 0.0, 0.0, min(confs)))
+    kind = "bend" if len(options) == 1 else "junction"
+    options = [
+        StructureOption(kind, big_l if kind == "junction" else o.distance, o.diameter,
+                        o.direction, o.angle, o.confidence)
+        for o in options
+    ]  # fmt: skip
+    return Detection(kind, options, float(min(confs)), diag)
+
+
+def _line_res(pu: NDArray, pv: NDArray, x: NDArray) -> NDArray:
+    """Distance of points to the axis through ``(x[0], 0)`` at angle ``x[1]`` minus ``x[2]``."""
+    qu = pu - x[0]
+    return np.abs(qu * math.sin(x[1]) - pv * math.cos(x[1])) - x[2]
+
+
+def _fit_outgoing(
+    pu: NDArray, pv: NDArray, big_r: float, u0: float, tol: float
+) -> tuple[float, float, float, float, int] | None:
+    """Robust fit of the outgoing pipe's walls (side folded to ``v > 0``): ``(L, theta, rho,
+    rms, support)``; the clamped radius unless a free one fits significantly better."""
+    if pu.size < 5:
+        return None
+    c0 = max(3.0 * tol, 0.004)
+    thetas = np.radians(np.arange(15.0, 166.0, 5.0))
+    l_grid = u0 + np.linspace(-0.5 * big_r, 3.0 * big_r, 15)
+    qu = pu[None, :] - l_grid[:, None]  # (L, n)
+    res = (
+        np.abs(qu[:, :, None] * np.sin(thetas)[None, None, :] - pv[None, :, None] * np.cos(thetas))
+        - big_r
+    )  # (L, n, T)
+    cost = np.minimum(res * res, c0 * c0).mean(axis=1)
+    # the turn-side incoming wall ends where the outgoing pipe's near wall meets it, at
+    # L - R tan(theta / 2): this rules out the mirror solution behind a wall seen head on
+    expect = l_grid[:, None] - big_r * np.tan(thetas / 2.0)[None, :]
+    cost = np.where(np.abs(expect - u0) <= 0.6 * big_r, cost, np.inf)
+    if not np.isfinite(cost).any():
+        return None
+    i_l, i_t = np.unravel_index(int(np.argmin(cost)), cost.shape)
+    x0 = np.array([float(l_grid[i_l]), float(thetas[i_t]), big_r])
+    c_fin = max(tol, 0.0015)
+    lower = np.array([-0.5, math.radians(5.0), big_r])
+    upper = np.array([3.0, math.radians(175.0), big_r])
+    x_eq, r_eq, w_eq = robust_gauss_newton(
+        lambda x: _line_res(pu, pv, x), x0, np.array([1e-5, 1e-5, 1e-5]), c=2.0 * c0,
+        iterations=10, lower=lower, upper=upper, c_final=c_fin,
+    )  # fmt: skip
+    lower[2], upper[2] = 0.4 * big_r, 1.6 * big_r
+    x_fr, r_fr, w_fr = robust_gauss_newton(
+        lambda x: _line_res(pu, pv, x), x_eq, np.array([1e-5, 1e-5, 1e-5]), c=2.0 * c_fin,
+        iterations=8, lower=lower, upper=upper, c_final=c_fin,
+    )  # fmt: skip
+    cost_eq, cost_fr = tukey_cost(r_eq, c_fin), tukey_cost(r_fr, c_fin)
+    n_in = max(int((w_fr > 0.1).sum()), 1)
+    sigma2 = max(2.0 * cost_fr / n_in, (0.3e-3) ** 2)
+    lr = 2.0 * (cost_eq - cost_fr) / sigma2
+    x, r, w = (x_fr, r_fr, w_fr) if lr > 12.0 else (x_eq, r_eq, w_eq)
+    rms = float(np.sqrt(np.sum(w * r * r) / max(float(w.sum()), 1e-9)))
+    if not np.all(np.isfinite(x)):
+        return None
+    return float(x[0]), float(x[1]), float(x[2]), rms, int((w > 0.1).sum())
+
+
+def _axisymmetric(
+    u: NDArray,
+    a: NDArray,
+    big_r: float,
+    inside: NDArray,
+    beyond: NDArray,
+    tol: float,
+    diag: dict[str, Any],
+) -> Detection:
+    contraction = bool(inside.sum() >= beyond.sum())
+    m = inside if contraction else beyond
+    if m.sum() < MIN_ANOMALY_POINTS:
+        return Detection.straight(confidence=0.3, **diag)
+    um, am = u[m], a[m]
+    if contraction:
+        u_med = float(np.median(um))
+        on = np.abs(um - u_med) <= 0.003 + 2.0 * tol
+        if on.mean() >= 0.8 and float(np.min(am[on])) < 0.5 * big_r:
+            up = um[on]
+            conf = _confidence(int(on.sum()), float(np.std(up)), 0.003 + 2.0 * tol)
+            opt = StructureOption("closure", float(np.mean(up)), 0.0, 0.0, 0.0, conf)
+            return Detection("closure", [opt], conf, diag)
+    r2 = _radius_mode(am)
+    if r2 < 0.25 * big_r:
+        conf = 0.3
+        opt = StructureOption("closure", max(0.0, float(np.min(um))), 0.0, 0.0, 0.0, conf)
+        return Detection("closure", [opt], conf, diag)
+    # the taper: returns between the two radii; the line |v|(u) crosses R at its start
+    lo, hi = min(r2, big_r) + tol, max(r2, big_r) - tol
+    taper = (am > lo) & (am < hi)
+    big_l = float(np.min(um))
+    if taper.sum() >= 3:
+        a0, b0 = _robust_yx(um[taper], am[taper])
+        if abs(b0) > 1e-3:
+            cand = (big_r - a0) / b0
+            if math.isfinite(cand) and abs(cand - big_l) < 0.2:
+                big_l = float(cand)
+    diag.update(reducer_r2=r2, taper_points=int(taper.sum()))
+    conf = _confidence(int(m.sum()), 0.0, tol)
+    opt = StructureOption("reducer", max(0.0, big_l), 2.0 * r2, 0.0, 0.0, conf)
+    return Detection("reducer", [opt], conf, diag)
