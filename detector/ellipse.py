@@ -173,7 +173,7 @@ def _from_conic(conic: NDArray[np.float64], x: NDArray, y: NDArray) -> Ellipse |
     val = A * x * x + B * x * y + C * y * y + D * x + E * y + F
     gx = 2 * A * x + B * y + D
     gy = B * x + 2 * C * y + E
-    grad = np.hypot(gx, gy)
+    grad = np.sqrt(np.square(gx) + np.square(gy))
     with np.errstate(divide="ignore", invalid="ignore"):
         dist = np.where(grad > 0, np.abs(val) / grad, 0.0)
     rms = float(np.sqrt(np.mean(dist**2)))

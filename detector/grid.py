@@ -21,6 +21,8 @@ from scipy import ndimage
 
 from detector.scan import Scan
 
+_EIGHT = np.ones((3, 3), dtype=bool)
+
 
 @dataclass(frozen=True, eq=False)
 class ScanGrid:
@@ -83,32 +85,34 @@ def build_grid(scan: Scan) -> ScanGrid:
 def label_regions(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32], int]:
     """Connected regions (8-neighbourhood) of a grid mask, joined across the row seam when the
     grid wraps. Returns ``(labels, n)`` with labels 1..n and 0 for background."""
-    labels, n = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
+    labels, n = ndimage.label(mask, structure=_EIGHT)
+    labels = labels.astype(np.int32, copy=False)
     if n == 0 or not wraps or mask.shape[0] < 3:
-        return labels.astype(np.int32), int(n)
+        return labels, int(n)
     first, last = labels[0], labels[-1]
+    # label pairs touching across the seam (same column or a diagonal neighbour)
+    a = np.concatenate([last, last[1:], last[:-1]])
+    b = np.concatenate([first, first[:-1], first[1:]])
+    touch = (a != 0) & (b != 0) & (a != b)
+    if not touch.any():
+        return labels, int(n)
     parent = np.arange(n + 1)
 
-    def find(a: int) -> int:
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
+    def find(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
 
-    cols = mask.shape[1]
-    for j in range(cols):
-        if last[j] == 0:
-            continue
-        for dj in (-1, 0, 1):
-            jj = j + dj
-            if 0 <= jj < cols and first[jj] != 0:
-                ra, rb = find(int(last[j])), find(int(first[jj]))
-                if ra != rb:
-                    parent[max(ra, rb)] = min(ra, rb)
-    roots = np.array([find(i) for i in range(n + 1)])
-    uniq, relabel = np.unique(roots, return_inverse=True)
-    out = relabel[labels].astype(np.int32)
-    return out, int(uniq.size - 1)
+    for la, lb in set(zip(a[touch].tolist(), b[touch].tolist())):
+        ra, rb = find(la), find(lb)
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    involved = np.unique(np.concatenate([a[touch], b[touch]]))
+    for i in involved.tolist():
+        parent[i] = find(i)
+    uniq, relabel = np.unique(parent, return_inverse=True)
+    return relabel[labels].astype(np.int32), int(uniq.size - 1)
 
 
 def dilate(mask: NDArray[np.bool_], wraps: bool, iterations: int = 1) -> NDArray[np.bool_]:

@@ -47,13 +47,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.detection import Detection
-from detector.grid import ScanGrid, build_grid, label_regions
+from detector.grid import build_grid, label_regions
 from detector.options import StructureOption, option_order
 from detector.robust import mad_sigma, robust_gauss_newton, tukey_cost, tukey_weights
 from detector.scan import Scan
 from detector.transforms import SensorInPipe, option_direction
 
 X_AXIS = np.array([1.0, 0.0, 0.0])
+#: Fits stop when no parameter moves by more than this (metres, radians): far below the
+#: accuracy that matters, and most fits then end in a few iterations.
+STEP_TOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -98,53 +101,151 @@ DEFAULT_CONFIG = ImprovedConfig()
 # --------------------------------------------------------------------------- point cloud
 @dataclass
 class PipeCloud:
-    """Returns of one scan in the pipe frame, on the unrolled grid."""
+    """Returns of one scan in the pipe frame.
 
-    grid: ScanGrid
-    sensor_pts: NDArray[np.float64]  # (G, K, 3) sensor frame (0 where invalid)
-    valid: NDArray[np.bool_]  # (G, K)
-    sigma_r: NDArray[np.float64]  # (G, K) radial noise of each return
+    The valid returns are kept compact, component-first (``(3, N)``), so a pose change is one
+    dense ``(3, 3) @ (3, N)`` product; ``cell`` places each on the unrolled scan grid (cropped
+    to the beam-angle columns that hold returns), whose ``(G, K)`` views (:attr:`valid`,
+    :attr:`sigma_r`, :attr:`xyz`, :attr:`pts`) are built on demand for region labelling.
+    """
+
+    wraps: bool  # the grid's first and last rows are neighbours
+    shape: tuple[int, int]  # (G, K) of the cropped grid
+    cell: NDArray[np.intp]  # (N,) flat grid cell of each return
+    sensor_v: NDArray[np.float64]  # (3, N) sensor frame
+    sigma_v: NDArray[np.float64]  # (N,) radial noise of each return
     pose: SensorInPipe
-    pts: NDArray[np.float64] = field(init=False)  # (G, K, 3) pipe frame
+    xyz_v: NDArray[np.float64] = field(init=False)  # (3, N) pipe frame
     thin: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(init=False, default=None)
+    _valid: NDArray[np.bool_] | None = field(init=False, default=None)
+    _sigma: NDArray[np.float64] | None = field(init=False, default=None)
+    _xyz: NDArray[np.float64] | None = field(init=False, default=None)
+
+    @property
+    def n(self) -> int:
+        return int(self.cell.size)
+
+    def _grid(self, values: NDArray, fill: float | bool) -> NDArray:
+        g, k = self.shape
+        lead = values.shape[:-1]
+        out = np.full((*lead, g * k), fill, dtype=values.dtype)
+        out[..., self.cell] = values
+        return out.reshape(*lead, g, k)
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """(G, K) True where the cell holds a return."""
+        if self._valid is None:
+            self._valid = self._grid(np.ones(self.n, dtype=bool), False)
+        return self._valid
+
+    @property
+    def sigma_r(self) -> NDArray[np.float64]:
+        """(G, K) radial noise of each return (0 where none)."""
+        if self._sigma is None:
+            self._sigma = self._grid(self.sigma_v, 0.0)
+        return self._sigma
+
+    @property
+    def xyz(self) -> NDArray[np.float64]:
+        """(3, G, K) pipe-frame points (0 where there is no return)."""
+        if self._xyz is None:
+            self._xyz = self._grid(self.xyz_v, 0.0)
+        return self._xyz
+
+    @property
+    def pts(self) -> NDArray[np.float64]:
+        """(G, K, 3) view of the pipe-frame points."""
+        return self.xyz.transpose(1, 2, 0)
+
+    def points(self, mask: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """(n, 3) pipe-frame points of the grid cells in ``mask`` (in grid order)."""
+        idx = np.flatnonzero(mask.reshape(-1)[self.cell])
+        return np.take(self.xyz_v, idx, axis=1).T
+
+    def points_at(self, flat_cells: NDArray[np.intp]) -> NDArray[np.float64]:
+        """(n, 3) pipe-frame points of the given flat grid cells."""
+        return np.take(self.xyz.reshape(3, -1), flat_cells, axis=1).T
 
     def set_pose(self, pose: SensorInPipe) -> None:
         self.pose = pose
-        flat = self.sensor_pts.reshape(-1, 3)
-        pts = (flat @ pose.rotation.T + pose.position).reshape(self.sensor_pts.shape)
-        pts *= self.valid[..., None]  # 0 where invalid
-        self.pts = pts
+        self.xyz_v = _transform(pose, self.sensor_v)
+        self._xyz = None
 
-    def restore(self, pose: SensorInPipe, pts: NDArray[np.float64]) -> None:
+    def restore(self, pose: SensorInPipe, xyz_v: NDArray[np.float64]) -> None:
         """Go back to a pose whose points were computed before."""
-        self.pose, self.pts = pose, pts
+        self.pose, self.xyz_v, self._xyz = pose, xyz_v, None
+
+
+def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Sensor-frame ``(3, N)`` coordinates into the pipe frame."""
+    out = pose.rotation @ xyz
+    out += pose.position[:, None]
+    return out
+
+
+#: Unrolled grid and beam directions per scan pattern (plane and beam angles), reused.
+_PATTERNS: dict[bytes, tuple[bool, int, NDArray, NDArray, NDArray]] = {}
+
+
+def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray]:
+    """(wraps, K, scan index of each grid cell (G*K,; -1 where the half-plane has no such
+    beam), unit beam direction (3, G*K), |sin beta| and |cos beta| (2, G*K)) of the scan's
+    angle pattern."""
+    key = scan.plane_angles.tobytes() + b"|" + scan.beam_angles.tobytes()
+    hit = _PATTERNS.get(key)
+    if hit is not None:
+        return hit
+    grid = build_grid(scan)
+    missing = grid.beam.reshape(-1) < 0
+    beam = np.maximum(grid.beam, 0).reshape(-1)
+    plane = grid.plane.reshape(-1)
+    src = np.where(missing, -1, plane * scan.n_beams + beam)
+    dirs = scan.directions()[plane, beam].T  # (3, G*K)
+    beta = scan.beam_angles[beam]
+    trig = np.stack([np.abs(np.sin(beta)), np.abs(np.cos(beta))])
+    hit = (grid.wraps, int(grid.beam.shape[1]), src, np.ascontiguousarray(dirs), trig)
+    if len(_PATTERNS) >= 16:
+        _PATTERNS.pop(next(iter(_PATTERNS)))
+    _PATTERNS[key] = hit
+    return hit
 
 
 def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig) -> PipeCloud:
-    grid = build_grid(scan)
-    ranges = np.where(scan.valid, scan.ranges - range_bias, 0.0)
-    ranges = np.maximum(ranges, 0.0)
-    local = scan.directions() * ranges[..., None]
+    wraps, k_cols, src, dirs, trig = _pattern(scan)
+    ok = scan.valid.reshape(-1)[src] & (src >= 0)
+    cell = np.flatnonzero(ok)
+    pb = src[cell]
+    ranges = np.maximum(scan.ranges.reshape(-1)[pb] - range_bias, 0.0)
+    local = np.take(dirs, cell, axis=1)
+    local *= ranges
     if scan.n_planes > 1 and not np.allclose(scan.nominal_positions, scan.nominal_positions[0]):
         # continuous sweep: express every plane in the last plane's sensor frame (odometry)
-        world = (
-            np.einsum("pij,pbj->pbi", scan.nominal_rotations, local)
-            + scan.nominal_positions[:, None, :]
-        )
-        local = (world - scan.nominal_positions[-1]) @ scan.nominal_rotations[-1]
+        plane = pb // scan.n_beams
+        world = np.einsum("nij,jn->in", scan.nominal_rotations[plane], local)
+        world += scan.nominal_positions[plane].T
+        local = scan.nominal_rotations[-1].T @ (world - scan.nominal_positions[-1][:, None])
+    near = local[0] <= cfg.horizon
+    if not near.all():
+        cell, ranges, local = cell[near], ranges[near], local[:, near]
+    tr = np.take(trig, cell, axis=1)
+    # crop the grid to the beam-angle columns that hold returns
+    g = src.size // max(k_cols, 1)
+    row, col = np.divmod(cell, k_cols)
+    if cell.size:
+        k0, k1 = int(col.min()), int(col.max()) + 1
+    else:
+        k0, k1 = 0, 1
+    shape = (g, k1 - k0)
+    cell = row * shape[1] + (col - k0)
     spec = scan.spec or {}
     sig = float(spec.get("noise_sigma", 0.0))
     sig_rel = float(spec.get("noise_sigma_rel", 0.0))
     res = float(spec.get("range_resolution", 0.0))
-    sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
-    sin_b = np.abs(np.sin(scan.beam_angles))[None, :]
     jitter = float(spec.get("angular_jitter", 0.0))
-    sigma_r = sigma_range * sin_b + ranges * jitter * np.abs(np.cos(scan.beam_angles))[None, :]
-    valid = grid.take(scan.valid, fill=False).astype(bool)
-    horizon_ok = grid.take(local[..., 0], fill=0.0) <= cfg.horizon
-    valid &= horizon_ok
-    sensor_pts = np.stack([grid.take(local[..., i], fill=0.0) for i in range(3)], axis=-1)
-    cloud = PipeCloud(grid, sensor_pts, valid, grid.take(sigma_r, fill=0.0), pose)
+    sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
+    sigma_r = sigma_range * tr[0] + ranges * jitter * tr[1]
+    cloud = PipeCloud(wraps, shape, cell, np.ascontiguousarray(local), sigma_r, pose)
     cloud.set_pose(pose)
     return cloud
 
@@ -154,6 +255,19 @@ def _subsample(idx: NDArray[np.intp], n: int) -> NDArray[np.intp]:
         return idx
     step = idx.size / n
     return idx[(np.arange(n) * step).astype(np.intp)]
+
+
+def _pct(x: NDArray[np.float64], q: float) -> float:
+    """``np.percentile(x, q)`` (linear interpolation) by partial sorting; 0 for empty input."""
+    n = x.size
+    if n == 0:
+        return 0.0
+    h = (n - 1) * q / 100.0
+    lo = min(int(h), n - 1)
+    if lo + 1 >= n:
+        return float(np.partition(x, lo)[lo])
+    part = np.partition(x, (lo, lo + 1))
+    return float(part[lo] + (h - lo) * (part[lo + 1] - part[lo]))
 
 
 # --------------------------------------------------------------------------- axis refinement
@@ -209,38 +323,42 @@ def _refine_axis(
     """Refine the pipe axis from the wall returns. Without ``u_max`` the nearest 60 % of the
     wall-like returns are used (a structure ahead is farther away); with it, every wall-like
     return before ``u_max`` (the start of the structure), which gives the tilt a long lever."""
-    pts = cloud.pts[cloud.valid]
+    xyz = cloud.xyz_v
     info: dict[str, Any] = {"axis_points": 0}
-    if pts.shape[0] < 20:
+    if xyz.shape[1] < 20:
         return cloud.pose, info
-    r = np.hypot(pts[:, 1], pts[:, 2])
+    r = np.sqrt(np.square(xyz[1]) + np.square(xyz[2]))
     gate = max(0.35 * big_r, 0.01)
     cand = np.flatnonzero(np.abs(r - big_r) < gate)
     if cand.size < 20:
         return cloud.pose, info
-    cand = cand[np.argsort(pts[cand, 0], kind="stable")]
+    u = xyz[0, cand]
     if u_max is None:
-        cand = cand[: max(400, int(0.6 * cand.size))]
+        keep = max(400, int(0.6 * cand.size))
+        if keep < cand.size:
+            cut = float(np.partition(u, keep - 1)[keep - 1])
+            cand = cand[u <= cut]
     else:
-        cand = cand[pts[cand, 0] < u_max]
+        cand = cand[u < u_max]
         if cand.size < 40:
             return cloud.pose, info
-    sub = pts[_subsample(cand, cfg.axis_points)]
+    sub = np.ascontiguousarray(xyz[:, _subsample(cand, cfg.axis_points)].T)
     # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
     # gentle taper would pass for a tilted wall), so it is held at the prior
-    span = float(np.percentile(sub[:, 0], 95) - np.percentile(sub[:, 0], 5))
+    span = float(_pct(sub[:, 0], 95) - _pct(sub[:, 0], 5))
     tilt_sigma = cfg.prior_tilt if span >= 0.05 else math.radians(0.05)
     prior = np.array([cfg.prior_offset, cfg.prior_offset, tilt_sigma, tilt_sigma])
     info["axis_span"] = span
     x, res, w = robust_gauss_newton(
-        lambda p: _cyl_axis_residual(sub, big_r, p, False)[0],
+        None,
         np.zeros(4),
         np.full(4, 1e-5),
         c=gate,
         iterations=10,
         prior_sigma=prior,
         c_final=0.004,
-        jacobian=lambda p: _cyl_axis_residual(sub, big_r, p, True)[1],
+        step_tol=STEP_TOL,
+        resjac=lambda p: _cyl_axis_residual(sub, big_r, p, True),
     )
     info.update(
         axis_points=int((w > 0).sum()),
@@ -275,6 +393,30 @@ def _torus_dist(p: NDArray, big_l: float, theta: float, phi: float, rb: float) -
     return d
 
 
+def _torus_dist_batch(p: NDArray, params: NDArray) -> NDArray:
+    """:func:`_torus_dist` for ``M`` parameter sets at once: ``params`` (M, 4) of
+    ``(big_l, theta, phi, rb)``; returns (M, N)."""
+    big_l, theta, phi, rb = (params[:, k : k + 1] for k in range(4))
+    cp, sp = np.cos(phi), np.sin(phi)
+    ct, st = np.cos(theta), np.sin(theta)
+    px, py, pz = p[:, 0], p[:, 1], p[:, 2]
+    qa = px - (big_l - rb * np.tan(0.5 * theta))
+    qy = py - rb * cp
+    qz = pz - rb * sp
+    qw = -(qy * cp + qz * sp)
+    qn = qz * cp - qy * sp
+    d_arc = np.sqrt((np.sqrt(qa * qa + qw * qw) - rb) ** 2 + qn * qn)
+    # outgoing straight axis through (big_l, 0, 0) along (ct, st cp, st sp)
+    ox = px - big_l
+    t = ox * ct + (py * cp + pz * sp) * st
+    d_out = np.sqrt(np.maximum(ox * ox + py * py + pz * pz - t * t, 0.0))
+    d_in = np.sqrt(py * py + pz * pz)
+    # arc angle of the projection: < 0 before the tangent point, > theta past the arc end
+    # (theta < pi), tested without arctan2
+    past = (qa >= 0.0) & (ct * qa - st * qw > 0.0)
+    return np.where(qa < 0.0, d_in, np.where(past, d_out, d_arc))
+
+
 def _torus_parts(
     p: NDArray, big_l: float, theta: float, phi: float, rb: float
 ) -> tuple[NDArray, NDArray]:
@@ -287,9 +429,9 @@ def _torus_parts(
     qw = -(py * cp + pz * sp)
     qn = pz * cp - py * sp
     ang = np.arctan2(qa, qw)  # 0 at the tangent point on the incoming axis
-    d_arc = np.sqrt((np.hypot(qa, qw) - rb) ** 2 + qn**2)
+    d_arc = np.sqrt((np.sqrt(np.square(qa) + np.square(qw)) - rb) ** 2 + qn**2)
     d_out = _line_dist(p, np.array([big_l, 0.0, 0.0]), _dir(theta, phi))
-    d_in = np.hypot(p[:, 1], p[:, 2])
+    d_in = np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2]))
     return np.where(ang < 0.0, d_in, np.where(ang > theta, d_out, d_arc)), ang
 
 
@@ -328,11 +470,18 @@ def detect_improved(
         cloud = _prepare(scan, pose0, bias, config)
         if refine_axis:
             candidates = [(pose0, {})]
-            pts_of = [cloud.pts]
+            xyz_of = [cloud.xyz_v]
             pose1, info1 = _refine_axis(cloud, big_r, config)
             candidates.append((pose1, info1))
             cloud.set_pose(pose1)
-            pts_of.append(cloud.pts)
+            xyz_of.append(cloud.xyz_v)
+            if _intact(cloud, big_r, config):
+                # straight pipe: no return off the wall under the refined axis
+                diag.update(info1)
+                diag["axis_pass"] = 1
+                return _detect_in_pipe_frame(cloud, big_r, config, diag).with_diagnostics(
+                    time_s=time.perf_counter() - t0
+                )
             # second pass: all of the intact wall before the structure
             u_start = _structure_start(cloud, big_r, config)
             pose2, info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
@@ -342,15 +491,15 @@ def detect_improved(
             # keep the pose that explains the most wall returns before the structure (a fit
             # pulled by the structure's own returns, e.g. tilted onto one side of a taper,
             # explains fewer of them)
-            cloud.restore(pose0, pts_of[0])
+            cloud.restore(pose0, xyz_of[0])
             u_near = min(u_start, _structure_start(cloud, big_r, config))
             scores = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
             best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
             pose, info = candidates[best]
             diag.update(info)
             diag["axis_pass"] = best
-            if best < len(pts_of):
-                cloud.restore(pose, pts_of[best])
+            if best < len(xyz_of):
+                cloud.restore(pose, xyz_of[best])
             else:
                 cloud.set_pose(pose)
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
@@ -367,27 +516,41 @@ def _wall_count(
     nearer than ``u_max`` along the axis (all of them when fewer than 100 are)."""
     if cloud.thin is None:  # every third valid return and its tolerance, computed once
         cloud.thin = (
-            cloud.sensor_pts[cloud.valid][::3],
-            cfg.tol_floor + cfg.noise_k * cloud.sigma_r[cloud.valid][::3],
+            np.ascontiguousarray(cloud.sensor_v[:, ::3]),
+            cfg.tol_floor + cfg.noise_k * cloud.sigma_v[::3],
         )
     sp, tol = cloud.thin
-    pts = sp @ pose.rotation.T + pose.position
-    r = np.hypot(pts[:, 1], pts[:, 2])
+    pts = _transform(pose, sp)
+    r = np.sqrt(np.square(pts[1]) + np.square(pts[2]))
     ok = np.abs(r - big_r) <= tol
-    near = pts[:, 0] < u_max
+    near = pts[0] < u_max
     if np.count_nonzero(near) >= 40:
         ok &= near
     return int(np.count_nonzero(ok))
 
 
+def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
+    """(G, K) radial tolerance of each return: floor, sensor noise and residual axis error."""
+    return cfg.tol_floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(cloud.xyz[0])
+
+
+def _intact(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> bool:
+    """True when fewer than ``min_anomaly_points`` returns leave the wall tolerance (the
+    classification would find nothing but straight pipe)."""
+    xyz = cloud.xyz_v
+    e = np.abs(np.sqrt(np.square(xyz[1]) + np.square(xyz[2])) - big_r)
+    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_v + cfg.axis_slope * np.abs(xyz[0])
+    off = e > tol
+    return int(np.count_nonzero(off)) < cfg.min_anomaly_points
+
+
 def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:
     """Axial position where the wall stops being intact (first significant anomalies); the
     horizon when there are none."""
-    pts = cloud.pts
-    r = np.hypot(pts[..., 1], pts[..., 2])
-    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(pts[..., 0])
-    anomaly = cloud.valid & (np.abs(r - big_r) > 2.0 * tol)
-    labels, n_lab = label_regions(anomaly, cloud.grid.wraps)
+    xyz = cloud.xyz
+    r = np.sqrt(np.square(xyz[1]) + np.square(xyz[2]))
+    anomaly = cloud.valid & (np.abs(r - big_r) > 2.0 * _tolerance(cloud, cfg))
+    labels, n_lab = label_regions(anomaly, cloud.wraps)
     if n_lab == 0:
         return cfg.horizon
     counts = np.bincount(labels[anomaly], minlength=n_lab + 1)
@@ -396,21 +559,20 @@ def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> flo
     sel = good[labels] & anomaly
     if not sel.any():
         return cfg.horizon
-    u = pts[..., 0][sel]
+    u = xyz[0][sel]
     # where the beams of those returns crossed the wall radius (sensor near the axis)
     uc = u * big_r / np.maximum(r[sel], 1e-9)
-    return float(np.percentile(np.minimum(u, uc), 1)) - 0.005
+    return float(_pct(np.minimum(u, uc), 1)) - 0.005
 
 
 def _detect_in_pipe_frame(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, diag: dict[str, Any]
 ) -> Detection:
     valid = cloud.valid
-    pts = cloud.pts
     diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
-    r = np.hypot(pts[..., 1], pts[..., 2])
+    r = np.sqrt(np.square(cloud.xyz[1]) + np.square(cloud.xyz[2]))
     # residual axis error grows with the distance along the axis
-    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(pts[..., 0])
+    tol = _tolerance(cloud, cfg)
     e = np.where(valid, r - big_r, 0.0)
     wall = valid & (np.abs(e) <= tol)
     beyond = valid & (e > tol)
@@ -422,16 +584,10 @@ def _detect_in_pipe_frame(
         return Detection.straight(confidence=0.0, **diag)
     # significant anomaly regions
     anomaly = beyond | inside
-    labels, n_lab = label_regions(anomaly, cloud.grid.wraps)
+    labels, n_lab = label_regions(anomaly, cloud.wraps)
     keep = np.zeros_like(anomaly)
     if n_lab:
-        rows = np.nonzero(anomaly)[0]
-        lab = labels[anomaly]
-        counts = np.bincount(lab, minlength=n_lab + 1)
-        # rows spanned per label
-        spans = np.zeros((n_lab + 1, anomaly.shape[0]), dtype=bool)
-        spans[lab, rows] = True
-        row_span = spans.sum(axis=1)
+        counts, row_span = _region_stats(labels, n_lab)
         good = (counts >= cfg.min_anomaly_points) & (row_span >= cfg.min_region_rows)
         good[0] = False
         keep = good[labels] & anomaly
@@ -447,8 +603,9 @@ def _detect_in_pipe_frame(
     diag["n_lobes"] = len(lobes)
     if lobes:
         # an expansion: returns beyond the wall all around and hardly any inside
-        cov = _azimuth_coverage(pts[beyond_k])
-        uniform = _azimuth_uniformity(pts[beyond_k])
+        p_beyond = cloud.points(beyond_k)
+        cov = _azimuth_coverage(p_beyond)
+        uniform = _azimuth_uniformity(p_beyond)
         diag.update(beyond_coverage=cov, beyond_uniformity=uniform)
         if uniform >= 0.3 and inside_k.sum() < 0.3 * beyond_k.sum():
             return _axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
@@ -476,21 +633,17 @@ class Lobe:
 def _find_lobes(
     cloud: PipeCloud, beyond: NDArray[np.bool_], big_r: float, cfg: ImprovedConfig
 ) -> list[Lobe]:
-    labels, n_lab = label_regions(beyond, cloud.grid.wraps)
+    labels, n_lab = label_regions(beyond, cloud.wraps)
     if n_lab == 0:
         return []
-    pts = cloud.pts
     lobes: list[Lobe] = []
-    for k in range(1, n_lab + 1):
+    counts, row_span = _region_stats(labels, n_lab)
+    cand = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
+    for k in cand[cand > 0].tolist():
         m = labels == k
-        n = int(m.sum())
-        if n < cfg.min_lobe_points:
-            continue
-        nrows = int(np.any(m, axis=1).sum())
-        if nrows < cfg.min_region_rows:
-            continue
-        p = pts[m]
-        depth = float(np.percentile(np.hypot(p[:, 1], p[:, 2]), 90)) - big_r
+        n = int(counts[k])
+        p = cloud.points(m)
+        depth = float(_pct(np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2])), 90)) - big_r
         if depth < max(0.006, 0.1 * big_r):
             continue  # a shallow sliver (seam leaks, noise), not an opening
         roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
@@ -502,7 +655,7 @@ def _find_lobes(
         for mg in merged:
             if abs(_wrap(lb.roll - mg.roll)) < math.radians(45.0):
                 mg.mask = mg.mask | lb.mask
-                p = pts[mg.mask]
+                p = cloud.points(mg.mask)
                 mg.roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
                 mg.n += lb.n
                 break
@@ -513,6 +666,18 @@ def _find_lobes(
         biggest = max(m.n for m in merged)
         merged = [m for m in merged if m.n >= max(cfg.min_lobe_points, 0.05 * biggest)]
     return merged
+
+
+def _region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
+    """(cells, grid rows spanned) of each label 0..n_lab of a labelled grid."""
+    flat = labels.reshape(-1)
+    nz = np.flatnonzero(flat)
+    lab = flat[nz]
+    counts = np.bincount(lab, minlength=n_lab + 1)
+    rows = nz // labels.shape[1]
+    pairs = np.unique(lab.astype(np.int64) * labels.shape[0] + rows)
+    row_span = np.bincount(pairs // labels.shape[0], minlength=n_lab + 1)
+    return counts, row_span
 
 
 def _wrap(a: float) -> float:
@@ -531,23 +696,22 @@ def _axisymmetric(
     diag: dict[str, Any],
 ) -> Detection:
     """End wall (closure) or reducer/expander: the structure is (nearly) axisymmetric."""
-    pts = cloud.pts
     contraction = bool(inside.sum() >= beyond.sum())
     anomaly = inside if contraction else beyond
     if anomaly.sum() < cfg.min_anomaly_points:
         return Detection.straight(confidence=0.3, **diag)
-    p = pts[anomaly]
+    p = cloud.points(anomaly)
     u = p[:, 0]
-    r = np.hypot(p[:, 1], p[:, 2])
-    tol_med = float(np.median(tol[anomaly]))
+    r = np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2]))
+    tol_med = float(_pct(tol[anomaly], 50.0))
     # --- closure: a plane perpendicular to the axis, seen down to the centre
     if contraction:
-        u_med = float(np.median(u))
+        u_med = float(_pct(u, 50.0))
         tol_u = 0.003 + 2.0 * tol_med
         on_plane = np.abs(u - u_med) <= tol_u
         frac_plane = float(on_plane.mean())
         diag["closure_plane_fraction"] = frac_plane
-        if frac_plane >= 0.8 and float(np.percentile(r[on_plane], 5)) < 0.5 * big_r:
+        if frac_plane >= 0.8 and float(_pct(r[on_plane], 5)) < 0.5 * big_r:
             up = u[on_plane]
             dist = float(np.mean(up))
             spread = float(np.std(up))
@@ -562,11 +726,11 @@ def _axisymmetric(
         u_cross = u
     else:
         u_cross = u * big_r / np.maximum(r, 1e-9)  # where the beams crossed the wall radius
-    u_first = float(np.percentile(u_cross, 1))
+    u_first = float(_pct(u_cross, 1))
     r2 = _radius_mode(r, r.size)
     sub = _subsample(np.arange(u.size), cfg.fit_points)
     us, rs = u[sub], r[sub]
-    t0 = max(0.01, float(np.percentile(u, 30)) - u_first)
+    t0 = max(0.01, float(_pct(u, 30)) - u_first)
 
     def resid(x: NDArray) -> NDArray:
         big_l, t_len, rr2 = x
@@ -583,6 +747,7 @@ def _axisymmetric(
         lower=np.array([-0.2, 0.002, 0.0]),
         upper=np.array([cfg.horizon, 1.0, 3.0 * big_r]),
         c_final=c_fin,
+        step_tol=STEP_TOL,
     )
     support = float((w > 0.1).mean())
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
@@ -609,13 +774,13 @@ def _radius_mode(r: NDArray, n: int) -> float:
     smooth = np.convolve(cnt, np.ones(3), mode="same")
     peak = (int(np.argmax(smooth)) + lo + 0.5) * 0.001
     near = np.abs(r - peak) <= 0.002
-    return float(np.median(r[near])) if near.any() else float(peak)
+    return float(_pct(r[near], 50.0)) if near.any() else float(peak)
 
 
 def _robust_line(x: NDArray, y: NDArray) -> tuple[float, float]:
     """Robust fit ``y = a + b x`` (Tukey IRLS)."""
     w = np.ones_like(x)
-    a, b = float(np.median(y)), 0.0
+    a, b = float(_pct(y, 50.0)), 0.0
     for _ in range(6):
         sw = w.sum()
         if sw <= 0:
@@ -646,7 +811,7 @@ def _azimuth_uniformity(p: NDArray, bins: int = 12) -> float:
     phi = np.arctan2(p[:, 2], p[:, 1])
     k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
     cnt = np.bincount(k, minlength=bins)
-    med = float(np.median(cnt))
+    med = float(_pct(cnt, 50.0))
     return float(cnt.min()) / med if med > 0 else 0.0
 
 
@@ -714,15 +879,13 @@ def _branches(
 ) -> Detection:
     """Bends and junctions: one outgoing pipe per lobe (``any_roll``: the lobe's roll is
     unknown and searched too)."""
-    pts = cloud.pts
-    flat = pts.reshape(-1, 3)
     # returns of the outgoing pipes: the lobes, and the inner returns near them (the far wall
     # of a turn seen head-on), not far end walls of a run that goes on
     lobe_mask = np.zeros_like(keep)
     for lb in lobes:
         lobe_mask |= lb.mask
-    u_all = pts[..., 0]
-    u_hi = float(np.percentile(u_all[lobe_mask], 95)) + 2.0 * big_r if lobe_mask.any() else 0.0
+    u_all = cloud.xyz[0]
+    u_hi = float(_pct(u_all[lobe_mask], 95)) + 2.0 * big_r if lobe_mask.any() else 0.0
     near_inside = keep & ~lobe_mask & (u_all <= u_hi)
     lobe_idx = np.concatenate(
         [_subsample(np.flatnonzero(lb.mask.reshape(-1)), cfg.fit_points // 2) for lb in lobes]
@@ -731,19 +894,19 @@ def _branches(
     sub_idx = np.concatenate([lobe_idx, near_idx])
     if any_roll:
         sub_idx = _subsample(np.flatnonzero(keep.reshape(-1)), cfg.fit_points)
-    p_all = flat[sub_idx]
-    tol_med = float(np.median(tol.reshape(-1)[sub_idx]))
-    noise_med = float(np.median(cloud.sigma_r.reshape(-1)[sub_idx])) + 0.3e-3
+    p_all = np.ascontiguousarray(cloud.points_at(sub_idx))
+    tol_med = float(_pct(tol.reshape(-1)[sub_idx], 50.0))
+    noise_med = float(_pct(cloud.sigma_r.reshape(-1)[sub_idx], 50.0)) + 0.3e-3
     lobe_pts = []
     u_edge = math.inf
     for lb in lobes:
-        lp = pts[lb.mask]
+        lp = cloud.points(lb.mask)
         lp = lp[_subsample(np.arange(lp.shape[0]), 200)]
         lobe_pts.append(lp)
         # where the beams left the incoming cylinder (sensor near the axis)
-        rr = np.hypot(lp[:, 1], lp[:, 2])
+        rr = np.sqrt(np.square(lp[:, 1]) + np.square(lp[:, 2]))
         uc = lp[:, 0] * big_r / np.maximum(rr, 1e-9)
-        u_edge = min(u_edge, float(np.percentile(uc, 1)))
+        u_edge = min(u_edge, float(_pct(uc, 1)))
     # --- does the incoming pipe go on? Then this is a junction seen along its run: every
     # lobe is a side branch of a standard fitting (tee 90 deg, wye 45 deg), no wider than
     # the run
@@ -779,7 +942,7 @@ def _branches(
     upper = np.array([cfg.horizon] + [math.radians(150.0), 10.0, 2.5 * big_r] * n_l)
     c_fin = max(3.0 * tol_med, 0.003)
     x, res, w = robust_gauss_newton(
-        lambda v: _line_resjac(p_all, v, n_l, False)[0],
+        None,
         x0a,
         np.full(x0a.size, 1e-5),
         c=2.0 * c0,
@@ -787,7 +950,8 @@ def _branches(
         lower=lower,
         upper=upper,
         c_final=c_fin,
-        jacobian=lambda v: _line_resjac(p_all, v, n_l, True)[1],
+        step_tol=STEP_TOL,
+        resjac=lambda v: _line_resjac(p_all, v, n_l, True),
     )
     # --- the outgoing radii: the clamped radius (a standard fitting) unless the returns
     # call for another one. A free radius is poorly observed from a partial view of an
@@ -799,7 +963,7 @@ def _branches(
     lo_eq[3::3] = big_r
     up_eq[3::3] = big_r
     x_eq, res_eq, w_eq = robust_gauss_newton(
-        lambda v: _line_resjac(p_all, v, n_l, False)[0],
+        None,
         x_eq,
         np.full(x_eq.size, 1e-5),
         c=2.0 * c_fin,
@@ -807,7 +971,8 @@ def _branches(
         lower=lo_eq,
         upper=up_eq,
         c_final=c_fin,
-        jacobian=lambda v: _line_resjac(p_all, v, n_l, True)[1],
+        step_tol=STEP_TOL,
+        resjac=lambda v: _line_resjac(p_all, v, n_l, True),
     )
     cost_free = tukey_cost(res, c_fin)
     cost_eq = tukey_cost(res_eq, c_fin)
@@ -864,11 +1029,11 @@ def _straight_on(
     cloud: PipeCloud, big_r: float, big_l: float, wall: NDArray[np.bool_], cfg: ImprovedConfig
 ) -> tuple[bool, float]:
     """Is the incoming pipe's wall seen again well beyond the structure, all around?"""
-    u = cloud.pts[..., 0]
+    u = cloud.xyz[0]
     far = wall & (u > big_l + 4.0 * big_r)
     if far.sum() < 10:
         return False, 0.0
-    cov = _azimuth_coverage(cloud.pts[far])
+    cov = _azimuth_coverage(cloud.points(far))
     return cov >= cfg.straight_on_coverage, cov
 
 
@@ -878,9 +1043,16 @@ def _fit_torus(
     """Long-radius bend fit from two bend-radius starts; returns (x, rms, support,
     largest arc angle seen)."""
     sub = p[_subsample(np.arange(p.shape[0]), 300)]
+    steps = np.vstack([np.zeros(4), np.diag(np.full(4, 1e-6))])  # (5, 4)
+    cols = np.array([0, 1, 2, 4])
 
-    def resid(x: NDArray) -> NDArray:
-        return _torus_dist(sub, x[0], x[1], x[2], x[4]) - x[3]
+    def resjac(x: NDArray) -> tuple[NDArray, NDArray]:
+        # residual and forward-difference Jacobian from one batched evaluation
+        dist = _torus_dist_batch(sub, x[cols] + steps)
+        jac = np.empty((sub.shape[0], 5))
+        jac[:, cols] = ((dist[1:] - dist[0]) / 1e-6).T
+        jac[:, 3] = -1.0
+        return dist[0] - x[3], jac
 
     lower = np.array([-0.5, math.radians(5.0), -10.0, 0.5 * big_r, 0.2 * big_r])
     upper = np.array([3.0, math.radians(175.0), 10.0, 2.0 * big_r, 8.0 * big_r])
@@ -888,14 +1060,16 @@ def _fit_torus(
     for rb_factor in (1.25, 2.5):
         x0 = np.array([big_l, f.theta, f.phi, big_r, rb_factor * 2.0 * big_r])
         x, res, w = robust_gauss_newton(
-            resid,
+            None,
             x0,
             np.full(5, 1e-6),
+            resjac=resjac,
             c=c0 * 2,
             iterations=10,
             lower=lower,
             upper=upper,
             c_final=c_fin,
+            step_tol=STEP_TOL,
         )
         rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
         sup = int((w > 0.1).sum())

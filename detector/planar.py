@@ -161,7 +161,7 @@ def detect_planar_thesis(
     dirs = scan.directions()[plane][valid]
     pts = pose.to_pipe(dirs * scan.ranges[plane][valid][:, None])
     forward = pts[:, 0]
-    radius = np.hypot(pts[:, 1], pts[:, 2])
+    radius = np.sqrt(np.square(pts[:, 1]) + np.square(pts[:, 2]))
     alpha = float(scan.plane_angles[plane])
     sides = {"left": beta > 0, "right": beta < 0}
     diag: dict = {"method": "thesis-planar", "plane_angle": alpha, "n_points": int(beta.size)}

@@ -27,7 +27,7 @@ def mad_sigma(x: NDArray[np.float64]) -> float:
 
 
 def robust_gauss_newton(
-    residual: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    residual: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
     x0: NDArray[np.float64],
     scales: NDArray[np.float64],
     c: float,
@@ -40,11 +40,13 @@ def robust_gauss_newton(
     data_sigma: float = 1e-3,
     jacobian: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
     step_tol: float = 1e-7,
+    resjac: Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]
+    | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Minimise ``sum rho_c(residual(x))`` (+ a gaussian prior) by reweighted Gauss-Newton.
 
     Args:
-        residual: parameters -> (N,) residuals.
+        residual: parameters -> (N,) residuals (may be ``None`` when ``resjac`` is given).
         x0: start parameters.
         scales: finite-difference step per parameter (also its natural scale).
         c: Tukey cut-off at the start, in residual units; it shrinks geometrically to
@@ -55,6 +57,9 @@ def robust_gauss_newton(
             prior (MAP estimate).
         jacobian: optional analytic Jacobian ``x -> (N, n_params)``; numeric otherwise.
         step_tol: stop when every parameter step is below this.
+        resjac: optional ``x -> (residuals, Jacobian)`` in one call (the cheapest form: every
+            accepted trial point brings its own Jacobian); replaces ``residual`` and
+            ``jacobian``.
         lower, upper: box bounds (clipped after every step).
 
     Returns:
@@ -65,34 +70,48 @@ def robust_gauss_newton(
     eps = np.asarray(scales, dtype=float)
     cf = c if c_final is None else c_final
     lam = 1e-3
-    r = residual(x)
+    diag_idx = np.arange(n_p)
+    if resjac is None:
+        if residual is None:
+            raise ValueError("robust_gauss_newton needs residual or resjac")
+        res_fn = residual
+
+        def resjac(xv: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+            rv = res_fn(xv)
+            if jacobian is not None:
+                return rv, jacobian(xv)
+            jv = np.empty((rv.size, n_p))
+            for k in range(n_p):
+                xk = xv.copy()
+                xk[k] += eps[k]
+                jv[:, k] = (res_fn(xk) - rv) / eps[k]
+            return rv, jv
+
+    inv = None
+    if prior_sigma is not None:
+        pm = x0 if prior_mean is None else prior_mean
+        inv = np.where(
+            np.isfinite(prior_sigma), np.square(data_sigma / np.asarray(prior_sigma)), 0.0
+        )
+    r, jac = resjac(x)
+    w = tukey_weights(r, c)
     for it in range(iterations):
         ci = c * (cf / c) ** (it / max(1, iterations - 1))
         w = tukey_weights(r, ci)
         if w.sum() < n_p + 1:
             break
-        if jacobian is not None:
-            jac = jacobian(x)
-        else:
-            jac = np.empty((r.size, n_p))
-            for k in range(n_p):
-                xk = x.copy()
-                xk[k] += eps[k]
-                jac[:, k] = (residual(xk) - r) / eps[k]
         jw = jac * w[:, None]
         h = jac.T @ jw
         g = jw.T @ r
-        if prior_sigma is not None:
-            pm = x0 if prior_mean is None else prior_mean
-            inv = np.where(
-                np.isfinite(prior_sigma), np.square(data_sigma / np.asarray(prior_sigma)), 0.0
-            )
-            h = h + np.diag(inv)
+        if inv is not None:
+            h[diag_idx, diag_idx] += inv
             g = g + inv * (x - pm)
-        cost0 = float(np.sum(w * r * r))
+        cost0 = float(np.dot(w, r * r))
+        hd = h[diag_idx, diag_idx] + 1e-12
         step_ok = False
         for _ in range(4):
-            a = h + lam * np.diag(np.diag(h) + 1e-12)
+            a = h.copy()
+            a[diag_idx, diag_idx] += lam * hd
             try:
                 dx = -np.linalg.solve(a, g)
             except np.linalg.LinAlgError:
@@ -103,19 +122,20 @@ def robust_gauss_newton(
                 xn = np.maximum(xn, lower)
             if upper is not None:
                 xn = np.minimum(xn, upper)
-            rn = residual(xn)
-            if not np.all(np.isfinite(rn)):
+            rn, jn = resjac(xn)
+            if not np.isfinite(rn).all():
                 lam *= 10.0
                 continue
-            if float(np.sum(w * rn * rn)) <= cost0 * (1.0 + 1e-9) or lam > 1e3:
-                x, r = xn, rn
+            if float(np.dot(w, rn * rn)) <= cost0 * (1.0 + 1e-9) or lam > 1e3:
+                dx = xn - x  # the step taken (bounds may have clipped it)
+                x, r, jac = xn, rn, jn
                 lam = max(lam / 3.0, 1e-6)
                 step_ok = True
                 break
             lam *= 10.0
         if not step_ok:
             break
-        if np.all(np.abs(dx) < step_tol):
+        if (np.abs(dx) < step_tol).all():
             break
     w = tukey_weights(r, cf)
     return x, r, w

@@ -128,7 +128,7 @@ def detect_spatial_thesis(
     grid = build_grid(scan)
     local = scan.directions() * np.where(scan.valid, scan.ranges, 0.0)[..., None]
     pts = pose.to_pipe(local.reshape(-1, 3)).reshape(local.shape)
-    radius = np.hypot(pts[..., 1], pts[..., 2])
+    radius = np.sqrt(np.square(pts[..., 1]) + np.square(pts[..., 2]))
     valid_g = grid.take(scan.valid, fill=False).astype(bool)
     r_g = np.where(valid_g, grid.take(radius, fill=0.0), np.nan)
     diag: dict[str, Any] = {"method": "thesis", "n_points": int(scan.n_valid)}

@@ -71,6 +71,18 @@ def sensor_offset_radius(
     return np.sqrt((offset_z + zs) ** 2 + (offset_y + ys) ** 2)
 
 
+_EYE3 = np.eye(3)
+
+
+def _det3(m: NDArray[np.float64]) -> float:
+    """Determinant of a 3x3 matrix (cheaper than the LAPACK call for one small matrix)."""
+    return float(
+        m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
+        - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
+        + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0])
+    )
+
+
 @dataclass(frozen=True)
 class SensorInPipe:
     """Pose of the sensor in the local pipe-axis frame.
@@ -91,7 +103,7 @@ class SensorInPipe:
             raise ValueError(f"SensorInPipe.position must be 3 finite numbers, got {p!r}")
         if r.shape != (3, 3) or not np.all(np.isfinite(r)):
             raise ValueError(f"SensorInPipe.rotation must be a finite 3x3 matrix, got {r!r}")
-        if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+        if float(np.abs(r.T @ r - _EYE3).max()) > 1e-6 or _det3(r) < 0:
             raise ValueError("SensorInPipe.rotation must be a proper rotation matrix")
         object.__setattr__(self, "position", p)
         object.__setattr__(self, "rotation", r)
@@ -180,6 +192,6 @@ def option_direction(axis_pipe: ArrayLike, pose: SensorInPipe) -> tuple[float, f
 def cylindrical(points: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray]:
     """(axial u, radius r, azimuth phi) of pipe-frame points; phi = atan2(z, y)."""
     u = points[:, 0]
-    r = np.hypot(points[:, 1], points[:, 2])
+    r = np.sqrt(np.square(points[:, 1]) + np.square(points[:, 2]))
     phi = np.arctan2(points[:, 2], points[:, 1])
     return u, r, phi
