@@ -57,6 +57,10 @@ X_AXIS = np.array([1.0, 0.0, 0.0])
 #: Fits stop when no parameter moves by more than this (metres, radians): far below the
 #: accuracy that matters, and most fits then end in a few iterations.
 STEP_TOL = 1e-6
+#: Fits shrink their robust cut-off over this many iterations, then run to convergence.
+ANNEAL = 3
+#: ... or once a step lowers the robust cost by less than this fraction.
+COST_TOL = 1e-4
 
 
 @dataclass(frozen=True)
@@ -358,6 +362,8 @@ def _refine_axis(
         prior_sigma=prior,
         c_final=0.004,
         step_tol=STEP_TOL,
+        anneal=ANNEAL,
+        cost_tol=COST_TOL,
         resjac=lambda p: _cyl_axis_residual(sub, big_r, p, True),
     )
     info.update(
@@ -492,7 +498,9 @@ def detect_improved(
             # pulled by the structure's own returns, e.g. tilted onto one side of a taper,
             # explains fewer of them)
             cloud.restore(pose0, xyz_of[0])
-            u_near = min(u_start, _structure_start(cloud, big_r, config))
+            u_near = u_start
+            if _pose_moved(pose0, pose1, big_r):
+                u_near = min(u_start, _structure_start(cloud, big_r, config))
             scores = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
             best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
             pose, info = candidates[best]
@@ -507,6 +515,13 @@ def detect_improved(
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
     return det.with_diagnostics(time_s=time.perf_counter() - t0)
+
+
+def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
+    """Do two poses differ by more than 2 % of the radius across or 0.2 deg in tilt?"""
+    lateral = float(np.abs(a.position[1:] - b.position[1:]).max())
+    tilt = float(np.abs(a.rotation[0] - b.rotation[0]).max())
+    return lateral > 0.02 * big_r or tilt > math.radians(0.2)
 
 
 def _wall_count(
@@ -748,6 +763,8 @@ def _axisymmetric(
         upper=np.array([cfg.horizon, 1.0, 3.0 * big_r]),
         c_final=c_fin,
         step_tol=STEP_TOL,
+        anneal=ANNEAL,
+        cost_tol=COST_TOL,
     )
     support = float((w > 0.1).mean())
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
@@ -836,33 +853,37 @@ def _line_resjac(
     incoming axis at ``(x[0], 0, 0)``; parameters per lobe: (theta, phi, rho)."""
     q = p - np.array([x[0], 0.0, 0.0])
     qq = np.einsum("ij,ij->i", q, q)
-    best = np.full(p.shape[0], np.inf)
-    arg = np.zeros(p.shape[0], dtype=np.intp)
-    parts = []
-    for k in range(n_l):
-        th, ph, rho = x[1 + 3 * k : 4 + 3 * k]
-        d = _dir(th, ph)
-        t = q @ d
-        dist = np.sqrt(np.maximum(qq - t * t, 1e-18))
-        res = dist - rho
-        better = np.abs(res) < np.abs(best)
-        best = np.where(better, res, best)
-        arg = np.where(better, k, arg)
-        parts.append((d, t, dist, th, ph))
+    th, ph, rho = x[1::3], x[2::3], x[3::3]
+    ct, st, cp, sp = np.cos(th), np.sin(th), np.cos(ph), np.sin(ph)
+    dirs = np.stack([ct, st * cp, st * sp])  # (3, n_l)
+    t_all = q @ dirs  # (N, n_l)
+    dist_all = np.sqrt(np.maximum(qq[:, None] - t_all * t_all, 1e-18))
+    res_all = dist_all - rho
+    if n_l == 1:
+        arg = np.zeros(p.shape[0], dtype=np.intp)
+        best, t, dist = res_all[:, 0], t_all[:, 0], dist_all[:, 0]
+    else:
+        rows = np.arange(p.shape[0])
+        arg = np.argmin(np.abs(res_all), axis=1)  # each return on its nearest cylinder
+        best, t, dist = res_all[rows, arg], t_all[rows, arg], dist_all[rows, arg]
     if not want_jac:
         return best, None
+    d_th = q @ np.stack([-st, ct * cp, ct * sp])  # (N, n_l): q . d(dir)/d(theta)
+    d_ph = q @ np.stack([np.zeros(n_l), -st * sp, st * cp])
+    if n_l == 1:
+        q_th, q_ph, d0 = d_th[:, 0], d_ph[:, 0], dirs[0, 0]
+    else:
+        q_th, q_ph, d0 = d_th[rows, arg], d_ph[rows, arg], dirs[0, arg]
     jac = np.zeros((p.shape[0], 1 + 3 * n_l))
-    for k, (d, t, dist, th, ph) in enumerate(parts):
-        m = arg == k
-        if not m.any():
-            continue
-        qk, tk, dk = q[m], t[m], dist[m]
-        d_th = np.array([-math.sin(th), math.cos(th) * math.cos(ph), math.cos(th) * math.sin(ph)])
-        d_ph = np.array([0.0, -math.sin(th) * math.sin(ph), math.sin(th) * math.cos(ph)])
-        jac[m, 0] = (tk * d[0] - qk[:, 0]) / dk
-        jac[m, 1 + 3 * k] = -tk * (qk @ d_th) / dk
-        jac[m, 2 + 3 * k] = -tk * (qk @ d_ph) / dk
-        jac[m, 3 + 3 * k] = -1.0
+    jac[:, 0] = (t * d0 - q[:, 0]) / dist
+    if n_l == 1:
+        jac[:, 1] = -t * q_th / dist
+        jac[:, 2] = -t * q_ph / dist
+        jac[:, 3] = -1.0
+    else:
+        jac[rows, 1 + 3 * arg] = -t * q_th / dist
+        jac[rows, 2 + 3 * arg] = -t * q_ph / dist
+        jac[rows, 3 + 3 * arg] = -1.0
     return best, jac
 
 
@@ -922,12 +943,21 @@ def _branches(
     for lb, lp in zip(lobes, lobe_pts):
         rolls = np.radians(np.arange(0.0, 360.0, 15.0)) if any_roll else np.array([lb.roll])
         rolls_of.append(rolls)
-        dirs = np.stack([_dir(float(t), float(ro)) for ro in rolls for t in thetas])  # (RT, 3)
-        q = lp[None, :, :] - np.stack([l_grid, 0 * l_grid, 0 * l_grid], axis=1)[:, None, :]
-        qq = np.einsum("lnk,lnk->ln", q, q)
-        t = q @ dirs.T  # (L, n, T)
+        st = np.sin(thetas)
+        dirs = np.stack(
+            [
+                np.tile(np.cos(thetas), rolls.size),
+                (np.cos(rolls)[:, None] * st).reshape(-1),
+                (np.sin(rolls)[:, None] * st).reshape(-1),
+            ]
+        )  # (3, RT)
+        lq = lp[_subsample(np.arange(lp.shape[0]), 100)]
+        qx = lq[None, :, 0] - l_grid[:, None]  # (L, n)
+        qq = qx * qx + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]
+        lat = lq[:, 1:] @ dirs[1:]  # (n, RT)
+        t = qx[:, :, None] * dirs[0] + lat[None]  # (L, n, RT)
         res = np.sqrt(np.maximum(qq[..., None] - t * t, 0.0)) - big_r
-        cost = np.minimum(res * res, c0 * c0).mean(axis=1)  # (L, T)
+        cost = np.minimum(res * res, c0 * c0).mean(axis=1)  # (L, RT)
         per_lobe.append(cost)
         total += cost.min(axis=1)
     i_l = int(np.argmin(total))
@@ -951,6 +981,8 @@ def _branches(
         upper=upper,
         c_final=c_fin,
         step_tol=STEP_TOL,
+        anneal=ANNEAL,
+        cost_tol=COST_TOL,
         resjac=lambda v: _line_resjac(p_all, v, n_l, True),
     )
     # --- the outgoing radii: the clamped radius (a standard fitting) unless the returns
@@ -972,6 +1004,8 @@ def _branches(
         upper=up_eq,
         c_final=c_fin,
         step_tol=STEP_TOL,
+        anneal=ANNEAL,
+        cost_tol=COST_TOL,
         resjac=lambda v: _line_resjac(p_all, v, n_l, True),
     )
     cost_free = tukey_cost(res, c_fin)
@@ -1057,7 +1091,7 @@ def _fit_torus(
     lower = np.array([-0.5, math.radians(5.0), -10.0, 0.5 * big_r, 0.2 * big_r])
     upper = np.array([3.0, math.radians(175.0), 10.0, 2.0 * big_r, 8.0 * big_r])
     best = None
-    for rb_factor in (1.25, 2.5):
+    for rb_factor in (1.75,):  # starts from 1.25 and 2.5 D converged alike
         x0 = np.array([big_l, f.theta, f.phi, big_r, rb_factor * 2.0 * big_r])
         x, res, w = robust_gauss_newton(
             None,
@@ -1070,6 +1104,8 @@ def _fit_torus(
             upper=upper,
             c_final=c_fin,
             step_tol=STEP_TOL,
+            anneal=ANNEAL,
+            cost_tol=COST_TOL,
         )
         rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
         sup = int((w > 0.1).sum())

@@ -42,6 +42,8 @@ def robust_gauss_newton(
     step_tol: float = 1e-7,
     resjac: Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]
     | None = None,
+    anneal: int | None = None,
+    cost_tol: float = 0.0,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Minimise ``sum rho_c(residual(x))`` (+ a gaussian prior) by reweighted Gauss-Newton.
 
@@ -60,6 +62,10 @@ def robust_gauss_newton(
         resjac: optional ``x -> (residuals, Jacobian)`` in one call (the cheapest form: every
             accepted trial point brings its own Jacobian); replaces ``residual`` and
             ``jacobian``.
+        anneal: iterations over which the cut-off shrinks from ``c`` to ``c_final`` (default:
+            all of them); after that the fit runs at ``c_final`` until it converges.
+        cost_tol: also stop (once annealed) when an accepted step lowers the weighted cost
+            by less than this fraction.
         lower, upper: box bounds (clipped after every step).
 
     Returns:
@@ -93,10 +99,17 @@ def robust_gauss_newton(
         inv = np.where(
             np.isfinite(prior_sigma), np.square(data_sigma / np.asarray(prior_sigma)), 0.0
         )
+    # parameters pinned by their bounds take no part in the steps
+    fixed = None
+    if lower is not None and upper is not None:
+        pinned = np.asarray(lower, dtype=float) >= np.asarray(upper, dtype=float)
+        if pinned.any():
+            fixed = np.flatnonzero(pinned)
     r, jac = resjac(x)
     w = tukey_weights(r, c)
+    n_anneal = max(1, iterations - 1 if anneal is None else anneal)
     for it in range(iterations):
-        ci = c * (cf / c) ** (it / max(1, iterations - 1))
+        ci = c * (cf / c) ** (min(it, n_anneal) / n_anneal)
         w = tukey_weights(r, ci)
         if w.sum() < n_p + 1:
             break
@@ -106,6 +119,11 @@ def robust_gauss_newton(
         if inv is not None:
             h[diag_idx, diag_idx] += inv
             g = g + inv * (x - pm)
+        if fixed is not None:
+            h[fixed, :] = 0.0
+            h[:, fixed] = 0.0
+            h[fixed, fixed] = 1.0
+            g[fixed] = 0.0
         cost0 = float(np.dot(w, r * r))
         hd = h[diag_idx, diag_idx] + 1e-12
         step_ok = False
@@ -126,7 +144,8 @@ def robust_gauss_newton(
             if not np.isfinite(rn).all():
                 lam *= 10.0
                 continue
-            if float(np.dot(w, rn * rn)) <= cost0 * (1.0 + 1e-9) or lam > 1e3:
+            cost1 = float(np.dot(w, rn * rn))
+            if cost1 <= cost0 * (1.0 + 1e-9) or lam > 1e3:
                 dx = xn - x  # the step taken (bounds may have clipped it)
                 x, r, jac = xn, rn, jn
                 lam = max(lam / 3.0, 1e-6)
@@ -136,6 +155,8 @@ def robust_gauss_newton(
         if not step_ok:
             break
         if (np.abs(dx) < step_tol).all():
+            break
+        if it >= n_anneal and cost1 >= cost0 * (1.0 - cost_tol):
             break
     w = tukey_weights(r, cf)
     return x, r, w
