@@ -91,8 +91,8 @@ class ImprovedConfig:
     min_region_rows: int = 3
     min_anomaly_points: int = 10
     horizon: float = 2.0
-    fit_points: int = 500
-    axis_points: int = 600
+    fit_points: int = 300
+    axis_points: int = 300
     prior_offset: float = 0.01
     prior_tilt: float = math.radians(3.0)
     straight_on_coverage: float = 0.5
@@ -118,6 +118,7 @@ class PipeCloud:
     cell: NDArray[np.intp]  # (N,) flat grid cell of each return
     sensor_v: NDArray[np.float64]  # (3, N) sensor frame
     sigma_v: NDArray[np.float64]  # (N,) radial noise of each return
+    sigma_range_v: NDArray[np.float64]  # (N,) range noise of each return
     pose: SensorInPipe
     xyz_v: NDArray[np.float64] = field(init=False)  # (3, N) pipe frame
     thin: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(init=False, default=None)
@@ -161,6 +162,10 @@ class PipeCloud:
     def pts(self) -> NDArray[np.float64]:
         """(G, K, 3) view of the pipe-frame points."""
         return self.xyz.transpose(1, 2, 0)
+
+    def values(self, mask: NDArray[np.bool_], per_return: NDArray) -> NDArray:
+        """Per-return values (``(N,)`` compact order) of the grid cells in ``mask``."""
+        return per_return[np.flatnonzero(mask.reshape(-1)[self.cell])]
 
     def points(self, mask: NDArray[np.bool_]) -> NDArray[np.float64]:
         """(n, 3) pipe-frame points of the grid cells in ``mask`` (in grid order)."""
@@ -223,7 +228,7 @@ def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedCon
     ranges = np.maximum(scan.ranges.reshape(-1)[pb] - range_bias, 0.0)
     local = np.take(dirs, cell, axis=1)
     local *= ranges
-    if scan.n_planes > 1 and not np.allclose(scan.nominal_positions, scan.nominal_positions[0]):
+    if scan.n_planes > 1 and float(np.ptp(scan.nominal_positions, axis=0).max()) > 1e-9:
         # continuous sweep: express every plane in the last plane's sensor frame (odometry)
         plane = pb // scan.n_beams
         world = np.einsum("nij,jn->in", scan.nominal_rotations[plane], local)
@@ -249,7 +254,7 @@ def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedCon
     jitter = float(spec.get("angular_jitter", 0.0))
     sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
     sigma_r = sigma_range * tr[0] + ranges * jitter * tr[1]
-    cloud = PipeCloud(wraps, shape, cell, np.ascontiguousarray(local), sigma_r, pose)
+    cloud = PipeCloud(wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose)
     cloud.set_pose(pose)
     return cloud
 
@@ -481,13 +486,14 @@ def detect_improved(
             candidates.append((pose1, info1))
             cloud.set_pose(pose1)
             xyz_of.append(cloud.xyz_v)
-            if _intact(cloud, big_r, config):
-                # straight pipe: no return off the wall under the refined axis
-                diag.update(info1)
-                diag["axis_pass"] = 1
-                return _detect_in_pipe_frame(cloud, big_r, config, diag).with_diagnostics(
-                    time_s=time.perf_counter() - t0
-                )
+            diag.update(info1)
+            diag["axis_pass"] = 1
+            straight = _intact(cloud, big_r, config, diag)
+            if straight is not None:  # no return off the wall under the refined axis
+                return straight.with_diagnostics(time_s=time.perf_counter() - t0)
+            for key in info1:
+                diag.pop(key)
+            diag.pop("axis_pass")
             # second pass: all of the intact wall before the structure
             u_start = _structure_start(cloud, big_r, config)
             pose2, info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
@@ -549,14 +555,24 @@ def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
     return cfg.tol_floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(cloud.xyz[0])
 
 
-def _intact(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> bool:
-    """True when fewer than ``min_anomaly_points`` returns leave the wall tolerance (the
-    classification would find nothing but straight pipe)."""
+def _intact(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, diag: dict[str, Any]
+) -> Detection | None:
+    """Straight pipe when fewer than ``min_anomaly_points`` returns leave the wall tolerance
+    (no region of anomalies can reach that size, so the classification would find nothing
+    else); ``None`` otherwise."""
     xyz = cloud.xyz_v
-    e = np.abs(np.sqrt(np.square(xyz[1]) + np.square(xyz[2])) - big_r)
+    e = np.sqrt(np.square(xyz[1]) + np.square(xyz[2])) - big_r
     tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_v + cfg.axis_slope * np.abs(xyz[0])
-    off = e > tol
-    return int(np.count_nonzero(off)) < cfg.min_anomaly_points
+    n_beyond = int(np.count_nonzero(e > tol))
+    n_inside = int(np.count_nonzero(e < -tol))
+    if n_beyond + n_inside >= cfg.min_anomaly_points or cloud.n < cfg.min_anomaly_points:
+        return None
+    n_wall = cloud.n - n_beyond - n_inside
+    diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
+    diag.update(n_wall=n_wall, n_beyond=n_beyond, n_inside=n_inside, n_anomaly=0)
+    conf = min(1.0, n_wall / 200.0) * n_wall / cloud.n
+    return Detection.straight(confidence=conf, **diag)
 
 
 def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:
@@ -622,8 +638,13 @@ def _detect_in_pipe_frame(
         cov = _azimuth_coverage(p_beyond)
         uniform = _azimuth_uniformity(p_beyond)
         diag.update(beyond_coverage=cov, beyond_uniformity=uniform)
-        if uniform >= 0.3 and inside_k.sum() < 0.3 * beyond_k.sum():
-            return _axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
+        # (inside returns count only near the start of the widening: an end wall far down
+        # the wider pipe is not part of the structure)
+        u_grid = cloud.xyz[0]
+        u_start = _pct(u_grid[beyond_k], 5.0)
+        inside_near = inside_k & (u_grid <= u_start + 4.0 * big_r)
+        if uniform >= 0.3 and inside_near.sum() < 0.3 * beyond_k.sum():
+            return _axisymmetric(cloud, big_r, inside_near, beyond_k, wall, tol, cfg, diag)
         return _branches(cloud, big_r, lobes, keep, wall, tol, cfg, diag)
     det = _axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
     if det.diagnostics.get("axisymmetric_support", 1.0) >= 0.6:
@@ -731,8 +752,22 @@ def _axisymmetric(
             dist = float(np.mean(up))
             spread = float(np.std(up))
             cov = _azimuth_coverage(p[on_plane])
-            diag.update(closure_rms=spread, closure_coverage=cov, axisymmetric_support=1.0)
-            if spread <= 0.5 * tol_u:
+            # a cap is flat: a plane (tilted by any residual axis error) must explain it to
+            # within the range noise, where the far wall of a pipe seen head-on is curved
+            pp = p[on_plane]
+            design = np.stack([np.ones(up.size), pp[:, 1], pp[:, 2]], axis=1)
+            coef = np.linalg.lstsq(design, up, rcond=None)[0]
+            plane_rms = float(np.sqrt(np.mean((up - design @ coef) ** 2)))
+            noise_u = float(_pct(cloud.values(anomaly, cloud.sigma_range_v)[on_plane], 50.0))
+            flat = plane_rms <= max(3.0 * noise_u, 0.001)
+            diag["closure_curved"] = not flat
+            diag.update(
+                closure_rms=spread,
+                closure_plane_rms=plane_rms,
+                closure_coverage=cov,
+                axisymmetric_support=1.0 if flat else 0.0,
+            )
+            if spread <= 0.5 * tol_u and flat:
                 conf = _confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
                 opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
                 return Detection("closure", [opt], conf, diag)
@@ -743,24 +778,35 @@ def _axisymmetric(
         u_cross = u * big_r / np.maximum(r, 1e-9)  # where the beams crossed the wall radius
     u_first = float(_pct(u_cross, 1))
     r2 = _radius_mode(r, r.size)
-    sub = _subsample(np.arange(u.size), cfg.fit_points)
+    # the start of a taper is one kink in r(u): it needs a denser sample than the other fits
+    sub = _subsample(np.arange(u.size), 2 * cfg.fit_points)
     us, rs = u[sub], r[sub]
     t0 = max(0.01, float(_pct(u, 30)) - u_first)
 
-    def resid(x: NDArray) -> NDArray:
+    def resjac(x: NDArray) -> tuple[NDArray, NDArray]:
         big_l, t_len, rr2 = x
-        frac = np.clip((us - big_l) / max(t_len, 1e-4), 0.0, 1.0)
-        return rs - (big_r + (rr2 - big_r) * frac)
+        t_len = max(t_len, 1e-4)
+        raw = (us - big_l) / t_len
+        frac = np.clip(raw, 0.0, 1.0)
+        ramp = (raw > 0.0) & (raw < 1.0)
+        jac = np.empty((us.size, 3))
+        jac[:, 0] = np.where(ramp, (rr2 - big_r) / t_len, 0.0)
+        jac[:, 1] = np.where(ramp, (rr2 - big_r) * raw / t_len, 0.0)
+        jac[:, 2] = -frac
+        return rs - (big_r + (rr2 - big_r) * frac), jac
 
     c_fin = max(2.0 * tol_med, 0.002)
     x, res, w = robust_gauss_newton(
-        resid,
+        None,
         np.array([u_first, t0, r2]),
         np.array([1e-4, 1e-4, 1e-5]),
         c=max(4.0 * c_fin, 0.01),
         iterations=15,
-        lower=np.array([-0.2, 0.002, 0.0]),
-        upper=np.array([cfg.horizon, 1.0, 3.0 * big_r]),
+        resjac=resjac,
+        # a widening starts where the beams leave the incoming pipe: its end edge is seen
+        # directly, the cone behind it mostly not
+        lower=np.array([-0.2 if contraction else u_first, 0.002, 0.0]),
+        upper=np.array([cfg.horizon if contraction else u_first, 1.0, 3.0 * big_r]),
         c_final=c_fin,
         step_tol=STEP_TOL,
         anneal=ANNEAL,
@@ -769,12 +815,31 @@ def _axisymmetric(
     support = float((w > 0.1).mean())
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     big_l, t_len, r2 = (float(v) for v in x)
+    if not contraction:
+        # the first returns off the wall lie a tolerance out on the cone: where the cone
+        # (when seen) reaches the wall radius is the start of the widening
+        cone = r < r2 - 2.0 * tol_med
+        if np.count_nonzero(cone) >= 20:
+            a_u, b_u = _robust_line(r[cone], u[cone])
+            if math.isfinite(a_u + b_u * big_r):
+                big_l = min(u_first, max(u_first - 0.1, a_u + b_u * big_r))
+        else:
+            # the edge lies between the last beam on the wall and the first one past it
+            u_wall = cloud.xyz[0][wall]
+            before = u_wall[(u_wall < u_first) & (u_wall > u_first - 0.1)]
+            if before.size:
+                big_l = 0.5 * (float(before.max()) + u_first)
+        diag["widening_start_from_cone"] = bool(np.count_nonzero(cone) >= 20)
     diag.update(reducer_r2=r2, reducer_taper=t_len, reducer_rms=rms, axisymmetric_support=support)
     cov = _azimuth_coverage(p)
     if not (math.isfinite(big_l) and math.isfinite(r2)):
         return Detection.straight(confidence=0.0, **diag)
     if r2 < 0.25 * big_r:
-        # the pipe closes (a cap seen obliquely, or a cone to nothing): a closure at its start
+        # the pipe closes (a cap seen obliquely, or a cone to nothing): a closure at its start;
+        # not when the end wall was found curved (the far wall of a pipe seen head-on)
+        if diag.get("closure_curved", False):
+            diag["axisymmetric_support"] = 0.0
+            return Detection.straight(confidence=0.0, **diag)
         conf = 0.5 * _confidence(int(w.sum()), rms, c_fin) * cov
         opt = StructureOption("closure", max(big_l, 0.0), 0.0, 0.0, 0.0, conf)
         return Detection("closure", [opt], conf, diag)
@@ -941,7 +1006,7 @@ def _branches(
     per_lobe = []
     rolls_of = []
     for lb, lp in zip(lobes, lobe_pts):
-        rolls = np.radians(np.arange(0.0, 360.0, 15.0)) if any_roll else np.array([lb.roll])
+        rolls = np.radians(np.arange(0.0, 360.0, 20.0)) if any_roll else np.array([lb.roll])
         rolls_of.append(rolls)
         st = np.sin(thetas)
         dirs = np.stack(
@@ -951,13 +1016,20 @@ def _branches(
                 (np.sin(rolls)[:, None] * st).reshape(-1),
             ]
         )  # (3, RT)
-        lq = lp[_subsample(np.arange(lp.shape[0]), 100)]
+        lq = lp[_subsample(np.arange(lp.shape[0]), 50 if any_roll else 100)]
         qx = lq[None, :, 0] - l_grid[:, None]  # (L, n)
         qq = qx * qx + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]
         lat = lq[:, 1:] @ dirs[1:]  # (n, RT)
         t = qx[:, :, None] * dirs[0] + lat[None]  # (L, n, RT)
         res = np.sqrt(np.maximum(qq[..., None] - t * t, 0.0)) - big_r
-        cost = np.minimum(res * res, c0 * c0).mean(axis=1)  # (L, RT)
+        sq = np.minimum(res * res, c0 * c0)
+        # the sensor sees every wall from inside its pipe: the wall normal (away from the
+        # axis) must not face the sensor; a cylinder behind the returns (the same patch
+        # seen from outside) is penalised like an outlier
+        qp = qx * lq[None, :, 0] + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]  # q . p
+        dp = lq[:, 0:1] * dirs[0] + lat  # (n, RT): d . p
+        sq = np.where(qp[..., None] - t * dp[None] < 0.0, c0 * c0, sq)
+        cost = sq.mean(axis=1)  # (L, RT)
         per_lobe.append(cost)
         total += cost.min(axis=1)
     i_l = int(np.argmin(total))
@@ -989,7 +1061,9 @@ def _branches(
     # call for another one. A free radius is poorly observed from a partial view of an
     # opening under range noise, so it is kept only when it fits significantly better
     # (likelihood ratio against the residual noise, a few units per extra parameter).
-    x_eq = x.copy()
+    # (a far wall seen head-on is too small a part of a pipe to size it: clamped from the
+    # coarse start)
+    x_eq = x0a.copy() if any_roll else x.copy()
     x_eq[3::3] = big_r
     lo_eq, up_eq = lower.copy(), upper.copy()
     lo_eq[3::3] = big_r
@@ -998,8 +1072,8 @@ def _branches(
         None,
         x_eq,
         np.full(x_eq.size, 1e-5),
-        c=2.0 * c_fin,
-        iterations=8,
+        c=2.0 * c0 if any_roll else 2.0 * c_fin,
+        iterations=12 if any_roll else 8,
         lower=lo_eq,
         upper=up_eq,
         c_final=c_fin,
@@ -1014,7 +1088,7 @@ def _branches(
     sigma2 = max(2.0 * cost_free / n_in, noise_med**2)
     lr = 2.0 * (cost_eq - cost_free) / sigma2
     diag.update(radius_lr=float(lr), radius_free=[float(v) for v in x[3::3]])
-    if lr <= cfg.radius_lr_per_branch * n_l:
+    if any_roll or lr <= cfg.radius_lr_per_branch * n_l:
         x, res, w = x_eq, res_eq, w_eq
     diag["radius_model"] = "clamped" if x is x_eq else "free"
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
@@ -1022,6 +1096,12 @@ def _branches(
     diag.update(fit_rms=rms, fit_support=support, fit_points=int(p_all.shape[0]))
     model = "straight_axes"
     fits = [BranchFit(x[1 + 3 * k], x[2 + 3 * k], x[3 + 3 * k]) for k in range(n_l)]
+    if any_roll and w.sum() > 0:
+        # a cylinder's axis has no sign: the way on is the half the returns lie along
+        f = fits[0]
+        along = (p_all - np.array([x[0], 0.0, 0.0])) @ _dir(f.theta, f.phi)
+        if float(np.sum(w * along)) < 0.0:
+            fits = [BranchFit(math.pi - f.theta, f.phi + math.pi, f.rho)]
     big_l = float(x[0])
     # --- a single way on that the straight model explains poorly: a long-radius bend (torus)
     lower_bound = False
