@@ -194,13 +194,13 @@ def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float
 
 
 #: Unrolled grid and beam directions per scan pattern (plane and beam angles), reused.
-_PATTERNS: dict[bytes, tuple[bool, int, NDArray, NDArray, NDArray]] = {}
+_PATTERNS: dict[bytes, tuple[bool, int, NDArray, NDArray, NDArray, NDArray]] = {}
 
 
-def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray]:
-    """(wraps, K, scan index of each grid cell (G*K,; -1 where the half-plane has no such
-    beam), unit beam direction (3, G*K), |sin beta| and |cos beta| (2, G*K)) of the scan's
-    angle pattern."""
+def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray]:
+    """(wraps, K, flat scan index of each grid cell (G*K,), unit beam direction (3, G*K),
+    |sin beta| and |cos beta| (2, G*K), the cells where the half-plane has no such beam) of
+    the scan's angle pattern."""
     key = scan.plane_angles.tobytes() + b"|" + scan.beam_angles.tobytes()
     hit = _PATTERNS.get(key)
     if hit is not None:
@@ -209,11 +209,18 @@ def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray]:
     missing = grid.beam.reshape(-1) < 0
     beam = np.maximum(grid.beam, 0).reshape(-1)
     plane = grid.plane.reshape(-1)
-    src = np.where(missing, -1, plane * scan.n_beams + beam)
+    src = plane * scan.n_beams + beam
     dirs = scan.directions()[plane, beam].T  # (3, G*K)
     beta = scan.beam_angles[beam]
     trig = np.stack([np.abs(np.sin(beta)), np.abs(np.cos(beta))])
-    hit = (grid.wraps, int(grid.beam.shape[1]), src, np.ascontiguousarray(dirs), trig)
+    hit = (
+        grid.wraps,
+        int(grid.beam.shape[1]),
+        src,
+        np.ascontiguousarray(dirs),
+        trig,
+        np.flatnonzero(missing),
+    )
     if len(_PATTERNS) >= 16:
         _PATTERNS.pop(next(iter(_PATTERNS)))
     _PATTERNS[key] = hit
@@ -221,8 +228,9 @@ def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray]:
 
 
 def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig) -> PipeCloud:
-    wraps, k_cols, src, dirs, trig = _pattern(scan)
-    ok = scan.valid.reshape(-1)[src] & (src >= 0)
+    wraps, k_cols, src, dirs, trig, src_missing = _pattern(scan)
+    ok = scan.valid.reshape(-1)[src]  # (missing cells point at a copy of a real one ...)
+    ok[src_missing] = False  # (... and are dropped here)
     cell = np.flatnonzero(ok)
     pb = src[cell]
     ranges = np.maximum(scan.ranges.reshape(-1)[pb] - range_bias, 0.0)
@@ -236,7 +244,8 @@ def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedCon
         local = scan.nominal_rotations[-1].T @ (world - scan.nominal_positions[-1][:, None])
     near = local[0] <= cfg.horizon
     if not near.all():
-        cell, ranges, local = cell[near], ranges[near], local[:, near]
+        keep = np.flatnonzero(near)
+        cell, ranges, local = cell[keep], ranges[keep], np.take(local, keep, axis=1)
     tr = np.take(trig, cell, axis=1)
     # crop the grid to the beam-angle columns that hold returns
     g = src.size // max(k_cols, 1)
@@ -578,17 +587,23 @@ def _intact(
 def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:
     """Axial position where the wall stops being intact (first significant anomalies); the
     horizon when there are none."""
-    xyz = cloud.xyz
+    xyz = cloud.xyz_v
     r = np.sqrt(np.square(xyz[1]) + np.square(xyz[2]))
-    anomaly = cloud.valid & (np.abs(r - big_r) > 2.0 * _tolerance(cloud, cfg))
-    labels, n_lab = label_regions(anomaly, cloud.wraps)
-    if n_lab == 0:
+    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_v + cfg.axis_slope * np.abs(xyz[0])
+    idx = np.flatnonzero(np.abs(r - big_r) > 2.0 * tol)  # returns off the wall
+    if idx.size < cfg.min_anomaly_points:
         return cfg.horizon
-    counts = np.bincount(labels[anomaly], minlength=n_lab + 1)
+    g, k = cloud.shape
+    mask = np.zeros(g * k, dtype=bool)
+    cells = cloud.cell[idx]
+    mask[cells] = True
+    labels, n_lab = label_regions(mask.reshape(g, k), cloud.wraps)
+    lab = labels.reshape(-1)[cells]
+    counts = np.bincount(lab, minlength=n_lab + 1)
     good = counts >= cfg.min_anomaly_points
     good[0] = False
-    sel = good[labels] & anomaly
-    if not sel.any():
+    sel = idx[good[lab]]
+    if not sel.size:
         return cfg.horizon
     u = xyz[0][sel]
     # where the beams of those returns crossed the wall radius (sensor near the axis)
@@ -920,7 +935,7 @@ def _line_resjac(
     qq = np.einsum("ij,ij->i", q, q)
     th, ph, rho = x[1::3], x[2::3], x[3::3]
     ct, st, cp, sp = np.cos(th), np.sin(th), np.cos(ph), np.sin(ph)
-    dirs = np.stack([ct, st * cp, st * sp])  # (3, n_l)
+    dirs = np.array([ct, st * cp, st * sp])  # (3, n_l)
     t_all = q @ dirs  # (N, n_l)
     dist_all = np.sqrt(np.maximum(qq[:, None] - t_all * t_all, 1e-18))
     res_all = dist_all - rho
@@ -933,8 +948,11 @@ def _line_resjac(
         best, t, dist = res_all[rows, arg], t_all[rows, arg], dist_all[rows, arg]
     if not want_jac:
         return best, None
-    d_th = q @ np.stack([-st, ct * cp, ct * sp])  # (N, n_l): q . d(dir)/d(theta)
-    d_ph = q @ np.stack([np.zeros(n_l), -st * sp, st * cp])
+    # (N, n_l): q . d(dir)/d(theta), q . d(dir)/d(phi)
+    d_both = q @ np.array(
+        [[*-st, *(0.0 * st)], [*(ct * cp), *(-st * sp)], [*(ct * sp), *(st * cp)]]
+    )
+    d_th, d_ph = d_both[:, :n_l], d_both[:, n_l:]
     if n_l == 1:
         q_th, q_ph, d0 = d_th[:, 0], d_ph[:, 0], dirs[0, 0]
     else:

@@ -7,6 +7,7 @@ thousand residuals), so a numeric Jacobian costs a few residual evaluations per 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -15,8 +16,10 @@ from numpy.typing import NDArray
 
 def tukey_weights(res: NDArray[np.float64], c: float) -> NDArray[np.float64]:
     """Tukey biweight: ``(1 - (r/c)^2)^2`` inside ``|r| < c``, 0 outside."""
-    u = res / c
-    return np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
+    w = 1.0 - np.square(res) * (1.0 / (c * c))
+    np.maximum(w, 0.0, out=w)
+    w *= w
+    return w
 
 
 def mad_sigma(x: NDArray[np.float64]) -> float:
@@ -111,7 +114,7 @@ def robust_gauss_newton(
     for it in range(iterations):
         ci = c * (cf / c) ** (min(it, n_anneal) / n_anneal)
         w = tukey_weights(r, ci)
-        if w.sum() < n_p + 1:
+        if float(w.sum()) < n_p + 1:
             break
         jw = jac * w[:, None]
         h = jac.T @ jw
@@ -128,8 +131,7 @@ def robust_gauss_newton(
         hd = h[diag_idx, diag_idx] + 1e-12
         step_ok = False
         for _ in range(4):
-            a = h.copy()
-            a[diag_idx, diag_idx] += lam * hd
+            a = h + np.diag(lam * hd)
             try:
                 dx = -np.linalg.solve(a, g)
             except np.linalg.LinAlgError:
@@ -141,10 +143,10 @@ def robust_gauss_newton(
             if upper is not None:
                 xn = np.minimum(xn, upper)
             rn, jn = resjac(xn)
-            if not np.isfinite(rn).all():
+            cost1 = float(np.dot(w, rn * rn))
+            if not math.isfinite(cost1) or not math.isfinite(float(rn.sum())):
                 lam *= 10.0
                 continue
-            cost1 = float(np.dot(w, rn * rn))
             if cost1 <= cost0 * (1.0 + 1e-9) or lam > 1e3:
                 dx = xn - x  # the step taken (bounds may have clipped it)
                 x, r, jac = xn, rn, jn
@@ -154,7 +156,7 @@ def robust_gauss_newton(
             lam *= 10.0
         if not step_ok:
             break
-        if (np.abs(dx) < step_tol).all():
+        if float(np.abs(dx).max()) < step_tol:
             break
         if it >= n_anneal and cost1 >= cost0 * (1.0 - cost_tol):
             break
