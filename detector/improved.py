@@ -1059,22 +1059,38 @@ def _branches(
     x0a = np.array(x0)
     # physical ranges: bends deflect 30-90 deg, branches 45, 90 or 135 deg
     lower = np.array([-0.5] + [math.radians(25.0), -10.0, 0.25 * big_r] * n_l)
-    upper = np.array([cfg.horizon] + [math.radians(150.0), 10.0, 2.5 * big_r] * n_l)
+    # (a side branch of a run that goes on is no wider than the run)
+    rho_max = 1.05 * big_r if straight_on else 2.5 * big_r
+    upper = np.array([cfg.horizon] + [math.radians(150.0), 10.0, rho_max] * n_l)
+    hole = None
+    if straight_on and not any_roll:
+        prior = (x0a.copy(), lower.copy(), upper.copy())
+        hole = _hole_prior(cloud, big_r, lobes, lobe_pts, wall, u_edge, c0, *prior)
     c_fin = max(3.0 * tol_med, 0.003)
-    x, res, w = robust_gauss_newton(
-        None,
-        x0a,
-        np.full(x0a.size, 1e-5),
-        c=2.0 * c0,
-        iterations=12,
-        lower=lower,
-        upper=upper,
-        c_final=c_fin,
-        step_tol=STEP_TOL,
-        anneal=ANNEAL,
-        cost_tol=COST_TOL,
-        resjac=lambda v: _line_resjac(p_all, v, n_l, True),
-    )
+
+    def free_fit(xs: NDArray, lo: NDArray, up: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        return robust_gauss_newton(
+            None,
+            xs,
+            np.full(xs.size, 1e-5),
+            c=2.0 * c0,
+            iterations=12,
+            lower=lo,
+            upper=up,
+            c_final=c_fin,
+            step_tol=STEP_TOL,
+            anneal=ANNEAL,
+            cost_tol=COST_TOL,
+            resjac=lambda v: _line_resjac(p_all, v, n_l, True),
+        )
+
+    x, res, w = free_fit(x0a, lower, upper)
+    if hole is not None and not _fits_hole(x, hole, big_r, lower, upper):
+        # the returns through the openings led the fit astray (few and noisy, far away):
+        # start again from the holes in the run's wall and stay near them
+        x0a, lower, upper = prior
+        x, res, w = free_fit(x0a, lower, upper)
+        diag.update(hole_reference=float(prior[0][0]), hole_prior_used=True)
     # --- the outgoing radii: the clamped radius (a standard fitting) unless the returns
     # call for another one. A free radius is poorly observed from a partial view of an
     # opening under range noise, so it is kept only when it fits significantly better
@@ -1106,7 +1122,14 @@ def _branches(
     sigma2 = max(2.0 * cost_free / n_in, noise_med**2)
     lr = 2.0 * (cost_eq - cost_free) / sigma2
     diag.update(radius_lr=float(lr), radius_free=[float(v) for v in x[3::3]])
-    if any_roll or lr <= cfg.radius_lr_per_branch * n_l:
+    # (a free fit that ends on the deflection bounds has not found a pipe: the radius traded
+    # against the angle)
+    th_lo, th_hi = lower[1] + math.radians(1.0), upper[1] - math.radians(1.0)
+    free_on_bound = bool(np.any((x[1::3] <= th_lo) | (x[1::3] >= th_hi)))
+    eq_on_bound = bool(np.any((x_eq[1::3] <= th_lo) | (x_eq[1::3] >= th_hi)))
+    diag["radius_free_on_bound"] = free_on_bound
+    weak = any_roll or bool(diag.get("hole_prior_used", False))  # too little to size a pipe
+    if weak or lr <= cfg.radius_lr_per_branch * n_l or (free_on_bound and not eq_on_bound):
         x, res, w = x_eq, res_eq, w_eq
     diag["radius_model"] = "clamped" if x is x_eq else "free"
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
@@ -1155,6 +1178,97 @@ def _branches(
     ]
     options.sort(key=option_order)
     return Detection(kind, options, conf, diag)
+
+
+def _hole_prior(
+    cloud: PipeCloud,
+    big_r: float,
+    lobes: list[Lobe],
+    lobe_pts: list[NDArray],
+    wall: NDArray[np.bool_],
+    u_edge: float,
+    c0: float,
+    x0: NDArray,
+    lower: NDArray,
+    upper: NDArray,
+) -> list[tuple[float, float, float]] | None:
+    """Side branches of a run that goes on, seen far away: the few returns through an opening
+    leave the branch's deflection and the reference point ill-determined, but the hole in the
+    run's wall is plain. A branch of radius ``R`` deflected by ``theta`` cuts a hole of
+    half-length ``R / sin(theta)`` centred ``R cot(theta)`` past the reference point; the
+    start (``x0``) and the bounds of the fit are set from it, in place. Returns the centre and
+    half-length of each lobe's hole and how far off they may be seen; ``None`` (nothing
+    changed) when a hole is not found for every lobe."""
+    u_w = cloud.xyz[0][wall]
+    p_w = cloud.points(wall)
+    phi_w = np.arctan2(p_w[:, 2], p_w[:, 1])
+    ells, thetas, slack = [], [], []
+    holes: list[tuple[float, float, float]] = []
+    for lb, lp in zip(lobes, lobe_pts):
+        near = np.abs(np.mod(phi_w - lb.roll + math.pi, 2.0 * math.pi) - math.pi)
+        sel = (near < math.radians(15.0)) & (u_w > u_edge - 2.0 * big_r)
+        sel &= u_w < u_edge + 8.0 * big_r
+        us = np.sort(u_w[sel])
+        if us.size < 10:
+            return None
+        gaps = np.diff(us)
+        i = int(np.argmax(gaps))
+        if gaps[i] < big_r:
+            return None
+        half = 0.5 * float(gaps[i])
+        centre = 0.5 * float(us[i] + us[i + 1])
+        # edges are known to within the spacing of the returns along the wall there
+        step = float(np.median(gaps[max(0, i - 5) : i + 6]))
+        # deflections along the coarse grid: the reference point that puts the hole's centre
+        # where it is seen, scored by the returns through the opening and by the hole length
+        # (returns at the edges fall off the wall, so a hole may look longer, never shorter)
+        best = None
+        for th in np.radians(np.arange(30.0, 150.1, 2.5)).tolist():
+            ell = centre - big_r / math.tan(th)
+            q = lp - np.array([ell, 0.0, 0.0])
+            t = q @ _dir(th, lb.roll)
+            res = np.sqrt(np.maximum(np.einsum("ij,ij->i", q, q) - t * t, 0.0)) - big_r
+            cost = float(np.minimum(res * res, c0 * c0).mean())
+            excess = max(0.0, big_r / math.sin(th) - half) / max(step, 0.005)
+            cost += c0 * c0 * min(1.0, 0.25 * excess * excess)
+            if th > 0.5 * math.pi + 1e-6:
+                cost *= 1.0 / 0.7  # forward branches first (tees and wyes along their run)
+            if best is None or cost < best[0]:
+                best = (cost, th, ell)
+        assert best is not None
+        thetas.append(best[1])
+        ells.append(best[2])
+        slack.append(max(0.25 * big_r, 1.5 * step))
+        holes.append((centre, half, slack[-1]))
+    ell = float(np.mean(ells))
+    d_ell = max(slack) + float(np.ptp(ells))
+    x0[0] = ell
+    lower[0], upper[0] = ell - d_ell, ell + d_ell
+    for k, th in enumerate(thetas):
+        x0[1 + 3 * k] = th
+        lower[1 + 3 * k] = max(lower[1 + 3 * k], th - math.radians(7.5))
+        upper[1 + 3 * k] = min(upper[1 + 3 * k], th + math.radians(7.5))
+    return holes
+
+
+def _fits_hole(
+    x: NDArray,
+    holes: list[tuple[float, float, float]],
+    big_r: float,
+    lower: NDArray,
+    upper: NDArray,
+) -> bool:
+    """Does a branch fit put every branch where its hole in the run's wall is seen, without
+    resting on a deflection bound?"""
+    for k, (centre, half, slack) in enumerate(holes):
+        th = float(x[1 + 3 * k])
+        if th <= lower[1 + 3 * k] + math.radians(1.0) or th >= upper[1 + 3 * k] - math.radians(1.0):
+            return False
+        if abs(float(x[0]) + big_r / math.tan(th) - centre) > slack:
+            return False
+        if big_r / math.sin(th) > half + slack:  # (a hole may look longer, never shorter)
+            return False
+    return True
 
 
 def _straight_on(

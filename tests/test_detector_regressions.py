@@ -102,3 +102,17 @@ def test_pinned_parameters_stay_put_and_the_fit_converges():
     assert abs(p[0] - 0.3) < 0.01 and abs(p[1] - 2.0) < 0.02
     assert len(evals) < 15  # converged, not stopped by the iteration limit
     assert w.min() > 0.0
+
+
+def test_noisy_tee_far_along_its_run_is_placed_by_the_hole_in_the_wall():
+    # 40 cm ahead with range noise only a few dozen returns come through the opening; they
+    # once pulled the branch back to 150 deg and the reference point 6.5 cm away
+    scan, truth, d = scan_layout(
+        "t_junction", 0.4, sensor="ydlidar_x4", seed=1, diameter=0.1, direction=0.76, entry="run"
+    )
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < 0.02  # thesis requirement
+        assert abs(o.angle - t.angle) < math.radians(10.0)
+        assert abs(o.diameter - t.diameter) < 0.005
