@@ -120,6 +120,7 @@ class PipeCloud:
     sigma_v: NDArray[np.float64]  # (N,) radial noise of each return
     sigma_range_v: NDArray[np.float64]  # (N,) range noise of each return
     pose: SensorInPipe
+    beam_step: float = 0.0  # angle between neighbouring beams of a plane, radians
     xyz_v: NDArray[np.float64] = field(init=False)  # (3, N) pipe frame
     thin: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(init=False, default=None)
     _valid: NDArray[np.bool_] | None = field(init=False, default=None)
@@ -263,7 +264,12 @@ def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedCon
     jitter = float(spec.get("angular_jitter", 0.0))
     sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
     sigma_r = sigma_range * tr[0] + ranges * jitter * tr[1]
-    cloud = PipeCloud(wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose)
+    steps = np.abs(np.diff(np.sort(scan.beam_angles)))
+    steps = steps[steps > 1e-9]
+    beam_step = float(np.median(steps)) if steps.size else 0.0
+    cloud = PipeCloud(
+        wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose, beam_step
+    )
     cloud.set_pose(pose)
     return cloud
 
@@ -1199,16 +1205,18 @@ def _hole_prior(
     start (``x0``) and the bounds of the fit are set from it, in place. Returns the centre and
     half-length of each lobe's hole and how far off they may be seen; ``None`` (nothing
     changed) when a hole is not found for every lobe."""
-    u_w = cloud.xyz[0][wall]
-    p_w = cloud.points(wall)
+    u_grid = cloud.xyz[0]
+    near_u = wall & (u_grid > u_edge - 2.0 * big_r) & (u_grid < u_edge + 8.0 * big_r)
+    p_w = cloud.points(near_u)
+    u_w = p_w[:, 0]
     phi_w = np.arctan2(p_w[:, 2], p_w[:, 1])
+    ths = np.radians(np.arange(30.0, 150.1, 2.5))
+    sin_t, cos_t = np.sin(ths), np.cos(ths)
     ells, thetas, slack = [], [], []
     holes: list[tuple[float, float, float]] = []
     for lb, lp in zip(lobes, lobe_pts):
         near = np.abs(np.mod(phi_w - lb.roll + math.pi, 2.0 * math.pi) - math.pi)
-        sel = (near < math.radians(15.0)) & (u_w > u_edge - 2.0 * big_r)
-        sel &= u_w < u_edge + 8.0 * big_r
-        us = np.sort(u_w[sel])
+        us = np.sort(u_w[near < math.radians(15.0)])
         if us.size < 10:
             return None
         gaps = np.diff(us)
@@ -1217,28 +1225,29 @@ def _hole_prior(
             return None
         half = 0.5 * float(gaps[i])
         centre = 0.5 * float(us[i] + us[i + 1])
-        # edges are known to within the spacing of the returns along the wall there
-        step = float(np.median(gaps[max(0, i - 5) : i + 6]))
-        # deflections along the coarse grid: the reference point that puts the hole's centre
-        # where it is seen, scored by the returns through the opening and by the hole length
-        # (returns at the edges fall off the wall, so a hole may look longer, never shorter)
-        best = None
-        for th in np.radians(np.arange(30.0, 150.1, 2.5)).tolist():
-            ell = centre - big_r / math.tan(th)
-            q = lp - np.array([ell, 0.0, 0.0])
-            t = q @ _dir(th, lb.roll)
-            res = np.sqrt(np.maximum(np.einsum("ij,ij->i", q, q) - t * t, 0.0)) - big_r
-            cost = float(np.minimum(res * res, c0 * c0).mean())
-            excess = max(0.0, big_r / math.sin(th) - half) / max(step, 0.005)
-            cost += c0 * c0 * min(1.0, 0.25 * excess * excess)
-            if th > 0.5 * math.pi + 1e-6:
-                cost *= 1.0 / 0.7  # forward branches first (tees and wyes along their run)
-            if best is None or cost < best[0]:
-                best = (cost, th, ell)
+        # each edge is known to within the axial spacing of neighbouring beams there
+        step = centre * centre / big_r * cloud.beam_step
+        spacing = float(np.median(gaps[max(0, i - 5) : i + 6]))  # of the returns seen
+        # deflections along a grid: the reference point that puts the hole's centre where it
+        # is seen, scored by the returns through the opening and by the hole length (returns
+        # at the edges fall off the wall, so a hole may look longer, never shorter)
+        ell_t = centre - big_r * cos_t / sin_t  # (T,)
+        lq = lp[_subsample(np.arange(lp.shape[0]), 100)]
+        qx = lq[None, :, 0] - ell_t[:, None]  # (T, n)
+        lat = lq[:, 1] * math.cos(lb.roll) + lq[:, 2] * math.sin(lb.roll)  # (n,)
+        t = qx * cos_t[:, None] + lat[None, :] * sin_t[:, None]
+        qq = qx * qx + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]
+        res = np.sqrt(np.maximum(qq - t * t, 0.0)) - big_r
+        cost = np.minimum(res * res, c0 * c0).mean(axis=1)
+        excess = np.maximum(0.0, big_r / sin_t - half) / max(spacing, 0.005)
+        cost += c0 * c0 * np.minimum(1.0, 0.25 * excess * excess)
+        cost = np.where(ths > 0.5 * math.pi + 1e-6, cost / 0.7, cost)  # forward branches first
+        j = int(np.argmin(cost))
+        best = (float(cost[j]), float(ths[j]), float(ell_t[j]))
         assert best is not None
         thetas.append(best[1])
         ells.append(best[2])
-        slack.append(max(0.25 * big_r, 1.5 * step))
+        slack.append(max(0.25 * big_r, 0.5 * step))
         holes.append((centre, half, slack[-1]))
     ell = float(np.mean(ells))
     d_ell = max(slack) + float(np.ptp(ells))
