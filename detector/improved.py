@@ -1025,6 +1025,10 @@ def _branches(
     # --- coarse grid per lobe over (L, theta) with the lobe's roll and radius R
     thetas = np.radians(np.arange(30.0, 151.0, 7.5))
     l_grid = u_edge + np.linspace(0.0, 3.0 * big_r, 13)
+    if any_roll:
+        # the far wall of a turn lies past the turn's reference point
+        u_near = min(float(lp[:, 0].min()) for lp in lobe_pts)
+        l_grid = u_near + np.linspace(-4.0 * big_r, 0.0, 13)
     c0 = max(6.0 * tol_med, 0.006)
     total = np.zeros(l_grid.size)
     per_lobe = []
@@ -1147,8 +1151,17 @@ def _branches(
         # a cylinder's axis has no sign: the way on is the half the returns lie along
         f = fits[0]
         along = (p_all - np.array([x[0], 0.0, 0.0])) @ _dir(f.theta, f.phi)
-        if float(np.sum(w * along)) < 0.0:
-            fits = [BranchFit(math.pi - f.theta, f.phi + math.pi, f.rho)]
+        ahead = float(np.sum(w * (along > 0.5 * big_r))) / max(float(w.sum()), 1e-9)
+        behind = float(np.sum(w * (along < -0.5 * big_r))) / max(float(w.sum()), 1e-9)
+        diag.update(far_wall_ahead=ahead, far_wall_behind=behind)
+        flipped = BranchFit(math.pi - f.theta, f.phi + math.pi, f.rho)
+        balanced = min(ahead, behind) >= 0.05 and min(ahead, behind) >= 0.5 * max(ahead, behind)
+        if balanced and abs(f.theta - 0.5 * math.pi) < math.radians(20.0):
+            # the far wall runs on evenly to both sides of the axis' foot: a pipe across,
+            # both its ways open (a tee seen from its stem)
+            fits = [f, flipped]
+        elif float(np.sum(w * along)) < 0.0:
+            fits = [flipped]
     big_l = float(x[0])
     # --- a single way on that the straight model explains poorly: a long-radius bend (torus)
     lower_bound = False
