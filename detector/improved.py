@@ -8,16 +8,21 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    else the thesis's centred-and-aligned assumption), then the pipe axis is refined by a robust
    fit of a cylinder of the clamped radius to the wall points (4 parameters: cross-section
    offset and tilt, with a weak prior towards the known pose when the wall seen is short). This
-   removes sensor misalignment (thesis 5.3) without any outside feedback.
+   removes sensor misalignment (thesis 5.3) without any outside feedback. When fewer returns
+   than a region needs leave the wall tolerance under the refined axis, the scan is straight
+   pipe and nothing else runs (the common case in a run).
 2. **Classification.** Each return's radial residual ``r - D/2`` is compared with a per-point
    tolerance from the sensor model in ``scan.spec`` (range noise projected on the radius, plus a
    floor). Non-wall returns are grouped into connected regions of the unrolled scan grid
    (:mod:`detector.grid`); regions too small or one azimuth wide are rejected as clutter.
 3. **Hypotheses.** Returns beyond the wall (``r > D/2``) are *lobes*: openings towards an
    outgoing pipe. Without lobes the structure is axisymmetric: an end wall (a plane
-   perpendicular to the axis, kind ``closure``) or a reducer (a cone from the wall radius to a new
-   radius: the most frequent inner radius is the new pipe, a robust line ``u = a + b r``
-   through the taper returns gives the start of the taper). With lobes, each lobe is an outgoing
+   perpendicular to the axis, kind ``closure``; flat to within the range noise, which tells it
+   from the curved far wall of a pipe seen head-on) or a reducer (a cone from the wall radius to
+   a new radius fitted as ``r(u)``; a widening starts at the edge where the beams leave the
+   incoming pipe, its cone mostly hidden behind that edge). A far wall seen head-on is fitted as
+   an outgoing pipe of the clamped radius with unknown roll, seen from inside; when it runs on
+   evenly to both sides it is a pipe across (both ways open). With lobes, each lobe is an outgoing
    pipe: a cylinder whose axis meets the incoming axis at the reference point ``(L, 0, 0)`` with
    deflection ``angle``, roll ``direction`` and radius ``rho``. Initial values come from a coarse
    grid over ``(L, angle)`` with the lobe's mean roll; all lobes are then refined jointly by
@@ -27,11 +32,19 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    meet) and the better fit is kept.
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
-   circumference; its option has the clamped diameter.
+   circumference; its option has the clamped diameter. Its side branches are no wider than the
+   run, and each cuts a hole in the run's wall (half-length ``R / sin(angle)``, centred
+   ``R cot(angle)`` past the reference point); when the few returns through a far opening lead
+   the fit away from the hole seen, the fit restarts from the hole and stays near it.
 5. **Kind and confidence.** One way on -> ``bend``; two or more -> ``junction``. Confidence
    combines the number of supporting returns and the fit residual relative to the tolerance.
    Degenerate inputs (no returns, too few wall returns, fits that fail or leave the physical
    range) give ``straight`` with low confidence, never NaN.
+
+Speed: returns are kept compact and component-first (one ``(3, 3) @ (3, N)`` product per
+pose), the unrolled grid and beam directions are cached per scan pattern, every fit uses a few
+hundred returns, and the robust fits anneal their cut-off over three iterations and then stop
+on a small cost change (:func:`detector.robust.robust_gauss_newton`).
 
 All lengths in metres, angles in radians.
 """
