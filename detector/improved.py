@@ -208,18 +208,21 @@ def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float
 
 
 #: Unrolled grid and beam directions per scan pattern (plane and beam angles), reused.
-_PATTERNS: dict[bytes, tuple[bool, int, NDArray, NDArray, NDArray, NDArray]] = {}
+_PATTERNS: dict[bytes, tuple[bool, int, NDArray, NDArray, NDArray, NDArray, float]] = {}
 
 
-def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray]:
+def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray, float]:
     """(wraps, K, flat scan index of each grid cell (G*K,), unit beam direction (3, G*K),
-    |sin beta| and |cos beta| (2, G*K), the cells where the half-plane has no such beam) of
-    the scan's angle pattern."""
+    |sin beta| and |cos beta| (2, G*K), the cells where the half-plane has no such beam, the
+    angle between neighbouring beams) of the scan's angle pattern."""
     key = scan.plane_angles.tobytes() + b"|" + scan.beam_angles.tobytes()
     hit = _PATTERNS.get(key)
     if hit is not None:
         return hit
     grid = build_grid(scan)
+    steps = np.abs(np.diff(np.sort(scan.beam_angles)))
+    steps = steps[steps > 1e-9]
+    beam_step = float(np.median(steps)) if steps.size else 0.0
     missing = grid.beam.reshape(-1) < 0
     beam = np.maximum(grid.beam, 0).reshape(-1)
     plane = grid.plane.reshape(-1)
@@ -234,6 +237,7 @@ def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray]
         np.ascontiguousarray(dirs),
         trig,
         np.flatnonzero(missing),
+        beam_step,
     )
     if len(_PATTERNS) >= 16:
         _PATTERNS.pop(next(iter(_PATTERNS)))
@@ -242,7 +246,7 @@ def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray]
 
 
 def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig) -> PipeCloud:
-    wraps, k_cols, src, dirs, trig, src_missing = _pattern(scan)
+    wraps, k_cols, src, dirs, trig, src_missing, beam_step = _pattern(scan)
     ok = scan.valid.reshape(-1)[src]  # (missing cells point at a copy of a real one ...)
     ok[src_missing] = False  # (... and are dropped here)
     cell = np.flatnonzero(ok)
@@ -277,9 +281,6 @@ def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedCon
     jitter = float(spec.get("angular_jitter", 0.0))
     sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
     sigma_r = sigma_range * tr[0] + ranges * jitter * tr[1]
-    steps = np.abs(np.diff(np.sort(scan.beam_angles)))
-    steps = steps[steps > 1e-9]
-    beam_step = float(np.median(steps)) if steps.size else 0.0
     cloud = PipeCloud(
         wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose, beam_step
     )
