@@ -1037,7 +1037,10 @@ def _branches(
     straight_on, cov_on = _straight_on(cloud, big_r, u_edge + big_r, wall, cfg)
     diag["straight_on_coverage"] = cov_on
     # --- coarse grid per lobe over (L, theta) with the lobe's roll and radius R
-    thetas = np.radians(np.arange(30.0, 151.0, 7.5))
+    # one way on and no run going on: a bend, deflecting up to 90 deg (wye branches at 135 deg
+    # come with a second way)
+    bend_only = len(lobes) == 1 and not straight_on
+    thetas = np.radians(np.arange(30.0, 101.0 if bend_only else 151.0, 7.5))
     l_grid = u_edge + np.linspace(0.0, 3.0 * big_r, 13)
     if any_roll:
         # the far wall of a turn lies past the turn's reference point
@@ -1085,7 +1088,8 @@ def _branches(
     lower = np.array([-0.5] + [math.radians(25.0), -10.0, 0.25 * big_r] * n_l)
     # (a side branch of a run that goes on is no wider than the run)
     rho_max = 1.05 * big_r if straight_on else 2.5 * big_r
-    upper = np.array([cfg.horizon] + [math.radians(150.0), 10.0, rho_max] * n_l)
+    th_max = math.radians(100.0 if bend_only else 150.0)
+    upper = np.array([cfg.horizon] + [th_max, 10.0, rho_max] * n_l)
     hole = None
     if straight_on and not any_roll:
         prior = (x0a.copy(), lower.copy(), upper.copy())

@@ -115,3 +115,17 @@ def test_noisy_tee_far_along_its_run_is_placed_by_the_hole_in_the_wall():
         assert abs(o.distance - t.distance) < 0.02  # thesis requirement
         assert abs(o.angle - t.angle) < math.radians(10.0)
         assert abs(o.diameter - t.diameter) < 0.005
+
+
+def test_noisy_bend_far_away_does_not_turn_back():
+    # a single way on with no run going on is a bend (at most 90 deg): the few noisy returns
+    # through a far opening once settled on a 150 deg deflection 10 cm beyond the bend
+    scan, truth, d = scan_layout(
+        "mitre_bend", 0.4, sensor="ydlidar_x4", seed=1, diameter=0.1, angle=1.3026, direction=-0.44
+    )
+    det = detect(scan, d)
+    assert det.kind == "bend", det.describe()
+    ((o, t),) = match(det.options, truth)
+    assert abs(o.distance - t.distance) < 0.02
+    assert abs(o.angle - t.angle) < math.radians(5.0)
+    assert abs(wrap(o.direction - t.direction)) < math.radians(5.0)
