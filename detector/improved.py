@@ -1130,20 +1130,25 @@ def _branches(
     lo_eq, up_eq = lower.copy(), upper.copy()
     lo_eq[3::3] = big_r
     up_eq[3::3] = big_r
-    x_eq, res_eq, w_eq = robust_gauss_newton(
-        None,
-        x_eq,
-        np.full(x_eq.size, 1e-5),
-        c=2.0 * c0 if any_roll else 2.0 * c_fin,
-        iterations=12 if any_roll else 8,
-        lower=lo_eq,
-        upper=up_eq,
-        c_final=c_fin,
-        step_tol=STEP_TOL,
-        anneal=ANNEAL,
-        cost_tol=COST_TOL,
-        resjac=lambda v: _line_resjac(p_all, v, n_l, True),
-    )
+    if not any_roll and bool(np.all(np.abs(x[3::3] - big_r) <= 0.01 * big_r)):
+        # the free fit found the clamped radius already: clamping it moves nothing that matters
+        res_eq = _line_resjac(p_all, x_eq, n_l, False)[0]
+        w_eq = tukey_weights(res_eq, c_fin)
+    else:
+        x_eq, res_eq, w_eq = robust_gauss_newton(
+            None,
+            x_eq,
+            np.full(x_eq.size, 1e-5),
+            c=2.0 * c0 if any_roll else 2.0 * c_fin,
+            iterations=12 if any_roll else 8,
+            lower=lo_eq,
+            upper=up_eq,
+            c_final=c_fin,
+            step_tol=STEP_TOL,
+            anneal=ANNEAL,
+            cost_tol=COST_TOL,
+            resjac=lambda v: _line_resjac(p_all, v, n_l, True),
+        )
     cost_free = tukey_cost(res, c_fin)
     cost_eq = tukey_cost(res_eq, c_fin)
     n_in = max(int((w > 0.1).sum()), 1)
