@@ -57,7 +57,7 @@ from numpy.typing import NDArray
 
 from detector.options import KINDS, StructureOption
 from pipe_env.generator import NetworkConfig, generate_network
-from pipe_env.geometry import Pose, clamp
+from pipe_env.geometry import Pose, clamp, norm3
 from pipe_env.network import PipeNetwork
 from pipe_env.plant import (
     BACK_OUT,
@@ -454,7 +454,7 @@ class _DecisionEnv(gym.Env):
         to_goal = None
         if goal is not None:
             rel = goal - odo.position
-            norm = float(np.linalg.norm(rel))
+            norm = norm3(rel)
             to_goal = rel / norm if norm > 1e-9 else None
             if to_goal is not None:  # backing out heads the other way
                 table[K_OPTIONS - 1, 14] = clamp(-float(odo.forward @ to_goal), -1.0, 1.0)

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.options import StructureOption
-from pipe_env.geometry import Pose, clamp, direction_from_angles, frame_from_forward
+from pipe_env.geometry import Pose, clamp, direction_from_angles, frame_from_forward, norm3
 from pipe_env.ground_truth import options_at
 from pipe_env.network import ROBOT_DIAMETER_RANGE, PipeNetwork
 from pipe_env.routing import (
@@ -396,7 +396,7 @@ class KinematicPlant:
         g = self.network.geometry[node]
         # the run whose outgoing axis is the matched true way on
         want = _world_vector(true, dec.pose)
-        run_out = min(runs, key=lambda r: float(np.linalg.norm(g.port(r.id).axis - want)))
+        run_out = min(runs, key=lambda r: norm3(g.port(r.id).axis - want))
         if turn_angle(self.network, node, dec.entry_run, run_out.id) > MAX_TURN:
             out.status, out.note = "jammed", "turn sharper than the robot can take"
             return out
