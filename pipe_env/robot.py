@@ -15,8 +15,8 @@ pipe axis by the drive (see below), oppose them (they stand in for the PIRATE's 
 other wall). Clamping is force controlled: the V folds until the apex wheels touch the wall with
 ``clamp_force``. One robot covers 57-125 mm by changing the V half-angle ``alpha``:
 ``D = 2 (leg_length sin(alpha) + wheel_offset cos(alpha) + wheel_radius)``. The clamped diameter is
-read back from the middle bending joint's angle (``2 alpha``) with gaussian encoder noise
-(``encoder_noise``, radians): :meth:`Robot.clamped_diameter`.
+read back from the joint angles (forward kinematics of the apex wheel in the front module's
+frame) with gaussian encoder noise (``encoder_noise``, radians): :meth:`Robot.clamped_diameter`.
 
 Drive model (and why): the front module is pulled by a soft weld to a mocap "drive target", and
 every follower module by a soft weld to the pose the front module had when it was at the
@@ -360,6 +360,7 @@ class Robot:
         self._apex_geom = np.zeros(model.ngeom, dtype=bool)
         for n in apex:
             self._apex_geom[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n)] = True
+        self._apex_wheel = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, apex[0])
         name = f"{PREFIX}bend_{c.middle_joint}_y"
         self._apex_qpos = int(
             model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)]
@@ -405,12 +406,19 @@ class Robot:
         return float(self._need_bound().qpos[self._roll_qpos])
 
     def clamped_diameter(self, rng: np.random.Generator | None = None) -> float:
-        """Pipe diameter read back from the V apex joint (with encoder noise if ``rng``), m."""
-        q = float(self._need_bound().qpos[self._apex_qpos])
-        if rng is not None and self.config.encoder_noise > 0:
-            q += float(rng.normal(0.0, self.config.encoder_noise))
-        alpha = 0.5 * abs(q)
-        return self.config.clamp_diameter_at(min(alpha, math.radians(89.0)))
+        """Pipe diameter spanned by the clamping V, m: twice the depth of the apex wheel below
+        the front module's axis, by forward kinematics of the joint angles (the encoders), with
+        gaussian encoder noise (``encoder_noise`` on the apex angle) if ``rng`` is given."""
+        d = self._need_bound()
+        c = self.config
+        b0 = self.body_ids[0]
+        rot = d.xmat[b0].reshape(3, 3)
+        rel = rot.T @ (d.geom_xpos[self._apex_wheel] - d.xpos[b0])
+        depth = -float(rel[2]) + c.wheel_radius
+        if rng is not None and c.encoder_noise > 0:
+            alpha = 0.5 * abs(float(d.qpos[self._apex_qpos]))
+            depth += c.leg_length * math.cos(alpha) * float(rng.normal(0.0, c.encoder_noise))
+        return 2.0 * max(depth, 0.5 * c.width)
 
     def apex_force(self) -> float:
         """Normal force on the V apex wheels (the clamp's contact with the wall), N."""
