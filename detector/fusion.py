@@ -338,9 +338,7 @@ class StructureTracker:
             angle = math.acos(max(-1.0, min(1.0, float(v_s @ axis_s))))
             perp = v_s - (v_s @ axis_s) * axis_s
             # a way straight on has no direction (0 by convention)
-            direction = (
-                math.atan2(float(perp[2]), float(perp[1])) if angle > STRAIGHT_ON else 0.0
-            )
+            direction = math.atan2(float(perp[2]), float(perp[1])) if angle > STRAIGHT_ON else 0.0
             if kind == "closure":
                 angle, direction = 0.0, 0.0
             diameter = 0.0 if kind == "closure" else max(0.0, way.diameter)

@@ -70,7 +70,7 @@ from pipe_env.plant import (
     option_vector,
 )
 from pipe_env.routing import MAX_TURN, edge_geodesic, edge_length, locate, route, turn_angle
-from pipe_env.sensing_model import DETECTOR_ERROR_MODELS
+from pipe_env.sensing_model import DETECTORS, error_model_for
 from pipe_env.way_log import WayLog
 
 K_OPTIONS = 6
@@ -136,10 +136,8 @@ class _DecisionEnv(gym.Env):
         network_pool: int | None = None,
         pool_seed: int = 0,
     ) -> None:
-        if detector not in DETECTOR_ERROR_MODELS:
-            raise ValueError(
-                f"detector={detector!r} is not allowed; use one of {sorted(DETECTOR_ERROR_MODELS)}"
-            )
+        if detector not in DETECTORS:
+            raise ValueError(f"detector={detector!r} is not allowed; use one of {DETECTORS}")
         if fidelity not in FIDELITIES:
             raise ValueError(f"fidelity={fidelity!r} is not allowed; use one of {FIDELITIES}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -229,7 +227,12 @@ class _DecisionEnv(gym.Env):
 
     def _make_plant(self, network: PipeNetwork) -> Any:
         if self.fidelity == "fast":
-            return KinematicPlant(network, self.detector, self.trigger_distance)
+            return KinematicPlant(
+                network,
+                self.detector,
+                self.trigger_distance,
+                error_model=error_model_for(self.detector, self.lidar),
+            )
         from pipe_env.plant_full import PhysicalPlant
 
         return PhysicalPlant(

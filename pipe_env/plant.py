@@ -39,7 +39,7 @@ from pipe_env.routing import (
     locate,
     turn_angle,
 )
-from pipe_env.sensing_model import DETECTOR_ERROR_MODELS, DetectionErrorModel
+from pipe_env.sensing_model import DETECTORS, DetectionErrorModel, error_model_for
 
 BACK_OUT = "back_out"
 
@@ -173,13 +173,11 @@ class KinematicPlant:
     ) -> None:
         if network.start_pose is None:
             raise ValueError("the network has no start_pose; the robot needs one")
-        if detector not in DETECTOR_ERROR_MODELS:
-            raise ValueError(
-                f"detector {detector!r} is unknown; allowed: {sorted(DETECTOR_ERROR_MODELS)}"
-            )
+        if detector not in DETECTORS:
+            raise ValueError(f"detector {detector!r} is unknown; allowed: {DETECTORS}")
         self.network = network
         self.detector = detector
-        self.error_model = error_model or DETECTOR_ERROR_MODELS[detector]
+        self.error_model = error_model or error_model_for(detector)
         self.trigger_distance = float(trigger_distance)
         self.tolerance = tolerance or ExecutionTolerance()
         self.speed = float(speed)

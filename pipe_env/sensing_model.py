@@ -3,14 +3,21 @@
 The ``fast`` fidelity of the environments does not ray-cast or run the detector; it reports the
 true options of the structure ahead, perturbed the way a detector errs: gaussian errors on
 distance, diameter, angle and direction, a missed way on, a phantom way on, a wrong kind. The
-models for ``"improved"`` and ``"thesis"`` are measured (see ``DETECTOR_ERROR_MODELS``'s comments
-and ``benchmarks/calibrate_sensing.py``); ``"ground_truth"`` is exact (the oracle ablation).
+models for ``"improved"`` and ``"thesis"`` are measured per LiDAR preset by
+``benchmarks/calibrate_sensing.py`` (the real detector on ray-cast scans, fused over the approach
+exactly as the full fidelity does, compared with ground truth at the trigger distance) and stored
+in ``pipe_env/data/sensing_models.json``; :func:`error_model_for` picks the entry of a detector
+and a sensor. ``"ground_truth"`` is exact (the oracle ablation).
 """
 
 from __future__ import annotations
 
+import json
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
+from functools import lru_cache
+from importlib import resources
+from typing import Any
 
 import numpy as np
 
@@ -122,34 +129,61 @@ def _confuse(kind: str, u: float) -> str:
     return others[int(u * len(others)) % len(others)]
 
 
-#: Error models of the fast fidelity, by detector name.
-DETECTOR_ERROR_MODELS: dict[str, DetectionErrorModel] = {
-    "ground_truth": DetectionErrorModel("ground_truth"),
-    # The thesis's own 3D figures (its tables 5.2, 5.3 and 6.1, 40-10 cm window): max errors of
-    # 4 cm distance, 1 cm diameter, 2 deg angle and 11 deg direction; a std of about 0.4 x the
-    # max error. The bend direction error grew to 28 deg near the bend (5.1.2): miss and
-    # misclassification rates reflect its type-1 confusion close to structures.
-    "thesis": DetectionErrorModel(
-        "thesis",
-        distance_sigma=0.016,
-        diameter_sigma=0.004,
-        angle_sigma=math.radians(0.8),
-        direction_sigma=math.radians(4.5),
-        miss_rate=0.05,
-        phantom_rate=0.02,
-        misclass_rate=0.05,
-        confidence=0.7,
-    ),
-    # Placeholder replaced by the calibration of the improved detector (see module docstring).
-    "improved": DetectionErrorModel(
-        "improved",
-        distance_sigma=0.003,
-        diameter_sigma=0.001,
-        angle_sigma=math.radians(0.3),
-        direction_sigma=math.radians(0.6),
-        miss_rate=0.005,
-        phantom_rate=0.002,
-        misclass_rate=0.005,
-        confidence=0.95,
-    ),
-}
+#: Detectors the environments accept.
+DETECTORS = ("improved", "thesis", "ground_truth")
+
+#: Used only when no calibrated entry exists for a sensor (a custom LidarSpec whose name is not
+#: a preset): the thesis's own 3D figures (its tables 5.2, 5.3 and 6.1, 40-10 cm window): max
+#: errors of 4 cm distance, 1 cm diameter, 2 deg angle and 11 deg direction, a std of about
+#: 0.4 x the max error; miss and misclassification rates reflect its type-1 confusion close to
+#: structures (5.1.2).
+THESIS_LITERATURE_MODEL = DetectionErrorModel(
+    "thesis/literature",
+    distance_sigma=0.016,
+    diameter_sigma=0.004,
+    angle_sigma=math.radians(0.8),
+    direction_sigma=math.radians(4.5),
+    miss_rate=0.05,
+    phantom_rate=0.02,
+    misclass_rate=0.05,
+    confidence=0.7,
+)
+
+
+@lru_cache(maxsize=1)
+def calibrated_models() -> dict[str, DetectionErrorModel]:
+    """The calibrated models by ``"detector/preset"`` (empty if the data file is missing)."""
+    try:
+        text = resources.files("pipe_env").joinpath("data/sensing_models.json").read_text()
+    except FileNotFoundError:
+        return {}
+    names = {f.name for f in fields(DetectionErrorModel)}
+    out: dict[str, DetectionErrorModel] = {}
+    for key, entry in json.loads(text)["models"].items():
+        out[key] = DetectionErrorModel(**{k: v for k, v in entry.items() if k in names})
+    return out
+
+
+def error_model_for(detector: str, lidar: Any = "ideal") -> DetectionErrorModel:
+    """The fast fidelity's error model of ``detector`` with the sensor ``lidar``.
+
+    Args:
+        detector: one of :data:`DETECTORS`.
+        lidar: a preset name or a ``LidarSpec`` (its ``name`` selects the calibrated entry).
+    """
+    if detector not in DETECTORS:
+        raise ValueError(f"detector={detector!r} is not allowed; use one of {DETECTORS}")
+    if detector == "ground_truth":
+        return DetectionErrorModel("ground_truth")
+    preset = lidar if isinstance(lidar, str) else str(getattr(lidar, "name", "ideal"))
+    models = calibrated_models()
+    if f"{detector}/{preset}" in models:
+        return models[f"{detector}/{preset}"]
+    if detector == "thesis":
+        return THESIS_LITERATURE_MODEL
+    if f"{detector}/ideal" in models:
+        return models[f"{detector}/ideal"]
+    raise ValueError(
+        f"no calibrated sensing model for detector={detector!r}; run "
+        "benchmarks/calibrate_sensing.py --write"
+    )

@@ -284,7 +284,7 @@ def test_goal_greedy_and_left_hand_choose_sensibly() -> None:
 
 def test_taken_feature_remembers_ways_at_a_junction() -> None:
     net = layouts.t_junction(0.1, direction=0.0).with_goals([[0, 0.5, 0]])
-    env = gym.make("pipenav/PipeNav-v0", network=net, detector="thesis")
+    env = gym.make("pipenav/PipeNav-v0", network=net, detector="ground_truth")
     obs, info = env.reset(seed=3)
     taken = OPTION_FEATURES.index("taken")
     assert not obs["options"][:, taken].any()
