@@ -602,9 +602,22 @@ class _DecisionEnv(gym.Env):
         return state
 
 
+#: Pool networks generated in this process, shared by its environments (an evaluation builds
+#: several envs on the same pool): (config, pool_seed, index) -> network.
+_POOL_CACHE: dict[tuple[str, int, int], PipeNetwork] = {}
+_POOL_CACHE_SIZE = 4096
+
+
 def pool_network(config: NetworkConfig, pool_seed: int, index: int) -> PipeNetwork:
     """Network ``index`` of the pool ``pool_seed`` (the same for every process and run)."""
-    return generate_network(config, np.random.default_rng([pool_seed, index]))
+    key = (repr(config), int(pool_seed), int(index))
+    net = _POOL_CACHE.get(key)
+    if net is None:
+        net = generate_network(config, np.random.default_rng([pool_seed, index]))
+        if len(_POOL_CACHE) >= _POOL_CACHE_SIZE:
+            _POOL_CACHE.pop(next(iter(_POOL_CACHE)))
+        _POOL_CACHE[key] = net
+    return net
 
 
 def _roll_of(pose: Pose) -> float:
