@@ -29,6 +29,14 @@ from pipe_env.plant import match_option
 from pipe_env.world import build_world
 
 OUT = Path(__file__).resolve().parents[1] / "pipe_env" / "data" / "sensing_models.json"
+#: An estimate beyond the thesis requirements (2 cm, 5 deg; 5 mm for the diameter) is a gross
+#: error; the fast fidelity draws gross and ordinary errors from separate gaussians.
+GROSS = {
+    "distance": 0.02,
+    "diameter": 0.005,
+    "angle": math.radians(5.0),
+    "direction": math.radians(5.0),
+}
 KINDS = ("mitre_bend", "long_bend", "tee_run", "tee_stem", "wye_run", "cross", "reducer", "closure")
 
 
@@ -82,6 +90,8 @@ def calibrate(
 ) -> dict:
     rng = np.random.default_rng(seed)
     errs = {"distance": [], "diameter": [], "angle": [], "direction": []}
+    gross: list[bool] = []  # per matched way on: beyond the thesis requirements
+    gross_dir: list[bool] = []  # the same, for the ways whose direction is defined
     n_struct = n_kind_ok = n_missed_ways = n_true_ways = n_phantoms = n_unconfirmed = 0
     confidences = []
     for i in range(samples):
@@ -108,18 +118,36 @@ def calibrate(
             errs["distance"].append(o.distance - t.distance)
             errs["diameter"].append(o.diameter - t.diameter)
             errs["angle"].append(o.angle - t.angle)
+            bad = (
+                abs(o.distance - t.distance) > GROSS["distance"]
+                or abs(o.diameter - t.diameter) > GROSS["diameter"]
+                or abs(o.angle - t.angle) > GROSS["angle"]
+            )
             if t.angle > math.radians(10):
-                errs["direction"].append(
-                    (o.direction - t.direction + math.pi) % (2 * math.pi) - math.pi
-                )
+                e_dir = (o.direction - t.direction + math.pi) % (2 * math.pi) - math.pi
+                errs["direction"].append(e_dir)
+                bad = bad or abs(e_dir) > GROSS["direction"]
+                gross_dir.append(bad)
+            gross.append(bad)
         n_missed_ways += len(truth) - len(matched)
-    rms = {k: float(np.sqrt(np.mean(np.square(v)))) if v else 0.0 for k, v in errs.items()}
+    gross_flags = np.array(gross, dtype=bool)
+
+    def rms(values: list[float], flags: np.ndarray, want: bool) -> float:
+        v = np.asarray(values, dtype=float)[flags == want] if values else np.zeros(0)
+        return round(float(np.sqrt(np.mean(np.square(v)))), 5) if v.size else 0.0
+
+    dir_flags = np.array(gross_dir, dtype=bool)
     return {
         "name": f"{method}/{preset}",
-        "distance_sigma": round(rms["distance"], 5),
-        "diameter_sigma": round(rms["diameter"], 5),
-        "angle_sigma": round(rms["angle"], 5),
-        "direction_sigma": round(rms["direction"], 5),
+        "distance_sigma": rms(errs["distance"], gross_flags, False),
+        "diameter_sigma": rms(errs["diameter"], gross_flags, False),
+        "angle_sigma": rms(errs["angle"], gross_flags, False),
+        "direction_sigma": rms(errs["direction"], dir_flags, False),
+        "gross_rate": round(float(gross_flags.mean()) if gross_flags.size else 0.0, 4),
+        "gross_distance_sigma": rms(errs["distance"], gross_flags, True),
+        "gross_diameter_sigma": rms(errs["diameter"], gross_flags, True),
+        "gross_angle_sigma": rms(errs["angle"], gross_flags, True),
+        "gross_direction_sigma": rms(errs["direction"], dir_flags, True),
         "miss_rate": round((n_missed_ways) / max(n_true_ways, 1), 4),
         "phantom_rate": round(n_phantoms / max(n_struct, 1), 4),
         "misclass_rate": round(1.0 - n_kind_ok / max(n_struct - n_unconfirmed, 1), 4),
@@ -140,10 +168,10 @@ def main() -> None:
     args = parser.parse_args()
     models = {}
     print(
-        "| detector/preset | dist rms cm | diam rms mm | angle rms deg | dir rms deg | "
+        "| detector/preset | dist rms cm | diam rms mm | angle rms deg | dir rms deg | gross | "
         "miss | phantom | misclass | unconfirmed | s |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for method in ("improved", "thesis"):
         for preset in ("ideal", "ydlidar_x4", "ls02"):
             t0 = time.perf_counter()
@@ -152,7 +180,8 @@ def main() -> None:
             print(
                 f"| {m['name']} | {m['distance_sigma'] * 100:.2f} | "
                 f"{m['diameter_sigma'] * 1000:.1f} | {math.degrees(m['angle_sigma']):.2f} | "
-                f"{math.degrees(m['direction_sigma']):.2f} | {m['miss_rate']:.3f} | "
+                f"{math.degrees(m['direction_sigma']):.2f} | {m['gross_rate']:.3f} | "
+                f"{m['miss_rate']:.3f} | "
                 f"{m['phantom_rate']:.3f} | {m['misclass_rate']:.3f} | "
                 f"{m['unconfirmed']}/{m['structures']} | {time.perf_counter() - t0:.0f} |",
                 flush=True,

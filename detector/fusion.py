@@ -22,6 +22,10 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
   from at least ``confirm_count`` consistent detections; it is dropped only when its evidence
   falls to zero (a confirmed track first has to lose it all, a tentative one is replaced by a
   better-supported newcomer).
+- **Lets nearer scans overrule.** Disagreeing detections are fused into a *challenger* track; once
+  the challenger has ``confirm_count - 1`` consistent detections and more trust weight than the
+  track (nearer scans weigh more), it replaces the track: a tee seen from its stem that looked
+  like a closure from 45 cm is a junction once the scans from 30 and 20 cm agree on it.
 - **Hands over** near the structure: when the fused reference point is closer than
   ``handover_distance`` (the detector's blind zone, about one diameter), detections that
   disagree ("straight", a closure-like reading, or nothing) are ignored; the confirmed estimate
@@ -44,6 +48,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from detector.detection import Detection
 from detector.options import StructureOption, option_order
+
+#: Ways on deflected less than this count as straight on (their direction is 0), radians.
+STRAIGHT_ON = math.radians(2.0)
 
 _FAMILY = {"closure": "end", "reducer": "reducer", "bend": "turn", "junction": "turn"}
 
@@ -164,11 +171,13 @@ class StructureTracker:
         self.handover_distance = float(handover_distance)
         self.pass_margin = float(pass_margin)
         self._track: _Track | None = None
+        self._challenger: _Track | None = None
         self._last_pose: tuple[NDArray, NDArray] | None = None
 
     def reset(self) -> None:
         """Forget the tracked structure."""
         self._track = None
+        self._challenger = None
         self._last_pose = None
 
     # ---------------------------------------------------------------- update
@@ -189,6 +198,7 @@ class StructureTracker:
         # finished: the sensor passed the structure
         if tr is not None and self._distance(tr, pos) < -self.pass_margin:
             self._track = tr = None
+            self._challenger = None
         handed_over = False
         if detection.kind == "straight" or not detection.options:
             if tr is not None:
@@ -210,14 +220,28 @@ class StructureTracker:
                 handed_over = True  # too close to see it: keep the confirmed estimate
             else:
                 tr.evidence -= self.miss_penalty
+                challenger = self._challenge(obs)
                 if tr.evidence <= 0.0 or (not tr.confirmed and obs["weight"] > tr.weight):
                     self._track = self._new_track(obs)
+                    self._challenger = None
+                elif challenger.hits >= self.confirm_count - 1 and challenger.weight > tr.weight:
+                    self._track = challenger
+                    self._challenger = None
         tr = self._track
         if tr is not None and not tr.confirmed:
             tr.confirmed = tr.hits >= self.confirm_count and tr.evidence >= self.confirm_evidence
         return self._state(handed_over)
 
     # ---------------------------------------------------------------- internals
+    def _challenge(self, obs: dict[str, Any]) -> _Track:
+        """Fuse a detection that disagrees with the track into the challenger track."""
+        ch = self._challenger
+        if ch is None or not self._consistent(ch, obs):
+            ch = self._challenger = self._new_track(obs)
+        else:
+            self._fuse(ch, obs)
+        return ch
+
     def _observation(self, det: Detection, pos: NDArray, rot: NDArray) -> dict[str, Any]:
         axis_s = np.asarray(det.diagnostics.get("pipe_axis_sensor") or [1.0, 0.0, 0.0], float)
         if axis_s.shape != (3,) or not np.all(np.isfinite(axis_s)):
@@ -313,9 +337,8 @@ class StructureTracker:
             axis_s = rot.T @ tr.axis
             angle = math.acos(max(-1.0, min(1.0, float(v_s @ axis_s))))
             perp = v_s - (v_s @ axis_s) * axis_s
-            direction = (
-                math.atan2(float(perp[2]), float(perp[1])) if np.linalg.norm(perp) > 1e-6 else 0.0
-            )
+            # a way straight on has no direction (0 by convention)
+            direction = math.atan2(float(perp[2]), float(perp[1])) if angle > STRAIGHT_ON else 0.0
             if kind == "closure":
                 angle, direction = 0.0, 0.0
             diameter = 0.0 if kind == "closure" else max(0.0, way.diameter)

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
 
-from pipe_env.geometry import Pose, clamp, cross, frame_from_forward, rotation_about
+from pipe_env.geometry import Pose, clamp, cross, frame_from_forward, norm3, rotation_about
 
 if TYPE_CHECKING:
     from pipe_env.network import PipeNetwork
@@ -63,7 +63,7 @@ class Piece:
         radial = rot @ (self.p0 - self.arc_centre)
         point = self.arc_centre + radial
         tangent = cross(self.arc_normal, radial)
-        return point, tangent / np.linalg.norm(tangent)
+        return point, tangent / norm3(tangent)
 
     def project(self, point: NDArray[np.float64]) -> float:
         """Arc length of the piece point closest to ``point``."""
@@ -74,7 +74,7 @@ class Piece:
             return clamp((point - self.p0) @ t, 0.0, self.length)
         assert self.arc_centre is not None and self.arc_normal is not None
         u = self.p0 - self.arc_centre
-        u /= np.linalg.norm(u)
+        u /= norm3(u)
         w = cross(self.arc_normal, u)
         rel = point - self.arc_centre
         phi = float(np.arctan2(rel @ w, rel @ u))
@@ -125,7 +125,7 @@ class Centreline:
             **arc: object,
         ) -> None:
             length = (
-                float(np.linalg.norm(p1 - p0))
+                norm3(p1 - p0)
                 if kind == "line"
                 else float(
                     arc["arc_radius"] * arc["arc_angle"]  # type: ignore[operator]
@@ -218,14 +218,14 @@ class Centreline:
         for arc in self._arcs:
             s = arc.project(x)
             p, _ = arc.point_tangent(s)
-            dist = float(np.linalg.norm(x - p))
+            dist = norm3(x - p)
             if dist < best_d - 1e-12:
                 best_piece, best_s, best_d = arc, s, dist
         return self.point_on(best_piece, best_s, x)
 
     def point_on(self, piece: Piece, s: float, query: NDArray | None = None) -> CentrelinePoint:
         p, tangent = piece.point_tangent(s)
-        dist = float(np.linalg.norm(query - p)) if query is not None else 0.0
+        dist = norm3(query - p) if query is not None else 0.0
         return CentrelinePoint(piece, float(s), p, tangent, dist, piece.diameter_at(s))
 
     def vertex_distance(self, a: Vertex, b: Vertex) -> float:

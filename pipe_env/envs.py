@@ -57,7 +57,7 @@ from numpy.typing import NDArray
 
 from detector.options import KINDS, StructureOption
 from pipe_env.generator import NetworkConfig, generate_network
-from pipe_env.geometry import Pose, clamp
+from pipe_env.geometry import Pose, clamp, norm3
 from pipe_env.network import PipeNetwork
 from pipe_env.plant import (
     BACK_OUT,
@@ -70,7 +70,7 @@ from pipe_env.plant import (
     option_vector,
 )
 from pipe_env.routing import MAX_TURN, edge_geodesic, edge_length, locate, route, turn_angle
-from pipe_env.sensing_model import DETECTOR_ERROR_MODELS
+from pipe_env.sensing_model import DETECTORS, error_model_for
 from pipe_env.way_log import WayLog
 
 K_OPTIONS = 6
@@ -136,10 +136,8 @@ class _DecisionEnv(gym.Env):
         network_pool: int | None = None,
         pool_seed: int = 0,
     ) -> None:
-        if detector not in DETECTOR_ERROR_MODELS:
-            raise ValueError(
-                f"detector={detector!r} is not allowed; use one of {sorted(DETECTOR_ERROR_MODELS)}"
-            )
+        if detector not in DETECTORS:
+            raise ValueError(f"detector={detector!r} is not allowed; use one of {DETECTORS}")
         if fidelity not in FIDELITIES:
             raise ValueError(f"fidelity={fidelity!r} is not allowed; use one of {FIDELITIES}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -229,7 +227,12 @@ class _DecisionEnv(gym.Env):
 
     def _make_plant(self, network: PipeNetwork) -> Any:
         if self.fidelity == "fast":
-            return KinematicPlant(network, self.detector, self.trigger_distance)
+            return KinematicPlant(
+                network,
+                self.detector,
+                self.trigger_distance,
+                error_model=error_model_for(self.detector, self.lidar),
+            )
         from pipe_env.plant_full import PhysicalPlant
 
         return PhysicalPlant(
@@ -454,7 +457,7 @@ class _DecisionEnv(gym.Env):
         to_goal = None
         if goal is not None:
             rel = goal - odo.position
-            norm = float(np.linalg.norm(rel))
+            norm = norm3(rel)
             to_goal = rel / norm if norm > 1e-9 else None
             if to_goal is not None:  # backing out heads the other way
                 table[K_OPTIONS - 1, 14] = clamp(-float(odo.forward @ to_goal), -1.0, 1.0)
@@ -599,9 +602,22 @@ class _DecisionEnv(gym.Env):
         return state
 
 
+#: Pool networks generated in this process, shared by its environments (an evaluation builds
+#: several envs on the same pool): (config, pool_seed, index) -> network.
+_POOL_CACHE: dict[tuple[str, int, int], PipeNetwork] = {}
+_POOL_CACHE_SIZE = 4096
+
+
 def pool_network(config: NetworkConfig, pool_seed: int, index: int) -> PipeNetwork:
     """Network ``index`` of the pool ``pool_seed`` (the same for every process and run)."""
-    return generate_network(config, np.random.default_rng([pool_seed, index]))
+    key = (repr(config), int(pool_seed), int(index))
+    net = _POOL_CACHE.get(key)
+    if net is None:
+        net = generate_network(config, np.random.default_rng([pool_seed, index]))
+        if len(_POOL_CACHE) >= _POOL_CACHE_SIZE:
+            _POOL_CACHE.pop(next(iter(_POOL_CACHE)))
+        _POOL_CACHE[key] = net
+    return net
 
 
 def _roll_of(pose: Pose) -> float:

@@ -20,6 +20,11 @@ FALLBACK_UP = np.array([1.0, 0.0, 0.0])
 _VERTICAL_COS = 0.999
 
 
+def norm3(v: NDArray[np.float64]) -> float:
+    """Euclidean length of a small 1-D vector (much cheaper than ``np.linalg.norm`` per call)."""
+    return math.sqrt(float(np.dot(v, v)))
+
+
 def unit(v: ArrayLike, name: str = "vector") -> NDArray[np.float64]:
     """Return ``v`` normalised; raise ``ValueError`` naming ``name`` if it is zero or not finite."""
     a = np.asarray(v, dtype=float).reshape(3)
@@ -116,7 +121,7 @@ def segment_distance(
     d1, d2, r = p1 - p0, q1 - q0, p0 - q0
     a, e, f = float(d1 @ d1), float(d2 @ d2), float(d2 @ r)
     if a < 1e-18 and e < 1e-18:
-        return float(np.linalg.norm(r))
+        return norm3(r)
     if a < 1e-18:
         s, t = 0.0, float(np.clip(f / e, 0.0, 1.0))
     else:
@@ -132,7 +137,7 @@ def segment_distance(
                 t, s = 0.0, float(np.clip(-c / a, 0.0, 1.0))
             elif t > 1.0:
                 t, s = 1.0, float(np.clip((b - c) / a, 0.0, 1.0))
-    return float(np.linalg.norm((p0 + d1 * s) - (q0 + d2 * t)))
+    return norm3((p0 + d1 * s) - (q0 + d2 * t))
 
 
 def point_segment_projection(
@@ -140,7 +145,7 @@ def point_segment_projection(
 ) -> tuple[float, NDArray[np.float64]]:
     """Arc length along a-b of the closest point to ``point`` and that closest point."""
     d = b - a
-    length = float(np.linalg.norm(d))
+    length = norm3(d)
     if length < 1e-15:
         return 0.0, a.copy()
     s = float(np.clip((point - a) @ d / length, 0.0, length))

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.options import StructureOption, option_order
-from pipe_env.geometry import Pose, clamp
+from pipe_env.geometry import Pose, clamp, norm3
 from pipe_env.routing import locate
 
 if TYPE_CHECKING:
@@ -40,11 +40,11 @@ def option_angles(
     The roll direction uses the part of ``outgoing`` perpendicular to the incoming axis,
     expressed in the pose's y (left) and z (up) axes; it is 0 for a way straight on.
     """
-    t = incoming / np.linalg.norm(incoming)
-    o = outgoing / np.linalg.norm(outgoing)
+    t = incoming / norm3(incoming)
+    o = outgoing / norm3(outgoing)
     angle = math.acos(clamp(t @ o, -1.0, 1.0))
     perp = o - (o @ t) * t
-    if np.linalg.norm(perp) < 1e-9:
+    if norm3(perp) < 1e-9:
         return angle, 0.0
     return angle, math.atan2(float(perp @ pose.up), float(perp @ pose.left))
 

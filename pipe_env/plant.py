@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.options import StructureOption
-from pipe_env.geometry import Pose, clamp, direction_from_angles, frame_from_forward
+from pipe_env.geometry import Pose, clamp, direction_from_angles, frame_from_forward, norm3
 from pipe_env.ground_truth import options_at
 from pipe_env.network import ROBOT_DIAMETER_RANGE, PipeNetwork
 from pipe_env.routing import (
@@ -39,7 +39,7 @@ from pipe_env.routing import (
     locate,
     turn_angle,
 )
-from pipe_env.sensing_model import DETECTOR_ERROR_MODELS, DetectionErrorModel
+from pipe_env.sensing_model import DETECTORS, DetectionErrorModel, error_model_for
 
 BACK_OUT = "back_out"
 
@@ -173,13 +173,11 @@ class KinematicPlant:
     ) -> None:
         if network.start_pose is None:
             raise ValueError("the network has no start_pose; the robot needs one")
-        if detector not in DETECTOR_ERROR_MODELS:
-            raise ValueError(
-                f"detector {detector!r} is unknown; allowed: {sorted(DETECTOR_ERROR_MODELS)}"
-            )
+        if detector not in DETECTORS:
+            raise ValueError(f"detector {detector!r} is unknown; allowed: {DETECTORS}")
         self.network = network
         self.detector = detector
-        self.error_model = error_model or DETECTOR_ERROR_MODELS[detector]
+        self.error_model = error_model or error_model_for(detector)
         self.trigger_distance = float(trigger_distance)
         self.tolerance = tolerance or ExecutionTolerance()
         self.speed = float(speed)
@@ -396,7 +394,7 @@ class KinematicPlant:
         g = self.network.geometry[node]
         # the run whose outgoing axis is the matched true way on
         want = _world_vector(true, dec.pose)
-        run_out = min(runs, key=lambda r: float(np.linalg.norm(g.port(r.id).axis - want)))
+        run_out = min(runs, key=lambda r: norm3(g.port(r.id).axis - want))
         if turn_angle(self.network, node, dec.entry_run, run_out.id) > MAX_TURN:
             out.status, out.note = "jammed", "turn sharper than the robot can take"
             return out

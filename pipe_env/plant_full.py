@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import detector as detection
-from detector.fusion import StructureTracker
+from detector.fusion import StructureTracker, TrackState
 from detector.options import StructureOption, option_order
 from detector.scan import Scan
 from pipe_env.geometry import Pose
@@ -128,6 +128,7 @@ class PhysicalPlant:
         self._started = True
         self.rng = rng
         self.tracker = StructureTracker()
+        self._track_state: TrackState | None = None
         self.decision: Decision | None = None
         self.detection_log: list[dict] = []
         self.last_scan: Scan | None = None
@@ -230,6 +231,7 @@ class PhysicalPlant:
                 return "continue"
             det = detection.detect(scan, float(state.clamped_diameter), method=self.detector)
             track = self.tracker.update(det, scan.nominal_positions[-1], scan.nominal_rotations[-1])
+            self._track_state = track
             fused = track.detection if track.confirmed else det
             self.detection_log.append(
                 detection_record(self.sim_time, node, truth, list(fused.options), fused.kind)
@@ -277,8 +279,8 @@ class PhysicalPlant:
             return Decision(
                 list(truth), truth[0].kind if truth else "straight", truth, node, entry, pose
             )
-        state = self.tracker.state() if hasattr(self.tracker, "state") else None
-        fused = state.detection if state is not None else None
+        state = self._track_state
+        fused = state.detection if state is not None and state.confirmed else None
         if fused is None or not fused.options:
             last = self.detection_log[-1] if self.detection_log else None
             options = [StructureOption(**o) for o in last["options"]] if last else []
@@ -340,6 +342,7 @@ class PhysicalPlant:
         if len(ways) > 1 and not (self.junctions and self.junctions[-1][1] == dec.node_id):
             self.junctions.append((odometer_at_decision, dec.node_id))
         self.tracker.reset()
+        self._track_state = None
         self.decision = None
         if self._goal_reached(goal):
             out.status = "goal"
@@ -360,6 +363,7 @@ class PhysicalPlant:
                 out.note = f"backing out ended {outcome.status}: {outcome.reason}"
         self._odometer = target
         self.tracker.reset()
+        self._track_state = None
         self.decision = None
         return out
 

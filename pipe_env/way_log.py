@@ -38,7 +38,8 @@ class WayLog:
         if not self._pos:
             return 0
         p = np.asarray(position, dtype=float)
-        near = np.linalg.norm(np.array(self._pos) - p, axis=1) < self.radius
+        rel = np.array(self._pos) - p
+        near = np.einsum("ij,ij->i", rel, rel) < self.radius * self.radius
         n = 0
         for i in np.flatnonzero(near):
             v = self._vec[i]

@@ -131,3 +131,51 @@ def test_reset_and_validation():
         tr.update(straight(), np.array([np.nan, 0, 0]), EYE)
     with pytest.raises(ValueError, match="gate"):
         StructureTracker(gate=-1.0)
+
+
+def closure(distance, conf=0.9):
+    return Detection("closure", [StructureOption("closure", distance, 0.0, 0.0, 0.0, conf)], conf)
+
+
+def tee(distance, conf=0.9, diameter=0.06):
+    opts = [
+        StructureOption("junction", distance, diameter, -math.pi / 2, math.pi / 2, conf),
+        StructureOption("junction", distance, diameter, math.pi / 2, math.pi / 2, conf),
+    ]
+    return Detection("junction", opts, conf)
+
+
+def test_nearer_disagreeing_scans_overrule_a_confirmed_far_reading():
+    # a tee seen from its stem looks like a closure from far away (its far wall); from nearer,
+    # alternating readings say junction: the nearer ones win
+    tr = StructureTracker()
+    ref = 1.0
+    for x in (0.55, 0.6, 0.65):
+        s = tr.update(closure(ref + 0.03 - x), np.array([x, 0.0, 0.0]), EYE)
+    assert s.confirmed and s.detection.kind == "closure"
+    s = tr.update(tee(ref - 0.7), np.array([0.7, 0.0, 0.0]), EYE)
+    assert s.detection.kind == "closure"  # one nearer scan is not enough
+    s = tr.update(closure(ref + 0.03 - 0.75), np.array([0.75, 0.0, 0.0]), EYE)
+    s = tr.update(tee(ref - 0.8), np.array([0.8, 0.0, 0.0]), EYE)
+    assert s.detection.kind == "junction"
+    s = tr.update(tee(ref - 0.82), np.array([0.82, 0.0, 0.0]), EYE)
+    assert s.confirmed and s.detection.kind == "junction"
+    assert [round(o.direction, 6) for o in s.detection.options] == pytest.approx(
+        [-math.pi / 2, math.pi / 2]
+    )
+
+
+def test_a_way_straight_on_has_direction_zero_after_fusion():
+    def tee_run(d):
+        opts = [
+            StructureOption("junction", d, 0.1, 0.7, 0.01, 0.9),  # straight on, 0.6 deg off
+            StructureOption("junction", d, 0.1, 1.0, math.pi / 2, 0.9),
+        ]
+        return Detection("junction", opts, 0.9)
+
+    tr = StructureTracker()
+    rot = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # rolled 90 deg
+    for x in (0.6, 0.62, 0.64):
+        s = tr.update(tee_run(1.0 - x), np.array([x, 0.0, 0.0]), rot)
+    straight_on = [o for o in s.detection.options if o.angle < 0.02]
+    assert len(straight_on) == 1 and straight_on[0].direction == 0.0

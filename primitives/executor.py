@@ -1,0 +1,689 @@
+"""The executor: runs primitive sequences on the MuJoCo robot at a fixed control rate.
+
+It owns the robot's drive state (see the drive model in :mod:`pipe_env.robot`):
+
+- the drive target of the front module, moved every control tick (``CONTROL_DT``) forward along
+  the front's heading, turned by the steering bend, and re-anchored to where the walls let the
+  front module be (lateral offsets beyond ``ANCHOR_POS``, heading beyond ``ANCHOR_ROT``): walls
+  guide a slightly-off command;
+- the driven path: the front module's real poses by odometer; every follower module is welded
+  to the pose the front had at its place (follow-the-leader), folded into the clamping V when
+  clamped; reversing retraces this path;
+- the commanded heading (open loop), which :class:`~primitives.steps.CheckHeading` compares with
+  the real one at the end of a turn.
+
+Outcomes: ``done``; ``jammed`` (front lagging its target by more than ``jam_lag``: a stall; a
+follower off its pose by more than ``jam_tracking``; a heading check failed); ``blocked`` /
+``dead_end`` (a :class:`~primitives.steps.Halt`: refused before moving). Telemetry (times,
+sensor positions, front poses, contact forces, joint angles, lag) is kept per control tick and
+can be saved (:meth:`Outcome.save`, npz) and plotted (:meth:`Outcome.plot`).
+
+Scans are stop-and-scan: the robot stands still, the clock advances by the sweep's duration.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from detector.scan import Scan as ScanData
+from pipe_env.geometry import Pose, rotation_about
+from pipe_env.lidar import LidarSpec, RotatingLidar
+from pipe_env.network import PipeNetwork
+from pipe_env.robot import Robot, RobotConfig, quat_of
+from pipe_env.world import PipeWorld, build_world
+from primitives.sequences import Sequence
+from primitives.steps import (
+    Bend,
+    CheckHeading,
+    Clamp,
+    Drive,
+    Halt,
+    Roll,
+    Scan,
+    Step,
+    Stop,
+    Unclamp,
+)
+
+#: Control period, s (50 Hz).
+CONTROL_DT = 0.02
+#: The drive target follows the front module's lateral offset beyond this, m.
+ANCHOR_POS = 0.003
+#: The drive target follows the front module's heading beyond this, rad.
+ANCHOR_ROT = math.radians(8.0)
+#: V folding/straightening rate, rad/s.
+CLAMP_RATE = math.radians(60.0)
+#: Driven-path samples are kept this far apart, m.
+PATH_STEP = 0.0005
+
+STATUSES = ("done", "jammed", "blocked", "dead_end")
+
+OnScan = Callable[[ScanData, "ExecutorState"], str]
+
+
+@dataclass
+class ExecutorState:
+    """What the robot knows about itself (passed to scan callbacks).
+
+    Attributes:
+        time: simulated time since the executor was created, s.
+        odometer: signed distance driven along the path, m.
+        clamped_diameter: pipe diameter read from the clamp's encoders, m.
+        sensor_pose: nominal LiDAR pose in the world.
+    """
+
+    time: float
+    odometer: float
+    clamped_diameter: float
+    sensor_pose: Pose
+
+
+@dataclass
+class Outcome:
+    """What a sequence (or a drive) did. Distances in metres, times in seconds.
+
+    Attributes:
+        status: ``done``, ``jammed``, ``blocked`` or ``dead_end``.
+        reason: why it ended (empty when done as planned).
+        travelled: distance the front module moved along its path (absolute), m.
+        duration: simulated time, s.
+        telemetry: per control tick: ``times`` (N,), ``sensor_position`` (N, 3), ``poses``
+            (N, 7: front position and quaternion w, x, y, z), ``contact_force`` (N,) N,
+            ``joint_angles`` (N, J) rad, ``lag`` (N,) m.
+        sequence: name of the sequence run.
+    """
+
+    status: str = "done"
+    reason: str = ""
+    travelled: float = 0.0
+    duration: float = 0.0
+    telemetry: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    sequence: str = ""
+
+    def save(self, path: str | Path) -> None:
+        """Save status and telemetry as an ``.npz`` file."""
+        np.savez(
+            path,
+            status=np.array(self.status),
+            reason=np.array(self.reason),
+            travelled=np.array(self.travelled),
+            duration=np.array(self.duration),
+            sequence=np.array(self.sequence),
+            **self.telemetry,
+        )
+
+    def plot(self, path: str | Path | None = None) -> Any:
+        """Contact force, lag and joint angles over time (matplotlib figure; saved if ``path``)."""
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
+        t = self.telemetry.get("times", np.zeros(0))
+        if len(t):
+            ax[0].plot(t, self.telemetry["contact_force"])
+            ax[1].plot(t, 1000 * self.telemetry["lag"])
+            ax[2].plot(t, np.degrees(self.telemetry["joint_angles"]))
+        ax[0].set_ylabel("contact force (N)")
+        ax[1].set_ylabel("lag (mm)")
+        ax[2].set_ylabel("joint angles (deg)")
+        ax[2].set_xlabel("time (s)")
+        ax[0].set_title(f"{self.sequence}: {self.status} {self.reason}")
+        fig.tight_layout()
+        if path is not None:
+            fig.savefig(path)
+        return fig
+
+
+class _Jam(Exception):
+    pass
+
+
+class _Halt(Exception):
+    def __init__(self, status: str, reason: str) -> None:
+        super().__init__(reason)
+        self.status = status
+        self.reason = reason
+
+
+class _ScanStop(Exception):
+    pass
+
+
+class Executor:
+    """Runs sequences on ``robot`` in ``world``; ``lidar`` scans on :class:`Scan` steps.
+
+    Args:
+        world: a world built with the robot (``build_world(..., customize=robot.customize)``).
+        robot: the robot (bound to ``world`` here if it is not yet).
+        lidar: the rotating LiDAR (its ``mount`` should be ``robot.lidar_mount``), or None.
+    """
+
+    def __init__(self, world: PipeWorld, robot: Robot, lidar: RotatingLidar | None = None) -> None:
+        if not isinstance(world, PipeWorld):
+            raise ValueError(f"world must be a PipeWorld, got {type(world).__name__}")
+        if not isinstance(robot, Robot):
+            raise ValueError(f"robot must be a pipe_env.robot.Robot, got {type(robot).__name__}")
+        if robot.model is not world.model:
+            robot.bind(world.model, world.data)
+        self.world = world
+        self.robot = robot
+        self.lidar = lidar
+        self.model = world.model
+        self.data = world.data
+        self.config = robot.config
+        self.substeps = max(1, int(round(CONTROL_DT / self.model.opt.timestep)))
+        self.time = 0.0
+        self.odometer = 0.0
+        n = self.config.n_modules
+        c = self.config
+        # follower offsets behind the front module's centre along the path, m
+        self._offsets = c.pitch * np.arange(n)
+        self._alpha = 0.0
+        self._kappa = 0.0
+        self._bend_offsets: dict[int, float] = {}
+        self._cap = 0
+        self._hs = np.zeros(0)
+        self._hp = np.zeros((0, 3))
+        self._hr = np.zeros((0, 3, 3))
+        self._n = 0
+        start = world.network.start_pose
+        if start is not None:
+            self.place(start, float(world.network.inner_diameter_at(start.position)))
+
+    @classmethod
+    def for_network(
+        cls,
+        network: PipeNetwork,
+        robot_config: RobotConfig | None = None,
+        lidar: LidarSpec | str | None = "ideal",
+        **lidar_kwargs: Any,
+    ) -> Executor:
+        """Build the world of ``network`` with the robot and the LiDAR, the robot clamped at
+        the network's start pose."""
+        if network.start_pose is None:
+            raise ValueError("network.start_pose is None; the robot needs a start pose")
+        robot = Robot(robot_config)
+        world = build_world(network, contact_walls=True, customize=robot.customize)
+        robot.bind(world.model, world.data)
+        sensor = None
+        if lidar is not None:
+            kwargs = {"mount": robot.lidar_mount, **lidar_kwargs}
+            sensor = RotatingLidar(world, lidar, **kwargs)
+        return cls(world, robot, sensor)
+
+    # ------------------------------------------------------------------ placing
+    def place(self, pose: Pose, diameter: float) -> None:
+        """Put the robot straight with its LiDAR at ``pose`` and clamp it at ``diameter`` m."""
+        if not isinstance(pose, Pose):
+            raise ValueError(f"pose must be a pipe_env.geometry.Pose, got {type(pose).__name__}")
+        lo, hi = self.config.diameter_range
+        if not (isinstance(diameter, (int, float)) and lo - 0.005 <= diameter <= hi + 0.005):
+            raise ValueError(
+                f"diameter = {diameter!r} is invalid; allowed: the robot's range [{lo}, {hi}] m"
+            )
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        rot = np.asarray(pose.rotation, dtype=float)
+        front = np.asarray(pose.position, dtype=float) - self.config.lidar_offset * rot[:, 0]
+        q = self.robot.free_qpos
+        d.qpos[q : q + 3] = front
+        d.qpos[q + 3 : q + 7] = quat_of(rot)
+        d.qpos[self.robot.joint_qpos] = 0.0
+        d.qvel[:] = 0.0
+        # the driven path so far: straight behind the front module
+        length = self._offsets[-1] + 1.0
+        s = np.linspace(-length, 0.0, int(length / 0.01) + 1)
+        self._n = 0
+        self._cap = 0
+        self._push_many(s, front[None, :] + s[:, None] * rot[:, 0][None, :], rot)
+        self.odometer = 0.0
+        self._alpha = 0.0
+        self._kappa = 0.0
+        self._bend_offsets = {}
+        self._F_pos = front.copy()
+        self._F_rot = rot.copy()
+        self._H_rot = rot.copy()
+        self._set_targets()
+        for i, mid in enumerate(self.robot.mocap_ids):
+            del i
+            d.mocap_pos[mid] = d.mocap_pos[mid]
+        mujoco.mj_forward(m, d)
+        self._tele = _Telemetry()
+        try:
+            self._clamp(float(diameter))
+        except _Jam:
+            pass
+
+    # ------------------------------------------------------------------ path
+    def _push_many(self, s: NDArray, p: NDArray, r: NDArray) -> None:
+        k = len(s)
+        self._ensure(self._n + k)
+        self._hs[self._n : self._n + k] = s
+        self._hp[self._n : self._n + k] = p
+        self._hr[self._n : self._n + k] = r
+        self._n += k
+
+    def _ensure(self, size: int) -> None:
+        if size <= self._cap:
+            return
+        cap = max(1024, 2 * size)
+        hs, hp, hr = np.zeros(cap), np.zeros((cap, 3)), np.zeros((cap, 3, 3))
+        hs[: self._n], hp[: self._n], hr[: self._n] = (
+            self._hs[: self._n],
+            self._hp[: self._n],
+            self._hr[: self._n],
+        )
+        self._hs, self._hp, self._hr, self._cap = hs, hp, hr, cap
+
+    def _push(self, s: float, p: NDArray, r: NDArray) -> None:
+        self._ensure(self._n + 1)
+        self._hs[self._n] = s
+        self._hp[self._n] = p
+        self._hr[self._n] = r
+        self._n += 1
+
+    def _truncate(self, s: float) -> None:
+        k = int(np.searchsorted(self._hs[: self._n], s, side="right"))
+        self._n = max(k, 1)
+
+    def _path(self, s: float) -> tuple[NDArray, NDArray]:
+        """Pose (position, rotation) of the driven path at odometer ``s``."""
+        hs = self._hs[: self._n]
+        if s <= hs[0]:
+            r = self._hr[0]
+            return self._hp[0] + (s - hs[0]) * r[:, 0], r
+        if s >= hs[-1]:
+            r = self._hr[self._n - 1]
+            return self._hp[self._n - 1] + (s - hs[-1]) * r[:, 0], r
+        k = int(np.searchsorted(hs, s))
+        s0, s1 = hs[k - 1], hs[k]
+        w = (s - s0) / (s1 - s0) if s1 > s0 else 0.0
+        p = (1 - w) * self._hp[k - 1] + w * self._hp[k]
+        return p, self._hr[k if w > 0.5 else k - 1]
+
+    # ------------------------------------------------------------------ targets
+    def _set_targets(self) -> None:
+        """Drive target of the front; follow-the-leader (and V) targets of the followers."""
+        d = self.data
+        ids = self.robot.mocap_ids
+        d.mocap_pos[ids[0]] = self._F_pos
+        d.mocap_quat[ids[0]] = quat_of(self._F_rot)
+        c = self.config
+        n = c.n_modules
+        j = c.middle_joint  # V apex: joint j, legs of k modules either side
+        k = c.leg_modules
+        a = self._alpha
+        shift = 2.0 * c.leg_length * (1.0 - math.cos(a))
+        for i in range(1, n):
+            s_i = self.odometer - self._offsets[i]
+            if a > 0.0 and j - k <= i < j + k:
+                s_top = self.odometer - (j - k - 0.5) * c.pitch  # joint at the front of the V
+                p0, r0 = self._path(s_top)
+                x, z = r0[:, 0], r0[:, 2]
+                if i < j:  # front leg, going down towards the apex
+                    along = (i - (j - k) + 0.5) * c.pitch
+                    pos = p0 - along * math.cos(a) * x - along * math.sin(a) * z
+                    rot = r0 @ _ry(-a)
+                else:  # rear leg, coming back up
+                    apex = p0 - c.leg_length * (math.cos(a) * x + math.sin(a) * z)
+                    along = (i - j + 0.5) * c.pitch
+                    pos = apex - along * math.cos(a) * x + along * math.sin(a) * z
+                    rot = r0 @ _ry(a)
+            else:
+                pos, rot = self._path(s_i + (shift if i >= j + k else 0.0))
+            off = self._bend_offsets.get(i)
+            if off:
+                rot = rot @ rotation_about([0.0, 0.0, 1.0], off)
+            d.mocap_pos[ids[i]] = pos
+            d.mocap_quat[ids[i]] = quat_of(rot)
+
+    # ------------------------------------------------------------------ stepping
+    def _tick(self, lag_axis: NDArray | None = None) -> float:
+        """Advance one control period with the current targets; returns the front's lag, m."""
+        mujoco.mj_step(self.model, self.data, nstep=self.substeps)
+        self.time += self.substeps * self.model.opt.timestep
+        d = self.data
+        front = d.xpos[self.robot.body_ids[0]]
+        diff = self._F_pos - front
+        lag = float(diff @ lag_axis) if lag_axis is not None else float(np.linalg.norm(diff))
+        self._tele.record(self, lag)
+        if not np.all(np.isfinite(d.qpos)):
+            raise _Jam("the simulation diverged")
+        if lag > self.config.jam_lag:
+            raise _Jam(f"stalled: the front lags its drive target by {lag * 1000:.1f} mm")
+        ids = self.robot.mocap_ids
+        bodies = self.robot.body_ids
+        err = np.linalg.norm(d.xpos[bodies[1:]] - d.mocap_pos[ids[1:]], axis=1)
+        if err.size and float(err.max()) > self.config.jam_tracking:
+            k = int(np.argmax(err)) + 1
+            raise _Jam(f"module {k} is pushed {err.max() * 1000:.1f} mm off its path")
+        return lag
+
+    def _front_pose(self) -> tuple[NDArray, NDArray]:
+        b = self.robot.body_ids[0]
+        return self.data.xpos[b].copy(), self.data.xmat[b].reshape(3, 3).copy()
+
+    def _anchor(self) -> None:
+        """Let the drive target follow the walls' guidance beyond the dead bands."""
+        p, r = self._front_pose()
+        x = r[:, 0]
+        diff = self._F_pos - p
+        axial = float(diff @ x)
+        lateral = diff - axial * x
+        n = float(np.linalg.norm(lateral))
+        if n > ANCHOR_POS:
+            lateral *= ANCHOR_POS / n
+        self._F_pos = p + axial * x + lateral
+        # rotation error from actual to commanded
+        rel = r.T @ self._F_rot
+        angle, axis = _log(rel)
+        if angle > ANCHOR_ROT:
+            self._F_rot = r @ rotation_about(axis, ANCHOR_ROT)
+
+    # ------------------------------------------------------------------ primitives
+    def _drive(self, step: Drive) -> None:
+        if step.distance < 0:
+            self._reverse(-step.distance, step.speed)
+            return
+        self._truncate(self.odometer)
+        p, r = self._front_pose()
+        self._F_pos, self._F_rot = p.copy(), _orthonormal(self._F_rot)
+        remaining = step.distance
+        ds_tick = step.speed * CONTROL_DT
+        while remaining > 1e-9:
+            ds = min(ds_tick, remaining)
+            remaining -= ds
+            self._anchor()
+            self._F_pos = self._F_pos + ds * self._F_rot[:, 0]
+            if self._kappa != 0.0:
+                turn = _rz(self._kappa * ds)
+                self._F_rot = self._F_rot @ turn
+                self._H_rot = self._H_rot @ turn
+            self.odometer += ds
+            self._travelled += ds
+            self._push(self.odometer, self._F_pos.copy(), self._F_rot.copy())
+            self._set_targets()
+            try:
+                self._tick(self._F_rot[:, 0])
+            except _Jam:
+                # the robot is where it stalled: the driven path ends there
+                p, _ = self._front_pose()
+                lag = float((self._F_pos - p) @ self._F_rot[:, 0])
+                self.odometer -= max(lag, 0.0)
+                self._travelled -= max(lag, 0.0)
+                self._truncate(self.odometer)
+                raise
+        self._settle(3)
+
+    def _reverse(self, distance: float, speed: float) -> None:
+        remaining = distance
+        ds_tick = speed * CONTROL_DT
+        while remaining > 1e-9:
+            ds = min(ds_tick, remaining)
+            remaining -= ds
+            self.odometer -= ds
+            self._travelled += ds
+            self._F_pos, self._F_rot = self._path(self.odometer)
+            self._F_pos = self._F_pos.copy()
+            self._set_targets()
+            self._tick(None)
+        self._H_rot = self._F_rot.copy()
+        self._settle(3)
+
+    def _settle(self, ticks: int) -> None:
+        for _ in range(ticks):
+            self._tick(None)
+
+    def _roll(self, step: Roll) -> None:
+        total = step.angle
+        if abs(total) < 1e-9:
+            return
+        n_ticks = max(1, int(math.ceil(abs(total) / (step.rate * CONTROL_DT))))
+        inc = total / n_ticks
+        c = self.config
+        s_joint = self.odometer - (c.middle_joint - 0.5) * c.pitch
+        hs = self._hs[: self._n]
+        w = np.clip((hs - (s_joint - 0.5 * c.pitch)) / c.pitch, 0.0, 1.0)
+        sel = np.nonzero(w > 0)[0]
+        for _ in range(n_ticks):
+            rx = _rx(inc)
+            self._F_rot = self._F_rot @ rx
+            self._H_rot = self._H_rot @ rx
+            for k in sel:
+                self._hr[k] = self._hr[k] @ (rx if w[k] >= 1.0 else _rx(inc * w[k]))
+            self._set_targets()
+            self._tick(None)
+        self._settle(3)
+
+    def _bend(self, step: Bend) -> None:
+        c = self.config
+        if step.joint >= c.n_modules:
+            raise ValueError(f"Bend.joint = {step.joint} is invalid; allowed: 1..{c.n_modules - 1}")
+        if step.joint == 1:
+            self._kappa = 2.0 * math.sin(0.5 * step.angle) / c.pitch
+        else:
+            self._bend_offsets[step.joint] = step.angle
+            self._set_targets()
+            self._settle(5)
+
+    def _clamp(self, diameter: float) -> None:
+        c = self.config
+        a_goal = c.clamp_angle(diameter + 0.01)
+        a = min(self._alpha, c.clamp_angle(diameter - 0.01))
+        rate = CLAMP_RATE * CONTROL_DT
+        self._alpha = a
+        for _ in range(400):
+            self._set_targets()
+            self._tick(None)
+            if self.robot.apex_force() >= c.clamp_force or self._alpha >= a_goal:
+                break
+            self._alpha = min(self._alpha + rate, a_goal)
+        self._settle(3)
+
+    def _unclamp(self) -> None:
+        rate = CLAMP_RATE * CONTROL_DT
+        while self._alpha > 0:
+            self._alpha = max(0.0, self._alpha - rate)
+            self._set_targets()
+            self._tick(None)
+        self._settle(2)
+
+    def _check_heading(self, step: CheckHeading) -> None:
+        _, r = self._front_pose()
+        cosang = float(np.clip(r[:, 0] @ self._H_rot[:, 0], -1.0, 1.0))
+        err = math.acos(cosang)
+        if err > step.tolerance:
+            raise _Jam(
+                f"the turn was blocked: heading {math.degrees(err):.0f} deg off the commanded one"
+            )
+
+    def _scan(self, on_scan: OnScan | None, rng: np.random.Generator) -> ScanData | None:
+        if self.lidar is None:
+            return None
+        scan = self.lidar.scan(self.robot.front_pose(), rng, t0=self.time)
+        self.time += self.lidar.sweep_duration
+        if on_scan is not None:
+            verdict = on_scan(scan, self.state(rng))
+            if verdict not in ("stop", "continue"):
+                raise ValueError(f"on_scan returned {verdict!r}; allowed: 'stop', 'continue'")
+            if verdict == "stop":
+                raise _ScanStop()
+        return scan
+
+    def state(self, rng: np.random.Generator | None = None) -> ExecutorState:
+        return ExecutorState(
+            self.time, self.odometer, self.robot.clamped_diameter(rng), self.robot.sensor_pose()
+        )
+
+    # ------------------------------------------------------------------ running
+    def _begin(self) -> tuple[float, float]:
+        self._tele = _Telemetry()
+        self._travelled = 0.0
+        return self.time, self.odometer
+
+    def _outcome(self, status: str, reason: str, t0: float, name: str) -> Outcome:
+        return Outcome(status, reason, self._travelled, self.time - t0, self._tele.arrays(), name)
+
+    def run(
+        self,
+        sequence: Sequence,
+        on_scan: OnScan | None = None,
+        rng: np.random.Generator | None = None,
+    ) -> Outcome:
+        """Execute ``sequence``; ``on_scan`` is called after each :class:`Scan` step and may
+        return ``"stop"`` to end the sequence early (status ``done``)."""
+        if not isinstance(sequence, Sequence):
+            raise ValueError(f"sequence must be a Sequence, got {type(sequence).__name__}")
+        rng = rng if rng is not None else np.random.default_rng(0)
+        t0, _ = self._begin()
+        p, r = self._front_pose()
+        self._H_rot = r.copy()
+        try:
+            for step in sequence.steps:
+                self._do(step, on_scan, rng)
+        except _Jam as exc:
+            self._stop_here()
+            return self._outcome("jammed", str(exc), t0, sequence.name)
+        except _Halt as h:
+            return self._outcome(h.status, h.reason, t0, sequence.name)
+        except _ScanStop:
+            return self._outcome("done", "stopped by a scan", t0, sequence.name)
+        return self._outcome("done", "", t0, sequence.name)
+
+    def _do(self, step: Step, on_scan: OnScan | None, rng: np.random.Generator) -> None:
+        if isinstance(step, Drive):
+            self._drive(step)
+        elif isinstance(step, Stop):
+            self._settle(max(1, int(round(step.duration / CONTROL_DT))))
+        elif isinstance(step, Roll):
+            self._roll(step)
+        elif isinstance(step, Bend):
+            self._bend(step)
+        elif isinstance(step, Clamp):
+            self._clamp(step.diameter)
+        elif isinstance(step, Unclamp):
+            self._unclamp()
+        elif isinstance(step, Scan):
+            self._scan(on_scan, rng)
+        elif isinstance(step, CheckHeading):
+            self._check_heading(step)
+        elif isinstance(step, Halt):
+            raise _Halt(step.status, step.reason)
+        else:
+            raise ValueError(f"unknown primitive {step!r}")
+
+    def _stop_here(self) -> None:
+        """After a jam: hold the targets where the robot is (it stops pushing)."""
+        p, r = self._front_pose()
+        self._F_pos, self._F_rot = p, r
+        self._kappa = 0.0
+        d = self.data
+        d.mocap_pos[self.robot.mocap_ids[0]] = p
+        d.mocap_quat[self.robot.mocap_ids[0]] = quat_of(r)
+        mujoco.mj_step(self.model, self.data, nstep=self.substeps)
+        self.time += self.substeps * self.model.opt.timestep
+
+    def drive_until(
+        self,
+        on_scan: OnScan,
+        max_distance: float,
+        scan_interval: float = 0.05,
+        rng: np.random.Generator | None = None,
+        speed: float = 0.05,
+    ) -> Outcome:
+        """Stop-and-scan forward: sweep, ask ``on_scan``, drive ``scan_interval`` m, repeat,
+        until ``on_scan`` says ``"stop"``, ``max_distance`` m are driven, or a jam."""
+        if not (math.isfinite(max_distance) and max_distance >= 0):
+            raise ValueError(f"max_distance = {max_distance!r} is invalid; allowed: >= 0 m")
+        if not (math.isfinite(scan_interval) and 0.001 <= scan_interval <= 1.0):
+            raise ValueError(f"scan_interval = {scan_interval!r} is invalid; allowed [1 mm, 1 m]")
+        rng = rng if rng is not None else np.random.default_rng(0)
+        t0, odo0 = self._begin()
+        try:
+            while True:
+                self._scan(on_scan, rng)
+                left = max_distance - (self.odometer - odo0)
+                if left <= 1e-6:
+                    return self._outcome("done", "max distance driven", t0, "drive_until")
+                self._drive(Drive(min(scan_interval, left), speed))
+        except _Jam as exc:
+            self._stop_here()
+            return self._outcome("jammed", str(exc), t0, "drive_until")
+        except _ScanStop:
+            return self._outcome("done", "stopped by a scan", t0, "drive_until")
+
+
+class _Telemetry:
+    def __init__(self) -> None:
+        self.rows: list[tuple] = []
+
+    def record(self, ex: Executor, lag: float) -> None:
+        d = ex.data
+        b = ex.robot.body_ids[0]
+        p = d.xpos[b].copy()
+        q = d.xquat[b].copy()
+        sensor = p + ex.config.lidar_offset * d.xmat[b].reshape(3, 3)[:, 0]
+        self.rows.append(
+            (
+                ex.time,
+                sensor,
+                np.concatenate([p, q]),
+                ex.robot.contact_force(),
+                ex.robot.joint_angles(),
+                lag,
+            )
+        )
+
+    def arrays(self) -> dict[str, NDArray[np.float64]]:
+        if not self.rows:
+            return {}
+        t, s, pose, f, j, lag = zip(*self.rows)
+        return {
+            "times": np.array(t),
+            "sensor_position": np.array(s),
+            "poses": np.array(pose),
+            "contact_force": np.array(f),
+            "joint_angles": np.array(j),
+            "lag": np.array(lag),
+        }
+
+
+def _rx(a: float) -> NDArray[np.float64]:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _ry(a: float) -> NDArray[np.float64]:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _rz(a: float) -> NDArray[np.float64]:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _log(r: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
+    """Angle (rad) and unit axis of a rotation matrix."""
+    cosang = float(np.clip(0.5 * (np.trace(r) - 1.0), -1.0, 1.0))
+    angle = math.acos(cosang)
+    v = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    n = float(np.linalg.norm(v))
+    if n < 1e-12:
+        return angle, np.array([1.0, 0.0, 0.0])
+    return angle, v / n
+
+
+def _orthonormal(r: NDArray[np.float64]) -> NDArray[np.float64]:
+    u, _, vt = np.linalg.svd(r)
+    return u @ vt

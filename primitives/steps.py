@@ -1,0 +1,176 @@
+"""Low-level motion primitives: frozen dataclasses, the vocabulary of a sequence.
+
+Each primitive is plain data (SI units: metres, radians, m/s) that prints, serialises
+(:func:`step_to_dict` / :func:`step_from_dict`) and replays; :mod:`primitives.executor` gives it
+meaning on the robot:
+
+- :class:`Drive`: move the front ``distance`` metres along its heading (negative: reverse along
+  the driven path) at ``speed``; while a bend is set, the heading turns as it drives;
+- :class:`Stop`: stand still (brakes) for ``duration`` seconds;
+- :class:`Roll`: turn the front half about its axis by ``angle`` (the middle roll joint);
+- :class:`Bend`: set bending joint ``joint`` (1 = behind the front module, the steering joint)
+  to ``angle``; the front then drives on the arc of radius ``pitch / (2 sin(angle / 2))``
+  through the joints, turning towards its +y (rolled) side;
+- :class:`Clamp` / :class:`Unclamp`: fold the V to span ``diameter`` / straighten it;
+- :class:`Scan`: stop-and-scan servo sweep of the LiDAR;
+- :class:`CheckHeading`: the turn is complete: the front's heading must be within
+  ``tolerance`` of the commanded one (else the bend was blocked: a jam);
+- :class:`Halt`: end the sequence with ``status`` (``blocked`` or ``dead_end``) without moving.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import asdict, dataclass, fields
+from typing import Any, ClassVar
+
+DEFAULT_SPEED = 0.05  # m/s
+
+
+def _num(obj: Any, name: str, lo: float, hi: float, unit: str) -> None:
+    v = getattr(obj, name)
+    ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+    if not ok or not lo <= v <= hi:
+        raise ValueError(
+            f"{type(obj).__name__}.{name} = {v!r} is invalid; allowed: [{lo:g}, {hi:g}] {unit}"
+        )
+    object.__setattr__(obj, name, float(v))
+
+
+@dataclass(frozen=True)
+class Step:
+    """Base class of primitives."""
+
+    op: ClassVar[str] = "step"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"op": self.op, **asdict(self)}
+
+
+@dataclass(frozen=True)
+class Drive(Step):
+    """Drive ``distance`` m (negative: back along the driven path) at ``speed`` m/s."""
+
+    op: ClassVar[str] = "drive"
+    distance: float
+    speed: float = DEFAULT_SPEED
+
+    def __post_init__(self) -> None:
+        _num(self, "distance", -50.0, 50.0, "m")
+        _num(self, "speed", 0.001, 0.5, "m/s")
+
+
+@dataclass(frozen=True)
+class Stop(Step):
+    """Stand still for ``duration`` s."""
+
+    op: ClassVar[str] = "stop"
+    duration: float = 0.1
+
+    def __post_init__(self) -> None:
+        _num(self, "duration", 0.0, 60.0, "s")
+
+
+@dataclass(frozen=True)
+class Roll(Step):
+    """Roll the front half by ``angle`` rad about its axis at ``rate`` rad/s."""
+
+    op: ClassVar[str] = "roll"
+    angle: float
+    rate: float = math.radians(90.0)
+
+    def __post_init__(self) -> None:
+        _num(self, "angle", -2 * math.pi, 2 * math.pi, "rad")
+        _num(self, "rate", 0.01, 10.0, "rad/s")
+
+
+@dataclass(frozen=True)
+class Bend(Step):
+    """Set bending joint ``joint`` (1 = steering joint behind the front module) to ``angle``."""
+
+    op: ClassVar[str] = "bend"
+    joint: int
+    angle: float
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.joint, int) and not isinstance(self.joint, bool)):
+            raise ValueError(f"Bend.joint = {self.joint!r} is invalid; allowed: an int >= 1")
+        if self.joint < 1:
+            raise ValueError(f"Bend.joint = {self.joint!r} is invalid; allowed: an int >= 1")
+        _num(self, "angle", -math.radians(170), math.radians(170), "rad")
+
+
+@dataclass(frozen=True)
+class Clamp(Step):
+    """Fold the V to span ``diameter`` m (plus the configured preload)."""
+
+    op: ClassVar[str] = "clamp"
+    diameter: float
+
+    def __post_init__(self) -> None:
+        _num(self, "diameter", 0.0, 0.3, "m")
+
+
+@dataclass(frozen=True)
+class Unclamp(Step):
+    """Straighten the V (wheels off the walls)."""
+
+    op: ClassVar[str] = "unclamp"
+
+
+@dataclass(frozen=True)
+class Scan(Step):
+    """A stop-and-scan servo sweep of the LiDAR (the robot stands still)."""
+
+    op: ClassVar[str] = "scan"
+
+
+@dataclass(frozen=True)
+class CheckHeading(Step):
+    """Jam unless the front's heading is within ``tolerance`` rad of the commanded heading."""
+
+    op: ClassVar[str] = "check_heading"
+    tolerance: float = math.radians(30.0)
+
+    def __post_init__(self) -> None:
+        _num(self, "tolerance", 0.0, math.pi, "rad")
+
+
+@dataclass(frozen=True)
+class Halt(Step):
+    """End the sequence here with ``status`` (``blocked`` or ``dead_end``) and ``reason``."""
+
+    op: ClassVar[str] = "halt"
+    status: str = "blocked"
+    reason: str = ""
+
+    def __post_init__(self) -> None:
+        if self.status not in ("blocked", "dead_end"):
+            raise ValueError(
+                f"Halt.status = {self.status!r} is invalid; allowed: 'blocked', 'dead_end'"
+            )
+
+
+STEP_TYPES: dict[str, type[Step]] = {
+    t.op: t for t in (Drive, Stop, Roll, Bend, Clamp, Unclamp, Scan, CheckHeading, Halt)
+}
+
+
+def step_to_dict(step: Step) -> dict[str, Any]:
+    return step.to_dict()
+
+
+def step_from_dict(d: dict[str, Any]) -> Step:
+    """The primitive a :meth:`Step.to_dict` made; errors name the unknown op or field."""
+    if not isinstance(d, dict) or "op" not in d:
+        raise ValueError(f"a step must be a dict with an 'op' key, got {d!r}")
+    op = d["op"]
+    if op not in STEP_TYPES:
+        raise ValueError(f"step op {op!r} is unknown; allowed: {sorted(STEP_TYPES)}")
+    cls = STEP_TYPES[op]
+    names = {f.name for f in fields(cls)}
+    extra = set(d) - names - {"op"}
+    if extra:
+        raise ValueError(f"step {op!r} has unknown fields {sorted(extra)}; allowed {sorted(names)}")
+    return cls(**{k: v for k, v in d.items() if k != "op"})

@@ -1,0 +1,69 @@
+"""The executor: turns with ground-truth options pass; wrong options jam; refusals."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import pytest
+
+from pipe_env import layouts
+from pipe_env.ground_truth import structures_ahead
+from pipe_env.routing import locate
+from primitives.executor import Executor
+from primitives.sequences import Sequence, for_option, go_straight
+
+
+def _turn(net, pick: int = -1, d_err: float = 0.0, dir_err: float = 0.0):
+    ex = Executor.for_network(net, lidar=None)
+    opts = structures_ahead(net, ex.robot.sensor_pose(), 5.0)
+    if opts[0].distance > 0.2:
+        ex.run(go_straight(opts[0].distance - 0.2))
+    o = structures_ahead(net, ex.robot.sensor_pose(), 5.0)[pick]
+    o = replace(o, distance=o.distance + d_err, direction=o.direction + dir_err)
+    out = ex.run(for_option(o, incoming_diameter=ex.robot.clamped_diameter()))
+    ep, _ = locate(net, ex.robot.sensor_pose())
+    return out, ep.run_id
+
+
+@pytest.mark.parametrize("diameter", [0.06, 0.09, 0.12])
+def test_mitre_90_turn_passes(diameter: float) -> None:
+    out, run = _turn(layouts.mitre_bend(diameter, math.pi / 2, 0.0))
+    assert out.status == "done", out.reason
+    assert run == "r_out0"
+
+
+def test_tee_branch_passes() -> None:
+    out, run = _turn(layouts.t_junction(0.09, direction=math.pi / 2))
+    assert out.status == "done", out.reason
+    assert run == "r_out1"
+
+
+def test_direction_off_by_90_deg_jams() -> None:
+    out, _ = _turn(layouts.mitre_bend(0.09, math.pi / 2, 0.0), dir_err=math.pi / 2)
+    assert out.status in ("jammed", "blocked")
+
+
+def test_reducer_below_57_mm_is_refused_before_entering() -> None:
+    net = layouts.reducer(0.1, 0.045)
+    ex = Executor.for_network(net, lidar=None)
+    before = ex.robot.sensor_pose().position.copy()
+    o = structures_ahead(net, ex.robot.sensor_pose(), 5.0)[0]
+    out = ex.run(for_option(o, incoming_diameter=0.1))
+    assert out.status == "blocked"
+    assert ex.robot.sensor_pose().position == pytest.approx(before, abs=0.002)
+
+
+def test_closure_is_a_dead_end() -> None:
+    net = layouts.closure(0.09)
+    ex = Executor.for_network(net, lidar=None)
+    o = structures_ahead(net, ex.robot.sensor_pose(), 5.0)[0]
+    assert ex.run(for_option(o)).status == "dead_end"
+
+
+def test_sequences_round_trip_as_data() -> None:
+    net = layouts.mitre_bend(0.09)
+    o = structures_ahead(net, net.start_pose, 5.0)[0]
+    seq = for_option(o, incoming_diameter=0.09)
+    assert Sequence.from_dict(seq.to_dict()) == seq
+    assert "take_turn" in str(seq) and "roll(" in str(seq)
