@@ -13,10 +13,13 @@ side of the middle joint fold into a V in
 the robot's x-z plane; the wheels at the apex press on one wall while the chain ends, held on the
 pipe axis by the drive (see below), oppose them (they stand in for the PIRATE's wheels on the
 other wall). Clamping is force controlled: the V folds until the apex wheels touch the wall with
-``clamp_force``. One robot covers 57-125 mm by changing the V half-angle ``alpha``:
+``clamp_force`` and is then held a small preload beyond the touching shape (the executor's
+``CLAMP_PRELOAD``). One robot covers 57-125 mm by changing the V half-angle ``alpha``:
 ``D = 2 (leg_length sin(alpha) + wheel_offset cos(alpha) + wheel_radius)``. The clamped diameter is
-read back from the joint angles (forward kinematics of the apex wheel in the front module's
-frame) with gaussian encoder noise (``encoder_noise``, radians): :meth:`Robot.clamped_diameter`.
+read back from the joint angles alone (:meth:`Robot.clamped_diameter`): forward kinematics of the
+chain gives the apex wheels' distance from the line through the two end modules, so a front
+module tilted by the clamping reaction does not bias it; every hinge encoder carries gaussian
+noise (``encoder_noise``, radians).
 
 Drive model (and why): the front module is pulled by a soft weld to a mocap "drive target", and
 every follower module by a soft weld to the pose the front module had when it was at the
@@ -406,19 +409,37 @@ class Robot:
         return float(self._need_bound().qpos[self._roll_qpos])
 
     def clamped_diameter(self, rng: np.random.Generator | None = None) -> float:
-        """Pipe diameter spanned by the clamping V, m: twice the depth of the apex wheel below
-        the front module's axis, by forward kinematics of the joint angles (the encoders), with
-        gaussian encoder noise (``encoder_noise`` on the apex angle) if ``rng`` is given."""
+        """Pipe diameter spanned by the clamping V, m, read from the joint encoders alone.
+
+        Forward kinematics of the chain (module pitch, joint anchors, wheel offsets) from the
+        hinge angles gives the apex wheels' distance from the line through the two end
+        modules' centres (which the drive holds on the pipe axis); the diameter is twice that
+        distance plus the wheel radius. The line, not the front module's axis, is the
+        reference, so a tilted front module does not bias the reading. With ``rng``, every
+        hinge angle carries gaussian encoder noise (``encoder_noise``, rad)."""
         d = self._need_bound()
+        q = d.qpos[self.joint_qpos].astype(float)
         c = self.config
-        b0 = self.body_ids[0]
-        rot = d.xmat[b0].reshape(3, 3)
-        rel = rot.T @ (d.geom_xpos[self._apex_wheel] - d.xpos[b0])
-        depth = -float(rel[2]) + c.wheel_radius
         if rng is not None and c.encoder_noise > 0:
-            alpha = 0.5 * abs(float(d.qpos[self._apex_qpos]))
-            depth += c.leg_length * math.cos(alpha) * float(rng.normal(0.0, c.encoder_noise))
-        return 2.0 * max(depth, 0.5 * c.width)
+            q = q + rng.normal(0.0, c.encoder_noise, size=q.shape)
+        return self.diameter_from_angles(q)
+
+    def diameter_from_angles(self, angles: NDArray[np.float64]) -> float:
+        """Clamped diameter (m) of the V described by hinge ``angles`` (:meth:`joint_names`
+        order, rad): forward kinematics, see :meth:`clamped_diameter`."""
+        c = self.config
+        pos, rot = chain_kinematics(c, np.asarray(angles, dtype=float))
+        a, b = pos[0], pos[-1]
+        axis = b - a
+        n = float(np.linalg.norm(axis))
+        axis = axis / n if n > 1e-9 else np.array([-1.0, 0.0, 0.0])
+        j = c.middle_joint
+        best = 0.0
+        for i, end in ((j - 1, -1.0), (j, 1.0)):
+            w = pos[i] + rot[i] @ np.array([end * 0.5 * c.pitch, 0.0, -c.wheel_offset])
+            rel = w - a
+            best = max(best, float(np.linalg.norm(rel - (rel @ axis) * axis)))
+        return 2.0 * max(best + c.wheel_radius, 0.5 * c.width)
 
     def apex_force(self) -> float:
         """Normal force on the V apex wheels (the clamp's contact with the wall), N."""
@@ -443,6 +464,40 @@ class Robot:
                 mujoco.mj_contactForce(m, d, k, f6)
                 total += abs(f6[0])
         return total
+
+
+def chain_kinematics(
+    config: RobotConfig, angles: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Module centres (n, 3) and rotations (n, 3, 3) in the front module's frame for hinge
+    ``angles`` (:meth:`Robot.joint_names` order, rad), as MuJoCo composes the hinges."""
+    c = config
+    n = c.n_modules
+    pos = np.zeros((n, 3))
+    rot = np.zeros((n, 3, 3))
+    rot[0] = np.eye(3)
+    anchor_local = np.array([0.5 * c.pitch, 0.0, 0.0])
+    k = 0
+    for i in range(1, n):
+        r = rot[i - 1].copy()
+        p = pos[i - 1] + r @ np.array([-c.pitch, 0.0, 0.0])
+        axes = ([0] if i == c.middle_joint else []) + [1, 2]
+        for ax in axes:
+            anchor = p + r @ anchor_local
+            r = r @ _axis_rot(ax, float(angles[k]))
+            k += 1
+            p = anchor - r @ anchor_local
+        pos[i], rot[i] = p, r
+    return pos, rot
+
+
+def _axis_rot(axis: int, a: float) -> NDArray[np.float64]:
+    c, s = math.cos(a), math.sin(a)
+    if axis == 0:
+        return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    if axis == 1:
+        return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def quat_of(rotation: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -61,6 +61,13 @@ ANCHOR_POS = 0.003
 ANCHOR_ROT = math.radians(8.0)
 #: V folding/straightening rate, rad/s.
 CLAMP_RATE = math.radians(60.0)
+#: Slow folding rate near the expected wall, rad/s.
+CLAMP_RATE_SLOW = math.radians(12.0)
+#: The V folds fast until this far short of the commanded diameter and searches up to this far
+#: beyond it, m.
+CLAMP_SEARCH = 0.008
+#: Once touching, the V is held at the touching diameter plus this, m (the clamping preload).
+CLAMP_PRELOAD = 0.001
 #: Driven-path samples are kept this far apart, m.
 PATH_STEP = 0.0005
 
@@ -477,18 +484,29 @@ class Executor:
             self._settle(5)
 
     def _clamp(self, diameter: float) -> None:
+        """Fold the V: fast to ``CLAMP_SEARCH`` short of ``diameter``, then slowly until the
+        apex wheels touch the wall (``clamp_force``); then hold it where it touched plus
+        ``CLAMP_PRELOAD`` (force control: the preload, not the commanded diameter, sets the
+        force, so a wrong commanded diameter does not crush the wall)."""
         c = self.config
-        a_goal = c.clamp_angle(diameter + 0.01)
-        a = min(self._alpha, c.clamp_angle(diameter - 0.01))
-        rate = CLAMP_RATE * CONTROL_DT
-        self._alpha = a
+        a_goal = c.clamp_angle(diameter + CLAMP_SEARCH)
+        a_fast = c.clamp_angle(diameter - CLAMP_SEARCH)
+        self._alpha = min(self._alpha, a_fast)
+        touched = False
         for _ in range(400):
             self._set_targets()
             self._tick(None)
-            if self.robot.apex_force() >= c.clamp_force or self._alpha >= a_goal:
+            if self.robot.apex_force() >= c.clamp_force:
+                touched = True
                 break
-            self._alpha = min(self._alpha + rate, a_goal)
-        self._settle(3)
+            if self._alpha >= a_goal:
+                break
+            rate = CLAMP_RATE if self._alpha < a_fast else CLAMP_RATE_SLOW
+            self._alpha = min(self._alpha + rate * CONTROL_DT, a_goal)
+        if touched:
+            self._alpha = c.clamp_angle(self.robot.clamped_diameter() + CLAMP_PRELOAD)
+            self._set_targets()
+        self._settle(8)
 
     def _unclamp(self) -> None:
         rate = CLAMP_RATE * CONTROL_DT
