@@ -137,9 +137,12 @@ class PhysicalPlant:
         self.sim_time = 0.0
         self._odometry_error = np.zeros(3)
         self._positions: list[NDArray[np.float64]] = [self.pose().position]
-        #: junctions passed: (odometer at the decision, node id); odometer: forward distance
-        self.junctions: list[tuple[float, str]] = []
+        #: junctions passed: (odometer at the decision, node id, clamped diameter there, m);
+        #: odometer: forward distance
+        self.junctions: list[tuple[float, str, float]] = []
         self._odometer = 0.0
+        self._start_diameter = self.clamped_diameter
+        self._decision_diameter = self._start_diameter
 
     def pose(self) -> Pose:
         """True sensor pose of the robot."""
@@ -270,6 +273,7 @@ class PhysicalPlant:
 
     def _decision(self, why: str | None) -> Decision:
         pose = self.pose()
+        self._decision_diameter = self.clamped_diameter
         node, entry, truth = self._truth(pose)
         if why == "blind":
             dist = truth[0].distance if truth else 0.0
@@ -329,10 +333,14 @@ class PhysicalPlant:
         if status == "jammed":
             # back off to where the robot decided, as an operator would, then sense again
             back = self.executor.run(
-                back_out(max(self._odometer - odometer_at_decision, 0.0)), rng=self.rng
+                back_out(
+                    max(self._odometer - odometer_at_decision, 0.0),
+                    diameter=self._decision_diameter,
+                ),
+                rng=self.rng,
             )
             self._account(back, out)
-            self._odometer = odometer_at_decision
+            self._odometer -= abs(float(back.travelled))
             out.status, out.note = "jammed", outcome.reason
             return out
         if status in ("blocked", "dead_end"):
@@ -340,7 +348,7 @@ class PhysicalPlant:
             return out
         ways = [r for r in self.network.runs_at[dec.node_id] if r.id != dec.entry_run]
         if len(ways) > 1 and not (self.junctions and self.junctions[-1][1] == dec.node_id):
-            self.junctions.append((odometer_at_decision, dec.node_id))
+            self.junctions.append((odometer_at_decision, dec.node_id, self._decision_diameter))
         self.tracker.reset()
         self._track_state = None
         self.decision = None
@@ -355,13 +363,16 @@ class PhysicalPlant:
         while self.junctions and self.junctions[-1][1] == dec.node_id:
             self.junctions.pop()
         target = self.junctions[-1][0] if self.junctions else 0.0
+        diameter = self.junctions[-1][2] if self.junctions else self._start_diameter
         distance = max(self._odometer - target, 0.0)
         if distance > 1e-3:
-            outcome = self.executor.run(back_out(distance), rng=self.rng)
+            outcome = self.executor.run(back_out(distance, diameter=diameter), rng=self.rng)
             self._account(outcome, out)
+            self._odometer -= abs(float(outcome.travelled))
             if outcome.status != "done":
                 out.note = f"backing out ended {outcome.status}: {outcome.reason}"
-        self._odometer = target
+                if outcome.status == "jammed":
+                    out.status = "jammed"
         self.tracker.reset()
         self._track_state = None
         self.decision = None

@@ -1,12 +1,14 @@
 """The PIRATE-like robot: its MuJoCo bodies, its clamping geometry and its encoders.
 
-Body (thesis 1.2, 3.1.2): a chain of ``RobotConfig.n_modules`` (>= 4) modules, 45 mm across
-including their wheels, ``pitch`` metres from joint to joint. Between consecutive modules sits a
-bending joint (two hinges, ``bend_<j>_y`` and ``bend_<j>_z``, j = 1 .. n-1); the joint in the
-middle of the chain also carries the roll joint ``roll`` (a hinge about the chain axis), so the
-front half (with the front module, the LiDAR mount and the first bending joint) can turn its
-bending plane towards a branch. Wheels are small spheres at both ends of every module, on the four
-sides. The front module carries the LiDAR at its front face (``RobotConfig.lidar_offset``).
+Body (thesis 1.2, 3.1.2): a chain of ``RobotConfig.n_modules`` (>= 4) modules, 47 mm across
+their wheels (the thesis's 45 mm module body with the wheels standing 1 mm proud, so the robot
+cannot squeeze into a 45 mm bore: it jams at its mouth), ``pitch`` metres from joint to joint.
+Between consecutive modules sits a bending joint (two hinges, ``bend_<j>_y`` and
+``bend_<j>_z``, j = 1 .. n-1); the joint in the middle of the chain also carries the roll joint
+``roll`` (a hinge about the chain axis), so the front half (with the front module, the LiDAR
+mount and the first bending joint) can turn its bending plane towards a branch. Wheels are small
+spheres at both ends of every module, on the four sides. The front module carries the LiDAR at
+its front face (``RobotConfig.lidar_offset``).
 
 Clamping (PIRATE V-shape): the two legs (``leg_modules`` modules each, held straight) either
 side of the middle joint fold into a V in
@@ -71,7 +73,8 @@ class RobotConfig:
     Attributes:
         n_modules: modules in the chain (>= 4).
         pitch: joint-to-joint length of a module.
-        width: module diameter across the wheels (thesis 3.1.2: 45 mm).
+        width: module diameter across the wheels (thesis 3.1.2: a 45 mm module; its wheels
+            stand 1 mm proud).
         wheel_radius: radius of the wheel spheres.
         lidar_offset: LiDAR origin ahead of the front module's centre, along its axis.
         module_mass: mass of one module, kg.
@@ -89,7 +92,7 @@ class RobotConfig:
 
     n_modules: int = 6
     pitch: float = 0.045
-    width: float = 0.045
+    width: float = 0.047
     wheel_radius: float = 0.0055
     lidar_offset: float = 0.03
     module_mass: float = 0.25

@@ -94,9 +94,15 @@ def go_straight(distance: float, speed: float = DEFAULT_SPEED) -> Sequence:
     return Sequence("go_straight", (Drive(distance, speed),))
 
 
-def back_out(distance: float, speed: float = DEFAULT_SPEED) -> Sequence:
-    """Reverse ``distance`` m along the driven path."""
-    return Sequence("back_out", (Drive(-abs(distance), speed),))
+def back_out(
+    distance: float, speed: float = DEFAULT_SPEED, diameter: float | None = None
+) -> Sequence:
+    """Reverse ``distance`` m along the driven path. With ``diameter`` (m, the pipe the robot
+    backs into) the robot unclamps first, so the V's straight legs do not cut the corners of
+    the turns it retraces, and clamps there again."""
+    if diameter is None:
+        return Sequence("back_out", (Drive(-abs(distance), speed),))
+    return Sequence("back_out", (Unclamp(), Drive(-abs(distance), speed), Clamp(diameter)))
 
 
 def stop_before(option: StructureOption, margin: float = STOP_MARGIN) -> Sequence:

@@ -12,6 +12,7 @@ from pipe_env.ground_truth import structures_ahead
 from pipe_env.routing import locate
 from primitives.executor import Executor
 from primitives.sequences import Sequence, for_option, go_straight
+from primitives.steps import Drive, Unclamp
 
 
 def _turn(net, pick: int = -1, d_err: float = 0.0, dir_err: float = 0.0):
@@ -67,3 +68,16 @@ def test_sequences_round_trip_as_data() -> None:
     seq = for_option(o, incoming_diameter=0.09)
     assert Sequence.from_dict(seq.to_dict()) == seq
     assert "take_turn" in str(seq) and "roll(" in str(seq)
+
+
+def test_driving_into_a_45_mm_bore_jams_at_its_mouth() -> None:
+    net = layouts.reducer(0.1, 0.045, taper_length=0.1, distance=0.5)
+    ex = Executor.for_network(net, lidar=None)
+    out = ex.run(Sequence("force_in", (Unclamp(), Drive(1.2))))
+    assert out.status == "jammed"
+    # the front module stalled in the taper: its front wheels never got into the 45 mm bore,
+    # which starts where the taper ends (0.1 m)
+    front = ex.robot.front_pose().position
+    mouth = float(net.geometry["s"].reference_point("r_out0")[0])
+    assert front[0] + 0.5 * ex.config.pitch < mouth
+    assert out.travelled < 0.7
