@@ -362,15 +362,14 @@ class Robot:
         self._robot_geom = np.zeros(model.ngeom, dtype=bool)
         self._robot_geom[self.geom_ids] = True
         j = c.middle_joint
-        apex = [f"{PREFIX}wheel{j - 1}_r3", f"{PREFIX}wheel{j}_f3"]
-        self._apex_geom = np.zeros(model.ngeom, dtype=bool)
+        # the V's apex: the wheels at the rear of module j-1 and the front of module j (the
+        # V folds towards any side; towards -z in the path frame when clamping)
+        apex = [f"{PREFIX}wheel{j - 1}_r{k}" for k in range(4)]
+        apex += [f"{PREFIX}wheel{j}_f{k}" for k in range(4)]
+        #: side of each apex wheel (0: +y, 1: +z, 2: -y, 3: -z in its module), -1 elsewhere
+        self._apex_side = np.full(model.ngeom, -1, dtype=int)
         for n in apex:
-            self._apex_geom[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n)] = True
-        self._apex_wheel = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, apex[0])
-        name = f"{PREFIX}bend_{c.middle_joint}_y"
-        self._apex_qpos = int(
-            model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)]
-        )
+            self._apex_side[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n)] = int(n[-1])
         self._roll_qpos = int(
             model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{PREFIX}roll")]
         )
@@ -439,19 +438,21 @@ class Robot:
         j = c.middle_joint
         best = 0.0
         for i, end in ((j - 1, -1.0), (j, 1.0)):
-            w = pos[i] + rot[i] @ np.array([end * 0.5 * c.pitch, 0.0, -c.wheel_offset])
-            rel = w - a
-            best = max(best, float(np.linalg.norm(rel - (rel @ axis) * axis)))
+            for dy, dz in ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)):
+                local = np.array([end * 0.5 * c.pitch, dy * c.wheel_offset, dz * c.wheel_offset])
+                rel = pos[i] + rot[i] @ local - a
+                best = max(best, float(np.linalg.norm(rel - (rel @ axis) * axis)))
         return 2.0 * max(best + c.wheel_radius, 0.5 * c.width)
 
-    def apex_force(self) -> float:
-        """Normal force on the V apex wheels (the clamp's contact with the wall), N."""
+    def apex_force(self, side: int = 3) -> float:
+        """Normal force on the V's apex wheels on ``side`` (0: +y, 1: +z, 2: -y, 3: -z, the
+        clamping side) against the wall, N."""
         m, d = self.model, self._need_bound()
         total = 0.0
         f6 = np.zeros(6)
         for k in range(d.ncon):
             con = d.contact[k]
-            if self._apex_geom[con.geom1] or self._apex_geom[con.geom2]:
+            if self._apex_side[con.geom1] == side or self._apex_side[con.geom2] == side:
                 mujoco.mj_contactForce(m, d, k, f6)
                 total += abs(f6[0])
         return total

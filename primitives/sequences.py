@@ -8,7 +8,8 @@ angles in radians, ``option`` distances from the sensor as DESIGN.md defines the
 - :func:`take_turn`: drive to where the turn arc starts (from the option's distance), unclamp,
   roll the front half to the option's direction, bend the steering joint and drive the arc
   through the option's angle, straighten, drive until the whole robot is in the outgoing pipe,
-  roll back, clamp to the outgoing diameter, check the heading;
+  roll back, centre on the outgoing pipe's axis (the V probes both walls), clamp to the
+  outgoing diameter, check the heading;
 - :func:`pass_reducer`: drive through the taper unclamped and clamp at the new diameter; a
   reducer to a diameter outside the robot's range is refused before entering (``blocked``);
 - :func:`pass_junction`: a branch is a turn; the way straight on is driven through;
@@ -26,6 +27,7 @@ from pipe_env.robot import RobotConfig
 from primitives.steps import (
     DEFAULT_SPEED,
     Bend,
+    Centre,
     CheckHeading,
     Clamp,
     Drive,
@@ -102,7 +104,9 @@ def back_out(
     the turns it retraces, and clamps there again."""
     if diameter is None:
         return Sequence("back_out", (Drive(-abs(distance), speed),))
-    return Sequence("back_out", (Unclamp(), Drive(-abs(distance), speed), Clamp(diameter)))
+    return Sequence(
+        "back_out", (Unclamp(), Drive(-abs(distance), speed), Centre(), Clamp(diameter))
+    )
 
 
 def stop_before(option: StructureOption, margin: float = STOP_MARGIN) -> Sequence:
@@ -168,6 +172,7 @@ def take_turn(
         Bend(1, 0.0),
         Drive(through, speed),
         Roll(-option.direction),
+        Centre(),
         Clamp(option.diameter),
         CheckHeading(c.jam_heading),
     ]
@@ -189,7 +194,13 @@ def pass_straight(
     dist = max(option.distance, 0.0) + c.length + 0.5 * max(d_in, option.diameter) + 0.03
     return Sequence(
         "pass_straight",
-        (Unclamp(), Drive(dist, speed), Clamp(option.diameter), CheckHeading(c.jam_heading)),
+        (
+            Unclamp(),
+            Drive(dist, speed),
+            Centre(),
+            Clamp(option.diameter),
+            CheckHeading(c.jam_heading),
+        ),
     )
 
 
@@ -208,7 +219,13 @@ def pass_reducer(
     dist = max(option.distance, 0.0) + c.length + 2.0 * max(d_in, option.diameter) + 0.03
     return Sequence(
         "pass_reducer",
-        (Unclamp(), Drive(dist, speed), Clamp(option.diameter), CheckHeading(c.jam_heading)),
+        (
+            Unclamp(),
+            Drive(dist, speed),
+            Centre(),
+            Clamp(option.diameter),
+            CheckHeading(c.jam_heading),
+        ),
     )
 
 

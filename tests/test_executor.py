@@ -34,6 +34,23 @@ def test_mitre_90_turn_passes(diameter: float) -> None:
     assert run == "r_out0"
 
 
+@pytest.mark.parametrize(
+    ("make", "diameter", "direction_deg"),
+    [(layouts.long_bend, 0.09, 225.0), (layouts.mitre_bend, 0.06, 90.0)],
+)
+def test_robot_is_centred_on_the_outgoing_axis_after_a_turn(make, diameter, direction_deg) -> None:
+    net = make(diameter, math.pi / 2, math.radians(direction_deg))
+    ex = Executor.for_network(net, lidar=None)
+    o = structures_ahead(net, ex.robot.sensor_pose(), 5.0)[0]
+    out = ex.run(for_option(o, incoming_diameter=ex.robot.clamped_diameter()))
+    assert out.status == "done", out.reason
+    # both chain ends on the axis (the walls alone leave them against a wall: 6-20 mm off)
+    for i in (0, ex.config.n_modules - 1):
+        p = ex.robot.module_pose(i).position
+        assert net.centreline.nearest(p).distance < 0.002
+    assert ex.robot.clamped_diameter() == pytest.approx(diameter, abs=0.001)
+
+
 def test_tee_branch_passes() -> None:
     out, run = _turn(layouts.t_junction(0.09, direction=math.pi / 2))
     assert out.status == "done", out.reason
