@@ -87,6 +87,10 @@ class RobotConfig:
         jam_lag: the front module lagging its drive target by more than this is a jam, m.
         jam_tracking: a follower further than this from its follow-the-leader pose is a jam, m.
         jam_heading: a turn ending more than this off its commanded heading is a jam, rad.
+        jam_steer: on a turn's arc (steering joint bent), the walls forcing the front module
+            more than this off its commanded heading stall the steering joint: a jam, rad.
+        jam_hold: the same while holding the turn's heading after the arc (joint straight,
+            stiffer), rad.
         diameter_range: the pipe diameters the robot can clamp in, m.
     """
 
@@ -104,6 +108,8 @@ class RobotConfig:
     jam_lag: float = 0.012
     jam_tracking: float = 0.02
     jam_heading: float = math.radians(30.0)
+    jam_steer: float = math.radians(25.0)
+    jam_hold: float = math.radians(21.0)
     diameter_range: tuple[float, float] = ROBOT_DIAMETER_RANGE
 
     def __post_init__(self) -> None:
@@ -149,6 +155,12 @@ class RobotConfig:
             "jam_heading",
             "[1, 90] deg in rad",
         )
+        for name in ("jam_steer", "jam_hold"):
+            need(
+                math.radians(1) <= getattr(self, name) <= math.radians(180),
+                name,
+                "[1, 180] deg in rad",
+            )
         lo, hi = self.diameter_range
         need(self.width < lo < hi <= 0.3, "diameter_range", "width < low < high <= 0.3 m")
         need(

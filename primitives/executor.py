@@ -425,10 +425,11 @@ class Executor:
         self._F_pos = p + axial * x + lateral
         # rotation error from actual to commanded; coming out of a turn the commanded heading
         # is the turn's (open loop), else the walls set it
-        want = self._H_rot if self._hold_heading and self._kappa == 0.0 else self._F_rot
+        hold = self._hold_heading and self._kappa == 0.0
+        want = self._H_rot if hold else self._F_rot
         rel = r.T @ want
         angle, axis = _log(rel)
-        limit = ANCHOR_ROT if self._kappa != 0.0 else ANCHOR_ROT_STRAIGHT
+        limit = ANCHOR_ROT if self._kappa != 0.0 or hold else ANCHOR_ROT_STRAIGHT
         self._F_rot = want if angle <= limit else r @ rotation_about(axis, limit)
 
     # ------------------------------------------------------------------ primitives
@@ -457,6 +458,8 @@ class Executor:
             self._set_targets()
             try:
                 self._tick(self._F_rot[:, 0])
+                if self._kappa != 0.0 or self._hold_heading:
+                    self._check_steer()
             except _Jam:
                 # the robot is where it stalled: the driven path ends there
                 p, _ = self._front_pose()
@@ -611,6 +614,18 @@ class Executor:
             self._set_targets()
             self._tick(None)
         self._settle(5)
+
+    def _check_steer(self) -> None:
+        """Steering: jam if the walls force the front too far off its commanded heading."""
+        _, r = self._front_pose()
+        cosang = float(np.clip(r[:, 0] @ self._H_rot[:, 0], -1.0, 1.0))
+        err = math.acos(cosang)
+        limit = self.config.jam_steer if self._kappa != 0.0 else self.config.jam_hold
+        if err > limit:
+            raise _Jam(
+                f"the steering stalled: the walls force the front {math.degrees(err):.0f} deg "
+                "off its commanded heading"
+            )
 
     def _check_heading(self, step: CheckHeading) -> None:
         _, r = self._front_pose()

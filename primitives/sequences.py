@@ -41,6 +41,10 @@ from primitives.steps import (
 
 #: Turn arc radius as a fraction of the incoming diameter (fits inside a mitre's corner).
 TURN_RADIUS_FACTOR = 0.65
+#: The turn starts this fraction of the radial clearance early (towards the inner corner).
+TURN_INSIDE = 0.9
+#: ... but at most this early, m.
+TURN_INSIDE_MAX = 0.0065
 #: The robot attempts sensed turns up to this angle (90 deg fittings plus sensing noise), rad.
 MAX_TURN_ATTEMPT = math.radians(100.0)
 #: Distance kept before a structure's reference point by :func:`stop_before`, m.
@@ -161,6 +165,10 @@ def take_turn(
     # the front module's centre follows the arc; it starts radius*tan(theta/2) before the
     # reference point, which is option.distance ahead of the sensor
     pre = option.distance + c.lidar_offset - radius * math.tan(0.5 * theta)
+    # start a little early so the arc hugs the inner corner: the front module's outer front
+    # wheel then clears the far corner of a branch's mouth (a tee in a 60 mm pipe)
+    clearance = 0.5 * (min(d_in, option.diameter) - c.width)
+    pre -= TURN_INSIDE * min(max(clearance, 0.0), TURN_INSIDE_MAX)
     through = c.length + 0.5 * option.diameter + 0.03
     steps: list[Step] = [Unclamp()]
     if pre > 0:
