@@ -214,12 +214,14 @@ class PhysicalPlant:
     def _on_scan_factory(self, goal: Any):
         blind = [0]
         verdict: dict[str, Any] = {"why": None}
+        t_start = self.executor.time  # the plant's clock catches up after the motion
 
         def on_scan(scan: Scan, state: Any) -> str:
             self.last_scan = scan
             if self.keep_image:
                 self.scan_image = scan_image(scan)
             pose = self.pose()
+            now = self.sim_time + (state.time - t_start)
             node, entry, truth = self._truth(pose)
             if self._goal_reached(goal):
                 verdict["why"] = "goal"
@@ -227,7 +229,7 @@ class PhysicalPlant:
             if self.detector == "ground_truth":
                 ref = truth[0].distance if truth else math.inf
                 kind = truth[0].kind if truth else "straight"
-                self.detection_log.append(detection_record(self.sim_time, node, truth, truth, kind))
+                self.detection_log.append(detection_record(now, node, truth, truth, kind))
                 if ref <= self.trigger_distance + 0.5 * self.scan_interval:
                     verdict["why"] = "confirmed"
                     return "stop"
@@ -237,7 +239,7 @@ class PhysicalPlant:
             self._track_state = track
             fused = track.detection if track.confirmed else det
             self.detection_log.append(
-                detection_record(self.sim_time, node, truth, list(fused.options), fused.kind)
+                detection_record(now, node, truth, list(fused.options), fused.kind)
             )
             blind[0] = blind[0] + 1 if scan.n_valid < BLIND_RETURNS else 0
             if blind[0] >= BLIND_SWEEPS:
