@@ -34,9 +34,10 @@ heading). The welds are softer than the contacts, so
 - a slightly-off command is guided by the walls (the front slides and turns along them, the
   followers trace the front's real path);
 - a command that drives into a wall makes the front module lag its target: past
-  ``jam_lag`` (or a follower past ``jam_tracking``, or a turn ending more than
-  ``jam_heading`` off its commanded heading) the executor stops and reports a jam; a wall is
-  never tunnelled because the pull is bounded by the lag limit.
+  ``jam_lag`` (or a follower past ``jam_tracking``, or the walls forcing the steering front
+  more than ``jam_steer`` / ``jam_hold`` off its commanded heading, or a turn ending more than
+  ``jam_heading`` off it) the executor stops and reports a jam; a wall is never tunnelled
+  because the pull is bounded by the lag limit.
 
 Wheel-driven propulsion with friction was not chosen: it needs small time steps and careful
 friction tuning to be stable in 57 mm pipes, and ~30 scenario runs per CI build need episodes
