@@ -18,6 +18,8 @@ def test_config_errors_name_field_value_and_range() -> None:
         RobotConfig(n_modules=3)
     with pytest.raises(ValueError, match=r"width = 0.07"):
         RobotConfig(width=0.07)
+    with pytest.raises(ValueError, match=r"jam_steer = 0.0 .*\[1, 180\] deg"):
+        RobotConfig(jam_steer=0.0)
 
 
 def test_one_robot_spans_57_to_125_mm() -> None:
