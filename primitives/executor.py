@@ -506,6 +506,13 @@ class Executor:
             self._tick(None)
         self._settle(3)
 
+    def _roll_home(self) -> None:
+        """Roll the front half back in line with the rear half (the V needs both halves in
+        one plane), e.g. after a turn that jammed while rolled."""
+        if abs(self._rho) > 1e-9:
+            self._roll(Roll(-self._rho))
+            self._rho = 0.0
+
     def _bend(self, step: Bend) -> None:
         c = self.config
         if step.joint >= c.n_modules:
@@ -526,6 +533,7 @@ class Executor:
         force, so a wrong commanded diameter does not crush the wall)."""
         c = self.config
         self._hold_heading = False
+        self._roll_home()
         if self._vside != CLAMP_SIDE:
             self._unclamp()
             self._vside = CLAMP_SIDE
@@ -581,6 +589,7 @@ class Executor:
         robot was so far off that a probe found the wall already touching (saturated)."""
         c = self.config
         self._hold_heading = False
+        self._roll_home()
         for _ in range(CENTRE_ROUNDS):
             h = [self._probe(side, rng) for side in range(4)]
             if any(v is None for v in h):
@@ -719,6 +728,7 @@ class Executor:
         p, r = self._front_pose()
         self._F_pos, self._F_rot = p, r
         self._kappa = 0.0
+        self._hold_heading = False
         d = self.data
         d.mocap_pos[self.robot.mocap_ids[0]] = p
         d.mocap_quat[self.robot.mocap_ids[0]] = quat_of(r)

@@ -11,7 +11,7 @@ from pipe_env import layouts
 from pipe_env.ground_truth import structures_ahead
 from pipe_env.routing import locate
 from primitives.executor import Executor
-from primitives.sequences import Sequence, for_option, go_straight
+from primitives.sequences import Sequence, back_out, for_option, go_straight
 from primitives.steps import Drive, Unclamp
 
 
@@ -98,3 +98,18 @@ def test_driving_into_a_45_mm_bore_jams_at_its_mouth() -> None:
     mouth = float(net.geometry["s"].reference_point("r_out0")[0])
     assert front[0] + 0.5 * ex.config.pitch < mouth
     assert out.travelled < 0.7
+
+
+def test_after_a_jammed_turn_backing_out_reclamps_on_the_axis() -> None:
+    net = layouts.mitre_bend(0.1, math.pi / 2, 0.0)
+    ex = Executor.for_network(net, lidar=None)
+    o = structures_ahead(net, ex.robot.sensor_pose(), 5.0)[0]
+    # wrong roll direction: the turn jams with the front half rolled
+    out = ex.run(for_option(replace(o, direction=o.direction + 1.7), incoming_diameter=0.1))
+    assert out.status == "jammed"
+    back = ex.run(back_out(out.travelled, diameter=0.1))
+    assert back.status == "done", back.reason
+    assert abs(ex.robot.roll_angle) < 0.05
+    assert ex.robot.clamped_diameter() == pytest.approx(0.1, abs=0.0015)
+    for i in (0, ex.config.n_modules - 1):
+        assert net.centreline.nearest(ex.robot.module_pose(i).position).distance < 0.002
