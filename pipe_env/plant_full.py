@@ -137,9 +137,12 @@ class PhysicalPlant:
         self.sim_time = 0.0
         self._odometry_error = np.zeros(3)
         self._positions: list[NDArray[np.float64]] = [self.pose().position]
-        #: junctions passed: (odometer at the decision, node id); odometer: forward distance
-        self.junctions: list[tuple[float, str]] = []
+        #: junctions passed: (odometer at the decision, node id, clamped diameter there, m);
+        #: odometer: forward distance
+        self.junctions: list[tuple[float, str, float]] = []
         self._odometer = 0.0
+        self._start_diameter = self.clamped_diameter
+        self._decision_diameter = self._start_diameter
 
     def pose(self) -> Pose:
         """True sensor pose of the robot."""
@@ -211,12 +214,14 @@ class PhysicalPlant:
     def _on_scan_factory(self, goal: Any):
         blind = [0]
         verdict: dict[str, Any] = {"why": None}
+        t_start = self.executor.time  # the plant's clock catches up after the motion
 
         def on_scan(scan: Scan, state: Any) -> str:
             self.last_scan = scan
             if self.keep_image:
                 self.scan_image = scan_image(scan)
             pose = self.pose()
+            now = self.sim_time + (state.time - t_start)
             node, entry, truth = self._truth(pose)
             if self._goal_reached(goal):
                 verdict["why"] = "goal"
@@ -224,7 +229,7 @@ class PhysicalPlant:
             if self.detector == "ground_truth":
                 ref = truth[0].distance if truth else math.inf
                 kind = truth[0].kind if truth else "straight"
-                self.detection_log.append(detection_record(self.sim_time, node, truth, truth, kind))
+                self.detection_log.append(detection_record(now, node, truth, truth, kind))
                 if ref <= self.trigger_distance + 0.5 * self.scan_interval:
                     verdict["why"] = "confirmed"
                     return "stop"
@@ -234,7 +239,7 @@ class PhysicalPlant:
             self._track_state = track
             fused = track.detection if track.confirmed else det
             self.detection_log.append(
-                detection_record(self.sim_time, node, truth, list(fused.options), fused.kind)
+                detection_record(now, node, truth, list(fused.options), fused.kind)
             )
             blind[0] = blind[0] + 1 if scan.n_valid < BLIND_RETURNS else 0
             if blind[0] >= BLIND_SWEEPS:
@@ -270,6 +275,7 @@ class PhysicalPlant:
 
     def _decision(self, why: str | None) -> Decision:
         pose = self.pose()
+        self._decision_diameter = self.clamped_diameter
         node, entry, truth = self._truth(pose)
         if why == "blind":
             dist = truth[0].distance if truth else 0.0
@@ -329,10 +335,14 @@ class PhysicalPlant:
         if status == "jammed":
             # back off to where the robot decided, as an operator would, then sense again
             back = self.executor.run(
-                back_out(max(self._odometer - odometer_at_decision, 0.0)), rng=self.rng
+                back_out(
+                    max(self._odometer - odometer_at_decision, 0.0),
+                    diameter=self._decision_diameter,
+                ),
+                rng=self.rng,
             )
             self._account(back, out)
-            self._odometer = odometer_at_decision
+            self._odometer -= abs(float(back.travelled))
             out.status, out.note = "jammed", outcome.reason
             return out
         if status in ("blocked", "dead_end"):
@@ -340,7 +350,7 @@ class PhysicalPlant:
             return out
         ways = [r for r in self.network.runs_at[dec.node_id] if r.id != dec.entry_run]
         if len(ways) > 1 and not (self.junctions and self.junctions[-1][1] == dec.node_id):
-            self.junctions.append((odometer_at_decision, dec.node_id))
+            self.junctions.append((odometer_at_decision, dec.node_id, self._decision_diameter))
         self.tracker.reset()
         self._track_state = None
         self.decision = None
@@ -355,13 +365,16 @@ class PhysicalPlant:
         while self.junctions and self.junctions[-1][1] == dec.node_id:
             self.junctions.pop()
         target = self.junctions[-1][0] if self.junctions else 0.0
+        diameter = self.junctions[-1][2] if self.junctions else self._start_diameter
         distance = max(self._odometer - target, 0.0)
         if distance > 1e-3:
-            outcome = self.executor.run(back_out(distance), rng=self.rng)
+            outcome = self.executor.run(back_out(distance, diameter=diameter), rng=self.rng)
             self._account(outcome, out)
+            self._odometer -= abs(float(outcome.travelled))
             if outcome.status != "done":
                 out.note = f"backing out ended {outcome.status}: {outcome.reason}"
-        self._odometer = target
+                if outcome.status == "jammed":
+                    out.status = "jammed"
         self.tracker.reset()
         self._track_state = None
         self.decision = None

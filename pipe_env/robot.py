@@ -1,22 +1,27 @@
 """The PIRATE-like robot: its MuJoCo bodies, its clamping geometry and its encoders.
 
-Body (thesis 1.2, 3.1.2): a chain of ``RobotConfig.n_modules`` (>= 4) modules, 45 mm across
-including their wheels, ``pitch`` metres from joint to joint. Between consecutive modules sits a
-bending joint (two hinges, ``bend_<j>_y`` and ``bend_<j>_z``, j = 1 .. n-1); the joint in the
-middle of the chain also carries the roll joint ``roll`` (a hinge about the chain axis), so the
-front half (with the front module, the LiDAR mount and the first bending joint) can turn its
-bending plane towards a branch. Wheels are small spheres at both ends of every module, on the four
-sides. The front module carries the LiDAR at its front face (``RobotConfig.lidar_offset``).
+Body (thesis 1.2, 3.1.2): a chain of ``RobotConfig.n_modules`` (>= 4) modules, 47 mm across
+their wheels (the thesis's 45 mm module body with the wheels standing 1 mm proud, so the robot
+cannot squeeze into a 45 mm bore: it jams at its mouth), ``pitch`` metres from joint to joint.
+Between consecutive modules sits a bending joint (two hinges, ``bend_<j>_y`` and
+``bend_<j>_z``, j = 1 .. n-1); the joint in the middle of the chain also carries the roll joint
+``roll`` (a hinge about the chain axis), so the front half (with the front module, the LiDAR
+mount and the first bending joint) can turn its bending plane towards a branch. Wheels are small
+spheres at both ends of every module, on the four sides. The front module carries the LiDAR at
+its front face (``RobotConfig.lidar_offset``).
 
 Clamping (PIRATE V-shape): the two legs (``leg_modules`` modules each, held straight) either
 side of the middle joint fold into a V in
 the robot's x-z plane; the wheels at the apex press on one wall while the chain ends, held on the
 pipe axis by the drive (see below), oppose them (they stand in for the PIRATE's wheels on the
 other wall). Clamping is force controlled: the V folds until the apex wheels touch the wall with
-``clamp_force``. One robot covers 57-125 mm by changing the V half-angle ``alpha``:
+``clamp_force`` and is then held a small preload beyond the touching shape (the executor's
+``CLAMP_PRELOAD``). One robot covers 57-125 mm by changing the V half-angle ``alpha``:
 ``D = 2 (leg_length sin(alpha) + wheel_offset cos(alpha) + wheel_radius)``. The clamped diameter is
-read back from the joint angles (forward kinematics of the apex wheel in the front module's
-frame) with gaussian encoder noise (``encoder_noise``, radians): :meth:`Robot.clamped_diameter`.
+read back from the joint angles alone (:meth:`Robot.clamped_diameter`): forward kinematics of the
+chain gives the apex wheels' distance from the line through the two end modules, so a front
+module tilted by the clamping reaction does not bias it; every hinge encoder carries gaussian
+noise (``encoder_noise``, radians).
 
 Drive model (and why): the front module is pulled by a soft weld to a mocap "drive target", and
 every follower module by a soft weld to the pose the front module had when it was at the
@@ -29,9 +34,10 @@ heading). The welds are softer than the contacts, so
 - a slightly-off command is guided by the walls (the front slides and turns along them, the
   followers trace the front's real path);
 - a command that drives into a wall makes the front module lag its target: past
-  ``jam_lag`` (or a follower past ``jam_tracking``, or a turn ending more than
-  ``jam_heading`` off its commanded heading) the executor stops and reports a jam; a wall is
-  never tunnelled because the pull is bounded by the lag limit.
+  ``jam_lag`` (or a follower past ``jam_tracking``, or the walls forcing the steering front
+  more than ``jam_steer`` / ``jam_hold`` off its commanded heading, or a turn ending more than
+  ``jam_heading`` off it) the executor stops and reports a jam; a wall is never tunnelled
+  because the pull is bounded by the lag limit.
 
 Wheel-driven propulsion with friction was not chosen: it needs small time steps and careful
 friction tuning to be stable in 57 mm pipes, and ~30 scenario runs per CI build need episodes
@@ -68,7 +74,8 @@ class RobotConfig:
     Attributes:
         n_modules: modules in the chain (>= 4).
         pitch: joint-to-joint length of a module.
-        width: module diameter across the wheels (thesis 3.1.2: 45 mm).
+        width: module diameter across the wheels (thesis 3.1.2: a 45 mm module; its wheels
+            stand 1 mm proud).
         wheel_radius: radius of the wheel spheres.
         lidar_offset: LiDAR origin ahead of the front module's centre, along its axis.
         module_mass: mass of one module, kg.
@@ -81,12 +88,16 @@ class RobotConfig:
         jam_lag: the front module lagging its drive target by more than this is a jam, m.
         jam_tracking: a follower further than this from its follow-the-leader pose is a jam, m.
         jam_heading: a turn ending more than this off its commanded heading is a jam, rad.
+        jam_steer: on a turn's arc (steering joint bent), the walls forcing the front module
+            more than this off its commanded heading stall the steering joint: a jam, rad.
+        jam_hold: the same while holding the turn's heading after the arc (joint straight,
+            stiffer), rad.
         diameter_range: the pipe diameters the robot can clamp in, m.
     """
 
     n_modules: int = 6
     pitch: float = 0.045
-    width: float = 0.045
+    width: float = 0.047
     wheel_radius: float = 0.0055
     lidar_offset: float = 0.03
     module_mass: float = 0.25
@@ -98,6 +109,8 @@ class RobotConfig:
     jam_lag: float = 0.012
     jam_tracking: float = 0.02
     jam_heading: float = math.radians(30.0)
+    jam_steer: float = math.radians(25.0)
+    jam_hold: float = math.radians(21.0)
     diameter_range: tuple[float, float] = ROBOT_DIAMETER_RANGE
 
     def __post_init__(self) -> None:
@@ -143,6 +156,12 @@ class RobotConfig:
             "jam_heading",
             "[1, 90] deg in rad",
         )
+        for name in ("jam_steer", "jam_hold"):
+            need(
+                math.radians(1) <= getattr(self, name) <= math.radians(180),
+                name,
+                "[1, 180] deg in rad",
+            )
         lo, hi = self.diameter_range
         need(self.width < lo < hi <= 0.3, "diameter_range", "width < low < high <= 0.3 m")
         need(
@@ -356,15 +375,14 @@ class Robot:
         self._robot_geom = np.zeros(model.ngeom, dtype=bool)
         self._robot_geom[self.geom_ids] = True
         j = c.middle_joint
-        apex = [f"{PREFIX}wheel{j - 1}_r3", f"{PREFIX}wheel{j}_f3"]
-        self._apex_geom = np.zeros(model.ngeom, dtype=bool)
+        # the V's apex: the wheels at the rear of module j-1 and the front of module j (the
+        # V folds towards any side; towards -z in the path frame when clamping)
+        apex = [f"{PREFIX}wheel{j - 1}_r{k}" for k in range(4)]
+        apex += [f"{PREFIX}wheel{j}_f{k}" for k in range(4)]
+        #: side of each apex wheel (0: +y, 1: +z, 2: -y, 3: -z in its module), -1 elsewhere
+        self._apex_side = np.full(model.ngeom, -1, dtype=int)
         for n in apex:
-            self._apex_geom[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n)] = True
-        self._apex_wheel = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, apex[0])
-        name = f"{PREFIX}bend_{c.middle_joint}_y"
-        self._apex_qpos = int(
-            model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)]
-        )
+            self._apex_side[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n)] = int(n[-1])
         self._roll_qpos = int(
             model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{PREFIX}roll")]
         )
@@ -406,28 +424,48 @@ class Robot:
         return float(self._need_bound().qpos[self._roll_qpos])
 
     def clamped_diameter(self, rng: np.random.Generator | None = None) -> float:
-        """Pipe diameter spanned by the clamping V, m: twice the depth of the apex wheel below
-        the front module's axis, by forward kinematics of the joint angles (the encoders), with
-        gaussian encoder noise (``encoder_noise`` on the apex angle) if ``rng`` is given."""
-        d = self._need_bound()
-        c = self.config
-        b0 = self.body_ids[0]
-        rot = d.xmat[b0].reshape(3, 3)
-        rel = rot.T @ (d.geom_xpos[self._apex_wheel] - d.xpos[b0])
-        depth = -float(rel[2]) + c.wheel_radius
-        if rng is not None and c.encoder_noise > 0:
-            alpha = 0.5 * abs(float(d.qpos[self._apex_qpos]))
-            depth += c.leg_length * math.cos(alpha) * float(rng.normal(0.0, c.encoder_noise))
-        return 2.0 * max(depth, 0.5 * c.width)
+        """Pipe diameter spanned by the clamping V, m, read from the joint encoders alone.
 
-    def apex_force(self) -> float:
-        """Normal force on the V apex wheels (the clamp's contact with the wall), N."""
+        Forward kinematics of the chain (module pitch, joint anchors, wheel offsets) from the
+        hinge angles gives the apex wheels' distance from the line through the two end
+        modules' centres (which the drive holds on the pipe axis); the diameter is twice that
+        distance plus the wheel radius. The line, not the front module's axis, is the
+        reference, so a tilted front module does not bias the reading. With ``rng``, every
+        hinge angle carries gaussian encoder noise (``encoder_noise``, rad)."""
+        d = self._need_bound()
+        q = d.qpos[self.joint_qpos].astype(float)
+        c = self.config
+        if rng is not None and c.encoder_noise > 0:
+            q = q + rng.normal(0.0, c.encoder_noise, size=q.shape)
+        return self.diameter_from_angles(q)
+
+    def diameter_from_angles(self, angles: NDArray[np.float64]) -> float:
+        """Clamped diameter (m) of the V described by hinge ``angles`` (:meth:`joint_names`
+        order, rad): forward kinematics, see :meth:`clamped_diameter`."""
+        c = self.config
+        pos, rot = chain_kinematics(c, np.asarray(angles, dtype=float))
+        a, b = pos[0], pos[-1]
+        axis = b - a
+        n = float(np.linalg.norm(axis))
+        axis = axis / n if n > 1e-9 else np.array([-1.0, 0.0, 0.0])
+        j = c.middle_joint
+        best = 0.0
+        for i, end in ((j - 1, -1.0), (j, 1.0)):
+            for dy, dz in ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)):
+                local = np.array([end * 0.5 * c.pitch, dy * c.wheel_offset, dz * c.wheel_offset])
+                rel = pos[i] + rot[i] @ local - a
+                best = max(best, float(np.linalg.norm(rel - (rel @ axis) * axis)))
+        return 2.0 * max(best + c.wheel_radius, 0.5 * c.width)
+
+    def apex_force(self, side: int = 3) -> float:
+        """Normal force on the V's apex wheels on ``side`` (0: +y, 1: +z, 2: -y, 3: -z, the
+        clamping side) against the wall, N."""
         m, d = self.model, self._need_bound()
         total = 0.0
         f6 = np.zeros(6)
         for k in range(d.ncon):
             con = d.contact[k]
-            if self._apex_geom[con.geom1] or self._apex_geom[con.geom2]:
+            if self._apex_side[con.geom1] == side or self._apex_side[con.geom2] == side:
                 mujoco.mj_contactForce(m, d, k, f6)
                 total += abs(f6[0])
         return total
@@ -443,6 +481,40 @@ class Robot:
                 mujoco.mj_contactForce(m, d, k, f6)
                 total += abs(f6[0])
         return total
+
+
+def chain_kinematics(
+    config: RobotConfig, angles: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Module centres (n, 3) and rotations (n, 3, 3) in the front module's frame for hinge
+    ``angles`` (:meth:`Robot.joint_names` order, rad), as MuJoCo composes the hinges."""
+    c = config
+    n = c.n_modules
+    pos = np.zeros((n, 3))
+    rot = np.zeros((n, 3, 3))
+    rot[0] = np.eye(3)
+    anchor_local = np.array([0.5 * c.pitch, 0.0, 0.0])
+    k = 0
+    for i in range(1, n):
+        r = rot[i - 1].copy()
+        p = pos[i - 1] + r @ np.array([-c.pitch, 0.0, 0.0])
+        axes = ([0] if i == c.middle_joint else []) + [1, 2]
+        for ax in axes:
+            anchor = p + r @ anchor_local
+            r = r @ _axis_rot(ax, float(angles[k]))
+            k += 1
+            p = anchor - r @ anchor_local
+        pos[i], rot[i] = p, r
+    return pos, rot
+
+
+def _axis_rot(axis: int, a: float) -> NDArray[np.float64]:
+    c, s = math.cos(a), math.sin(a)
+    if axis == 0:
+        return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    if axis == 1:
+        return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def quat_of(rotation: NDArray[np.float64]) -> NDArray[np.float64]:

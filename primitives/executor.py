@@ -4,11 +4,17 @@ It owns the robot's drive state (see the drive model in :mod:`pipe_env.robot`):
 
 - the drive target of the front module, moved every control tick (``CONTROL_DT``) forward along
   the front's heading, turned by the steering bend, and re-anchored to where the walls let the
-  front module be (lateral offsets beyond ``ANCHOR_POS``, heading beyond ``ANCHOR_ROT``): walls
-  guide a slightly-off command;
-- the driven path: the front module's real poses by odometer; every follower module is welded
-  to the pose the front had at its place (follow-the-leader), folded into the clamping V when
-  clamped; reversing retraces this path;
+  front module be (lateral offsets beyond ``ANCHOR_POS``; heading beyond ``ANCHOR_ROT`` on an
+  arc, ``ANCHOR_ROT_STRAIGHT`` driving straight): walls guide a slightly-off command. Coming
+  out of a turn's arc the target keeps the turn's commanded heading (open loop) until the robot
+  centres or clamps;
+- the driven path: the drive target's poses by odometer, stored in the rear half's frame (the
+  commanded roll of the front half removed); every follower module is welded to the pose the
+  front had at its place (follow-the-leader; front-half modules rolled by the current roll),
+  folded into the clamping V when clamped; reversing retraces this path;
+- centring (:class:`~primitives.steps.Centre`): the V folds towards the four sides in turn until
+  its apex touches a wall; the two planes' touching depths give the ends' offset from the pipe
+  axis, and the robot (with the driven path under it) is moved onto the axis;
 - the commanded heading (open loop), which :class:`~primitives.steps.CheckHeading` compares with
   the real one at the end of a turn.
 
@@ -42,6 +48,7 @@ from pipe_env.world import PipeWorld, build_world
 from primitives.sequences import Sequence
 from primitives.steps import (
     Bend,
+    Centre,
     CheckHeading,
     Clamp,
     Drive,
@@ -59,8 +66,26 @@ CONTROL_DT = 0.02
 ANCHOR_POS = 0.003
 #: The drive target follows the front module's heading beyond this, rad.
 ANCHOR_ROT = math.radians(8.0)
+#: Driving straight (no bend set), the drive target follows the front's heading beyond this,
+#: rad: with no steering, the walls set the heading.
+ANCHOR_ROT_STRAIGHT = math.radians(1.0)
 #: V folding/straightening rate, rad/s.
 CLAMP_RATE = math.radians(60.0)
+#: Slow folding rate near the expected wall, rad/s.
+CLAMP_RATE_SLOW = math.radians(12.0)
+#: The V folds fast until this far short of the commanded diameter and searches up to this far
+#: beyond it, m.
+CLAMP_SEARCH = 0.008
+#: Once touching, the V is held at the touching diameter plus this, m (the clamping preload).
+CLAMP_PRELOAD = 0.001
+#: The clamping V folds towards -z of the path frame (side 3, see ``_V_SIDES``).
+CLAMP_SIDE = 3
+#: Centring probes at most this many times (a robot against a wall needs two).
+CENTRE_ROUNDS = 3
+#: Centring moves the robot sideways by at most this per control tick, m.
+SHIFT_STEP = 0.001
+#: Behind the robot's rear, a centring shift of the driven path fades out over this, m.
+SHIFT_BLEND = 0.1
 #: Driven-path samples are kept this far apart, m.
 PATH_STEP = 0.0005
 
@@ -189,7 +214,11 @@ class Executor:
         # follower offsets behind the front module's centre along the path, m
         self._offsets = c.pitch * np.arange(n)
         self._alpha = 0.0
+        self._vside = CLAMP_SIDE
+        self._hold_heading = False
         self._kappa = 0.0
+        #: commanded roll of the front half against the rear half, rad
+        self._rho = 0.0
         self._bend_offsets: dict[int, float] = {}
         self._cap = 0
         self._hs = np.zeros(0)
@@ -249,6 +278,8 @@ class Executor:
         self.odometer = 0.0
         self._alpha = 0.0
         self._kappa = 0.0
+        self._rho = 0.0
+        self._hold_heading = False
         self._bend_offsets = {}
         self._F_pos = front.copy()
         self._F_rot = rot.copy()
@@ -324,23 +355,31 @@ class Executor:
         k = c.leg_modules
         a = self._alpha
         shift = 2.0 * c.leg_length * (1.0 - math.cos(a))
+        n_local, fold_front, fold_rear = _V_SIDES[self._vside]
+        if a > 0.0:
+            rot_front, rot_rear = fold_front(a), fold_rear(a)
+        # the driven path keeps the rear half's frames; the front half (modules before the roll
+        # joint) is rolled by the commanded roll
+        roll_front = _rx(self._rho) if self._rho != 0.0 else None
         for i in range(1, n):
             s_i = self.odometer - self._offsets[i]
             if a > 0.0 and j - k <= i < j + k:
                 s_top = self.odometer - (j - k - 0.5) * c.pitch  # joint at the front of the V
                 p0, r0 = self._path(s_top)
-                x, z = r0[:, 0], r0[:, 2]
-                if i < j:  # front leg, going down towards the apex
+                x, nv = r0[:, 0], r0 @ n_local  # the apex goes towards nv
+                if i < j:  # front leg, going towards the apex
                     along = (i - (j - k) + 0.5) * c.pitch
-                    pos = p0 - along * math.cos(a) * x - along * math.sin(a) * z
-                    rot = r0 @ _ry(-a)
-                else:  # rear leg, coming back up
-                    apex = p0 - c.leg_length * (math.cos(a) * x + math.sin(a) * z)
+                    pos = p0 - along * math.cos(a) * x + along * math.sin(a) * nv
+                    rot = r0 @ rot_front
+                else:  # rear leg, coming back
+                    apex = p0 - c.leg_length * (math.cos(a) * x - math.sin(a) * nv)
                     along = (i - j + 0.5) * c.pitch
-                    pos = apex - along * math.cos(a) * x + along * math.sin(a) * z
-                    rot = r0 @ _ry(a)
+                    pos = apex - along * math.cos(a) * x - along * math.sin(a) * nv
+                    rot = r0 @ rot_rear
             else:
                 pos, rot = self._path(s_i + (shift if i >= j + k else 0.0))
+            if roll_front is not None and i < j:
+                rot = rot @ roll_front
             off = self._bend_offsets.get(i)
             if off:
                 rot = rot @ rotation_about([0.0, 0.0, 1.0], off)
@@ -384,11 +423,14 @@ class Executor:
         if n > ANCHOR_POS:
             lateral *= ANCHOR_POS / n
         self._F_pos = p + axial * x + lateral
-        # rotation error from actual to commanded
-        rel = r.T @ self._F_rot
+        # rotation error from actual to commanded; coming out of a turn the commanded heading
+        # is the turn's (open loop), else the walls set it
+        hold = self._hold_heading and self._kappa == 0.0
+        want = self._H_rot if hold else self._F_rot
+        rel = r.T @ want
         angle, axis = _log(rel)
-        if angle > ANCHOR_ROT:
-            self._F_rot = r @ rotation_about(axis, ANCHOR_ROT)
+        limit = ANCHOR_ROT if self._kappa != 0.0 or hold else ANCHOR_ROT_STRAIGHT
+        self._F_rot = want if angle <= limit else r @ rotation_about(axis, limit)
 
     # ------------------------------------------------------------------ primitives
     def _drive(self, step: Drive) -> None:
@@ -411,10 +453,13 @@ class Executor:
                 self._H_rot = self._H_rot @ turn
             self.odometer += ds
             self._travelled += ds
-            self._push(self.odometer, self._F_pos.copy(), self._F_rot.copy())
+            rear_frame = self._F_rot @ _rx(-self._rho) if self._rho != 0.0 else self._F_rot
+            self._push(self.odometer, self._F_pos.copy(), rear_frame.copy())
             self._set_targets()
             try:
                 self._tick(self._F_rot[:, 0])
+                if self._kappa != 0.0 or self._hold_heading:
+                    self._check_steer()
             except _Jam:
                 # the robot is where it stalled: the driven path ends there
                 p, _ = self._front_pose()
@@ -435,6 +480,8 @@ class Executor:
             self._travelled += ds
             self._F_pos, self._F_rot = self._path(self.odometer)
             self._F_pos = self._F_pos.copy()
+            if self._rho != 0.0:
+                self._F_rot = self._F_rot @ _rx(self._rho)
             self._set_targets()
             self._tick(None)
         self._H_rot = self._F_rot.copy()
@@ -450,26 +497,29 @@ class Executor:
             return
         n_ticks = max(1, int(math.ceil(abs(total) / (step.rate * CONTROL_DT))))
         inc = total / n_ticks
-        c = self.config
-        s_joint = self.odometer - (c.middle_joint - 0.5) * c.pitch
-        hs = self._hs[: self._n]
-        w = np.clip((hs - (s_joint - 0.5 * c.pitch)) / c.pitch, 0.0, 1.0)
-        sel = np.nonzero(w > 0)[0]
         for _ in range(n_ticks):
             rx = _rx(inc)
             self._F_rot = self._F_rot @ rx
             self._H_rot = self._H_rot @ rx
-            for k in sel:
-                self._hr[k] = self._hr[k] @ (rx if w[k] >= 1.0 else _rx(inc * w[k]))
+            self._rho += inc
             self._set_targets()
             self._tick(None)
         self._settle(3)
+
+    def _roll_home(self) -> None:
+        """Roll the front half back in line with the rear half (the V needs both halves in
+        one plane), e.g. after a turn that jammed while rolled."""
+        if abs(self._rho) > 1e-9:
+            self._roll(Roll(-self._rho))
+            self._rho = 0.0
 
     def _bend(self, step: Bend) -> None:
         c = self.config
         if step.joint >= c.n_modules:
             raise ValueError(f"Bend.joint = {step.joint} is invalid; allowed: 1..{c.n_modules - 1}")
         if step.joint == 1:
+            if self._kappa != 0.0 and step.angle == 0.0:
+                self._hold_heading = True  # out of the arc: drive on in the turn's heading
             self._kappa = 2.0 * math.sin(0.5 * step.angle) / c.pitch
         else:
             self._bend_offsets[step.joint] = step.angle
@@ -477,18 +527,34 @@ class Executor:
             self._settle(5)
 
     def _clamp(self, diameter: float) -> None:
+        """Fold the V: fast to ``CLAMP_SEARCH`` short of ``diameter``, then slowly until the
+        apex wheels touch the wall (``clamp_force``); then hold it where it touched plus
+        ``CLAMP_PRELOAD`` (force control: the preload, not the commanded diameter, sets the
+        force, so a wrong commanded diameter does not crush the wall)."""
         c = self.config
-        a_goal = c.clamp_angle(diameter + 0.01)
-        a = min(self._alpha, c.clamp_angle(diameter - 0.01))
-        rate = CLAMP_RATE * CONTROL_DT
-        self._alpha = a
+        self._hold_heading = False
+        self._roll_home()
+        if self._vside != CLAMP_SIDE:
+            self._unclamp()
+            self._vside = CLAMP_SIDE
+        a_goal = c.clamp_angle(diameter + CLAMP_SEARCH)
+        a_fast = c.clamp_angle(diameter - CLAMP_SEARCH)
+        self._alpha = min(self._alpha, a_fast)
+        touched = False
         for _ in range(400):
             self._set_targets()
             self._tick(None)
-            if self.robot.apex_force() >= c.clamp_force or self._alpha >= a_goal:
+            if self.robot.apex_force(CLAMP_SIDE) >= c.clamp_force:
+                touched = True
                 break
-            self._alpha = min(self._alpha + rate, a_goal)
-        self._settle(3)
+            if self._alpha >= a_goal:
+                break
+            rate = CLAMP_RATE if self._alpha < a_fast else CLAMP_RATE_SLOW
+            self._alpha = min(self._alpha + rate * CONTROL_DT, a_goal)
+        if touched:
+            self._alpha = c.clamp_angle(self.robot.clamped_diameter() + CLAMP_PRELOAD)
+            self._set_targets()
+        self._settle(8)
 
     def _unclamp(self) -> None:
         rate = CLAMP_RATE * CONTROL_DT
@@ -497,6 +563,78 @@ class Executor:
             self._set_targets()
             self._tick(None)
         self._settle(2)
+
+    def _probe(self, side: int, rng: np.random.Generator) -> float | None:
+        """Fold the V towards ``side`` (see :data:`_V_SIDES`) until its apex touches the wall;
+        returns the encoders' distance from the end modules' line to that wall (m), or None
+        if the V folded fully without touching; the V is straightened again."""
+        c = self.config
+        self._unclamp()
+        self._vside = side
+        a_max = math.radians(75.0)
+        h = None
+        while self._alpha < a_max:
+            self._alpha = min(self._alpha + CLAMP_RATE * CONTROL_DT, a_max)
+            self._set_targets()
+            self._tick(None)
+            if self.robot.apex_force(side) >= c.clamp_force:
+                h = 0.5 * self.robot.clamped_diameter(rng)
+                break
+        self._unclamp()
+        self._vside = CLAMP_SIDE
+        return h
+
+    def _centre(self, step: Centre, rng: np.random.Generator) -> None:
+        """Probe both walls in two planes and move the robot onto the pipe axis; again if the
+        robot was so far off that a probe found the wall already touching (saturated)."""
+        c = self.config
+        self._hold_heading = False
+        self._roll_home()
+        for _ in range(CENTRE_ROUNDS):
+            h = [self._probe(side, rng) for side in range(4)]
+            if any(v is None for v in h):
+                return  # an opening (a junction, a wider pipe): no axis to centre on
+            hy0, hz0, hy1, hz1 = (float(v) for v in h)  # type: ignore[arg-type]
+            _, r = self._path(self.odometer)
+            # the ends' line sits off the axis by e; folding towards n the apex meets the wall
+            # at R - e.n: side 0 (+y) / 2 (-y) and 1 (+z) / 3 (-z)
+            offset = 0.5 * (hy1 - hy0) * r[:, 1] + 0.5 * (hz1 - hz0) * r[:, 2]
+            dist = float(np.linalg.norm(offset))
+            if dist < step.tolerance:
+                return
+            self._shift(-offset / dist * min(dist, step.max_shift))
+            saturated = min(h) <= 0.5 * c.width + 0.002  # type: ignore[type-var]
+            if not saturated and dist < 0.003:
+                return
+
+    def _shift(self, move: NDArray) -> None:
+        """Translate the robot (its drive target and the driven path under it) by ``move`` m,
+        gradually; the path behind the robot blends back to where it was."""
+        c = self.config
+        hs = self._hs[: self._n]
+        rear = self.odometer - self._offsets[-1] - 0.5 * c.pitch
+        w = np.clip((hs - (rear - SHIFT_BLEND)) / SHIFT_BLEND, 0.0, 1.0)
+        sel = np.nonzero(w > 0)[0]
+        n_ticks = max(1, int(math.ceil(float(np.linalg.norm(move)) / SHIFT_STEP)))
+        inc = move / n_ticks
+        for _ in range(n_ticks):
+            self._hp[sel] += w[sel, None] * inc[None, :]
+            self._F_pos = self._F_pos + inc
+            self._set_targets()
+            self._tick(None)
+        self._settle(5)
+
+    def _check_steer(self) -> None:
+        """Steering: jam if the walls force the front too far off its commanded heading."""
+        _, r = self._front_pose()
+        cosang = float(np.clip(r[:, 0] @ self._H_rot[:, 0], -1.0, 1.0))
+        err = math.acos(cosang)
+        limit = self.config.jam_steer if self._kappa != 0.0 else self.config.jam_hold
+        if err > limit:
+            raise _Jam(
+                f"the steering stalled: the walls force the front {math.degrees(err):.0f} deg "
+                "off its commanded heading"
+            )
 
     def _check_heading(self, step: CheckHeading) -> None:
         _, r = self._front_pose()
@@ -548,6 +686,7 @@ class Executor:
         t0, _ = self._begin()
         p, r = self._front_pose()
         self._H_rot = r.copy()
+        self._hold_heading = False
         try:
             for step in sequence.steps:
                 self._do(step, on_scan, rng)
@@ -573,6 +712,8 @@ class Executor:
             self._clamp(step.diameter)
         elif isinstance(step, Unclamp):
             self._unclamp()
+        elif isinstance(step, Centre):
+            self._centre(step, rng)
         elif isinstance(step, Scan):
             self._scan(on_scan, rng)
         elif isinstance(step, CheckHeading):
@@ -587,6 +728,7 @@ class Executor:
         p, r = self._front_pose()
         self._F_pos, self._F_rot = p, r
         self._kappa = 0.0
+        self._hold_heading = False
         d = self.data
         d.mocap_pos[self.robot.mocap_ids[0]] = p
         d.mocap_quat[self.robot.mocap_ids[0]] = quat_of(r)
@@ -682,6 +824,30 @@ def _log(r: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
     if n < 1e-12:
         return angle, np.array([1.0, 0.0, 0.0])
     return angle, v / n
+
+
+def _v_side(n_local: tuple[float, float, float]) -> tuple[NDArray, Callable, Callable]:
+    """Apex direction in the path frame and the legs' rotations (front, rear) for a V folding
+    towards it by half-angle ``a``."""
+    nl = np.array(n_local, dtype=float)
+    k = np.cross([1.0, 0.0, 0.0], nl)
+
+    def front(a: float) -> NDArray[np.float64]:
+        return rotation_about(k, -a)
+
+    def rear(a: float) -> NDArray[np.float64]:
+        return rotation_about(k, a)
+
+    return nl, front, rear
+
+
+#: The V's fold sides (0: +y, 1: +z, 2: -y, 3: -z of the path frame), as the robot's wheels.
+_V_SIDES = {
+    0: _v_side((0.0, 1.0, 0.0)),
+    1: _v_side((0.0, 0.0, 1.0)),
+    2: _v_side((0.0, -1.0, 0.0)),
+    3: (np.array([0.0, 0.0, -1.0]), lambda a: _ry(-a), lambda a: _ry(a)),
+}
 
 
 def _orthonormal(r: NDArray[np.float64]) -> NDArray[np.float64]:

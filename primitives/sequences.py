@@ -8,7 +8,8 @@ angles in radians, ``option`` distances from the sensor as DESIGN.md defines the
 - :func:`take_turn`: drive to where the turn arc starts (from the option's distance), unclamp,
   roll the front half to the option's direction, bend the steering joint and drive the arc
   through the option's angle, straighten, drive until the whole robot is in the outgoing pipe,
-  roll back, clamp to the outgoing diameter, check the heading;
+  roll back, centre on the outgoing pipe's axis (the V probes both walls), clamp to the
+  outgoing diameter, check the heading;
 - :func:`pass_reducer`: drive through the taper unclamped and clamp at the new diameter; a
   reducer to a diameter outside the robot's range is refused before entering (``blocked``);
 - :func:`pass_junction`: a branch is a turn; the way straight on is driven through;
@@ -26,6 +27,7 @@ from pipe_env.robot import RobotConfig
 from primitives.steps import (
     DEFAULT_SPEED,
     Bend,
+    Centre,
     CheckHeading,
     Clamp,
     Drive,
@@ -39,6 +41,10 @@ from primitives.steps import (
 
 #: Turn arc radius as a fraction of the incoming diameter (fits inside a mitre's corner).
 TURN_RADIUS_FACTOR = 0.65
+#: The turn starts this fraction of the radial clearance early (towards the inner corner).
+TURN_INSIDE = 0.9
+#: ... but at most this early, m.
+TURN_INSIDE_MAX = 0.0065
 #: The robot attempts sensed turns up to this angle (90 deg fittings plus sensing noise), rad.
 MAX_TURN_ATTEMPT = math.radians(100.0)
 #: Distance kept before a structure's reference point by :func:`stop_before`, m.
@@ -94,9 +100,17 @@ def go_straight(distance: float, speed: float = DEFAULT_SPEED) -> Sequence:
     return Sequence("go_straight", (Drive(distance, speed),))
 
 
-def back_out(distance: float, speed: float = DEFAULT_SPEED) -> Sequence:
-    """Reverse ``distance`` m along the driven path."""
-    return Sequence("back_out", (Drive(-abs(distance), speed),))
+def back_out(
+    distance: float, speed: float = DEFAULT_SPEED, diameter: float | None = None
+) -> Sequence:
+    """Reverse ``distance`` m along the driven path. With ``diameter`` (m, the pipe the robot
+    backs into) the robot unclamps first, so the V's straight legs do not cut the corners of
+    the turns it retraces, and clamps there again."""
+    if diameter is None:
+        return Sequence("back_out", (Drive(-abs(distance), speed),))
+    return Sequence(
+        "back_out", (Unclamp(), Drive(-abs(distance), speed), Centre(), Clamp(diameter))
+    )
 
 
 def stop_before(option: StructureOption, margin: float = STOP_MARGIN) -> Sequence:
@@ -151,6 +165,10 @@ def take_turn(
     # the front module's centre follows the arc; it starts radius*tan(theta/2) before the
     # reference point, which is option.distance ahead of the sensor
     pre = option.distance + c.lidar_offset - radius * math.tan(0.5 * theta)
+    # start a little early so the arc hugs the inner corner: the front module's outer front
+    # wheel then clears the far corner of a branch's mouth (a tee in a 60 mm pipe)
+    clearance = 0.5 * (min(d_in, option.diameter) - c.width)
+    pre -= TURN_INSIDE * min(max(clearance, 0.0), TURN_INSIDE_MAX)
     through = c.length + 0.5 * option.diameter + 0.03
     steps: list[Step] = [Unclamp()]
     if pre > 0:
@@ -162,6 +180,7 @@ def take_turn(
         Bend(1, 0.0),
         Drive(through, speed),
         Roll(-option.direction),
+        Centre(),
         Clamp(option.diameter),
         CheckHeading(c.jam_heading),
     ]
@@ -183,7 +202,13 @@ def pass_straight(
     dist = max(option.distance, 0.0) + c.length + 0.5 * max(d_in, option.diameter) + 0.03
     return Sequence(
         "pass_straight",
-        (Unclamp(), Drive(dist, speed), Clamp(option.diameter), CheckHeading(c.jam_heading)),
+        (
+            Unclamp(),
+            Drive(dist, speed),
+            Centre(),
+            Clamp(option.diameter),
+            CheckHeading(c.jam_heading),
+        ),
     )
 
 
@@ -202,7 +227,13 @@ def pass_reducer(
     dist = max(option.distance, 0.0) + c.length + 2.0 * max(d_in, option.diameter) + 0.03
     return Sequence(
         "pass_reducer",
-        (Unclamp(), Drive(dist, speed), Clamp(option.diameter), CheckHeading(c.jam_heading)),
+        (
+            Unclamp(),
+            Drive(dist, speed),
+            Centre(),
+            Clamp(option.diameter),
+            CheckHeading(c.jam_heading),
+        ),
     )
 
 

@@ -12,6 +12,7 @@ meaning on the robot:
   to ``angle``; the front then drives on the arc of radius ``pitch / (2 sin(angle / 2))``
   through the joints, turning towards its +y (rolled) side;
 - :class:`Clamp` / :class:`Unclamp`: fold the V to span ``diameter`` / straighten it;
+- :class:`Centre`: probe both walls in two planes with the V and move onto the pipe axis;
 - :class:`Scan`: stop-and-scan servo sweep of the LiDAR;
 - :class:`CheckHeading`: the turn is complete: the front's heading must be within
   ``tolerance`` of the commanded one (else the bend was blocked: a jam);
@@ -120,6 +121,21 @@ class Unclamp(Step):
 
 
 @dataclass(frozen=True)
+class Centre(Step):
+    """Probe the walls with the V on four sides (up, down, left, right) and move the robot's
+    ends onto the pipe axis if they are more than ``tolerance`` m off it (at most
+    ``max_shift`` m); leaves the robot unclamped. Nothing moves where the V finds no wall."""
+
+    op: ClassVar[str] = "centre"
+    tolerance: float = 0.0005
+    max_shift: float = 0.05
+
+    def __post_init__(self) -> None:
+        _num(self, "tolerance", 0.0, 0.05, "m")
+        _num(self, "max_shift", 0.0, 0.2, "m")
+
+
+@dataclass(frozen=True)
 class Scan(Step):
     """A stop-and-scan servo sweep of the LiDAR (the robot stands still)."""
 
@@ -153,7 +169,7 @@ class Halt(Step):
 
 
 STEP_TYPES: dict[str, type[Step]] = {
-    t.op: t for t in (Drive, Stop, Roll, Bend, Clamp, Unclamp, Scan, CheckHeading, Halt)
+    t.op: t for t in (Drive, Stop, Roll, Bend, Clamp, Unclamp, Centre, Scan, CheckHeading, Halt)
 }
 
 

@@ -11,7 +11,8 @@ from pipe_env import layouts
 from pipe_env.ground_truth import structures_ahead
 from pipe_env.routing import locate
 from primitives.executor import Executor
-from primitives.sequences import Sequence, for_option, go_straight
+from primitives.sequences import Sequence, back_out, for_option, go_straight
+from primitives.steps import Drive, Unclamp
 
 
 def _turn(net, pick: int = -1, d_err: float = 0.0, dir_err: float = 0.0):
@@ -31,6 +32,23 @@ def test_mitre_90_turn_passes(diameter: float) -> None:
     out, run = _turn(layouts.mitre_bend(diameter, math.pi / 2, 0.0))
     assert out.status == "done", out.reason
     assert run == "r_out0"
+
+
+@pytest.mark.parametrize(
+    ("make", "diameter", "direction_deg"),
+    [(layouts.long_bend, 0.09, 225.0), (layouts.mitre_bend, 0.06, 90.0)],
+)
+def test_robot_is_centred_on_the_outgoing_axis_after_a_turn(make, diameter, direction_deg) -> None:
+    net = make(diameter, math.pi / 2, math.radians(direction_deg))
+    ex = Executor.for_network(net, lidar=None)
+    o = structures_ahead(net, ex.robot.sensor_pose(), 5.0)[0]
+    out = ex.run(for_option(o, incoming_diameter=ex.robot.clamped_diameter()))
+    assert out.status == "done", out.reason
+    # both chain ends on the axis (the walls alone leave them against a wall: 6-20 mm off)
+    for i in (0, ex.config.n_modules - 1):
+        p = ex.robot.module_pose(i).position
+        assert net.centreline.nearest(p).distance < 0.002
+    assert ex.robot.clamped_diameter() == pytest.approx(diameter, abs=0.001)
 
 
 def test_tee_branch_passes() -> None:
@@ -67,3 +85,31 @@ def test_sequences_round_trip_as_data() -> None:
     seq = for_option(o, incoming_diameter=0.09)
     assert Sequence.from_dict(seq.to_dict()) == seq
     assert "take_turn" in str(seq) and "roll(" in str(seq)
+
+
+def test_driving_into_a_45_mm_bore_jams_at_its_mouth() -> None:
+    net = layouts.reducer(0.1, 0.045, taper_length=0.1, distance=0.5)
+    ex = Executor.for_network(net, lidar=None)
+    out = ex.run(Sequence("force_in", (Unclamp(), Drive(1.2))))
+    assert out.status == "jammed"
+    # the front module stalled in the taper: its front wheels never got into the 45 mm bore,
+    # which starts where the taper ends (0.1 m)
+    front = ex.robot.front_pose().position
+    mouth = float(net.geometry["s"].reference_point("r_out0")[0])
+    assert front[0] + 0.5 * ex.config.pitch < mouth
+    assert out.travelled < 0.7
+
+
+def test_after_a_jammed_turn_backing_out_reclamps_on_the_axis() -> None:
+    net = layouts.mitre_bend(0.1, math.pi / 2, 0.0)
+    ex = Executor.for_network(net, lidar=None)
+    o = structures_ahead(net, ex.robot.sensor_pose(), 5.0)[0]
+    # wrong roll direction: the turn jams with the front half rolled
+    out = ex.run(for_option(replace(o, direction=o.direction + 1.7), incoming_diameter=0.1))
+    assert out.status == "jammed"
+    back = ex.run(back_out(out.travelled, diameter=0.1))
+    assert back.status == "done", back.reason
+    assert abs(ex.robot.roll_angle) < 0.05
+    assert ex.robot.clamped_diameter() == pytest.approx(0.1, abs=0.0015)
+    for i in (0, ex.config.n_modules - 1):
+        assert net.centreline.nearest(ex.robot.module_pose(i).position).distance < 0.002

@@ -23,3 +23,19 @@ def test_tee_branch_goal_is_reached(detector: str) -> None:
         _, res = plant.advance(goal)
     assert res.status == "goal"
     assert plant.edge_position().run_id == "r_out1"
+
+
+@pytest.mark.parametrize("detector", ["ground_truth", "improved"])
+def test_reducer_below_57_mm_is_blocked_before_the_robot_enters(detector: str) -> None:
+    net = layouts.reducer(0.1, 0.045, taper_length=0.1, distance=0.5)
+    plant = PhysicalPlant(net, detector=detector)
+    dec, out = plant.advance(None)
+    assert dec is not None and out.status != "jammed"
+    assert plant.edge_position().run_id == "r_in"
+    before = plant.pose().position.copy()
+    # the sensed way on is narrower than the robot's range: every option is refused
+    for option in dec.options:
+        res = plant.execute(option)
+        assert res.status == "blocked", (option, res.note)
+        assert plant.pose().position == pytest.approx(before, abs=0.002)
+    assert any(o.kind == "reducer" and o.diameter < 0.057 for o in dec.options)
