@@ -46,20 +46,34 @@ BACK_OUT = "back_out"
 
 @dataclass(frozen=True)
 class ExecutionTolerance:
-    """Largest option errors a turn primitive survives (from benchmarks/bench_primitives.py).
+    """Largest option errors a turn primitive survives, measured by
+    ``benchmarks/bench_primitives.py`` in full fidelity (90 deg mitre bends, the smallest over roll
+    directions) at the diameters in ``diameters``; linear in the diameter between them and held
+    beyond. Distances are fractions of the pipe diameter, angles radians.
 
     Attributes:
-        distance_fraction: |distance error| as a fraction of the pipe diameter.
-        direction: |roll direction error| (weighted by sin(angle)), radians.
-        angle: |deflection error|, radians.
+        diameters: where the tolerances were measured, metres.
+        distance_early: the option's distance too short (the robot turns early).
+        distance_late: the option's distance too long (it turns late).
+        direction: roll direction error (weighted by sin(angle) when applied).
+        angle_under: the option's deflection too small.
+        angle_over: the option's deflection too large.
         match: largest angle between a chosen option's outgoing axis and the true way on for
             the option to be that way at all (else it is a phantom and the robot jams).
     """
 
-    distance_fraction: float = 0.5
-    direction: float = math.radians(25.0)
-    angle: float = math.radians(20.0)
+    diameters: tuple[float, ...] = (0.060, 0.090, 0.120)
+    distance_early: tuple[float, ...] = (0.19, 0.28, 0.28)
+    distance_late: tuple[float, ...] = (0.19, 0.42, 0.52)
+    direction: tuple[float, ...] = tuple(math.radians(a) for a in (14.1, 16.9, 19.7))
+    angle_under: tuple[float, ...] = tuple(math.radians(a) for a in (18.7, 20.6, 20.6))
+    angle_over: tuple[float, ...] = tuple(math.radians(a) for a in (9.4, 9.4, 9.4))
     match: float = math.radians(40.0)
+
+    def at(self, diameter: float) -> dict[str, float]:
+        """The tolerances in a pipe of ``diameter`` metres."""
+        keys = ("distance_early", "distance_late", "direction", "angle_under", "angle_over")
+        return {k: float(np.interp(diameter, self.diameters, getattr(self, k))) for k in keys}
 
 
 @dataclass(frozen=True)
@@ -375,19 +389,27 @@ class KinematicPlant:
         if sep > tol.match:
             out.status, out.note = "jammed", f"no way on within {math.degrees(sep):.0f} deg"
             return out
-        errors = {
-            "distance": abs(choice.distance - true.distance) / max(diameter, 1e-3),
-            "direction": abs(_wrap(choice.direction - true.direction)) * math.sin(true.angle),
-            "angle": abs(choice.angle - true.angle),
-        }
-        limits = {"distance": tol.distance_fraction, "direction": tol.direction, "angle": tol.angle}
+        lim = tol.at(diameter)
+        d_err = (choice.distance - true.distance) / max(diameter, 1e-3)
+        a_err = choice.angle - true.angle
+        checks = (
+            ("distance (early, fraction of D)", -d_err, lim["distance_early"]),
+            ("distance (late, fraction of D)", d_err, lim["distance_late"]),
+            (
+                "direction",
+                abs(_wrap(choice.direction - true.direction)) * math.sin(true.angle),
+                lim["direction"],
+            ),
+            ("angle (under)", -a_err, lim["angle_under"]),
+            ("angle (over)", a_err, lim["angle_over"]),
+        )
         lo, hi = ROBOT_DIAMETER_RANGE
         if not lo <= true.diameter <= hi:
             out.status, out.note = "jammed", "the pipe is narrower/wider than the robot's range"
             return out
-        for key, value in errors.items():
-            if value > limits[key]:
-                out.status, out.note = "jammed", f"{key} error {value:.3f} > {limits[key]:.3f}"
+        for key, value, limit in checks:
+            if value > limit:
+                out.status, out.note = "jammed", f"{key} error {value:.3f} > {limit:.3f}"
                 return out
         node = dec.node_id
         runs = [r for r in self.network.runs_at[node] if r.id != dec.entry_run]
