@@ -25,6 +25,8 @@ A scenario file (packaged ones live in ``agents/scenarios/``)::
     detect: {distances: [0.4, 0.3, 0.2, 0.1], planar: false}   # detect mode: sensor positions
                                     # before the structure (m); planar: the 2D algorithm on one
                                     # horizontal plane
+    known_failure: why it fails today  # optional: a documented gap; pytest expects the failure
+                                    # (strict: a pass is reported, so the note gets removed)
     criteria:
       success: true                 # expected is_success
       max_jams: 0
@@ -70,6 +72,7 @@ SCENARIO_KEYS = {
     "detect",
     "criteria",
     "tags",
+    "known_failure",
 }
 MODES = ("navigate", "detect")
 ENVS = ("PipeNav-v0", "PipeExplore-v0")
@@ -118,6 +121,9 @@ class Scenario:
     max_decisions: int = 32
     criteria: dict[str, Any] = field(default_factory=dict)
     tags: list[str] = field(default_factory=list)
+    #: why the scenario is expected to fail today (a documented gap, not a skipped check: the
+    #: test suite runs it and fails if it starts passing, so the note gets removed)
+    known_failure: str | None = None
 
     @property
     def base_dir(self) -> Path:
@@ -281,6 +287,9 @@ def _parse_scenario(data: Any, source: str) -> Scenario:
         raise _fail(source, "tags", f"got {tags!r}; allowed: a list of strings")
     desc = data.get("description", "")
     _expect(source, "description", desc, str, "a string")
+    known = data.get("known_failure")
+    if known is not None and not (isinstance(known, str) and known.strip()):
+        raise _fail(source, "known_failure", f"got {known!r}; allowed: a non-empty string")
     return Scenario(
         name,
         source,
@@ -295,6 +304,7 @@ def _parse_scenario(data: Any, source: str) -> Scenario:
         max_decisions,
         criteria,
         tags,
+        known,
     )
 
 

@@ -322,9 +322,9 @@ class StructureTracker:
             return TrackState(False, Detection.straight(confidence=0.5), 0.0, 0, False, None)
         pos, rot = self._last_pose
         dist = self._distance(tr, pos)
-        # keep the ways seen in at least half of the track's detections (a way glimpsed once
-        # from far away is dropped once better scans disagree)
-        ways = [w for w in tr.ways if w.hits * 2 >= tr.hits or len(tr.ways) == 1]
+        # keep the ways that carry at least half of the track's trust weight (a way glimpsed
+        # from far away is dropped once nearer, better scans disagree)
+        ways = [w for w in tr.ways if w.weight * 2 >= tr.weight or len(tr.ways) == 1]
         if not ways:
             ways = [max(tr.ways, key=lambda w: w.weight)]
         kind = tr.kind
