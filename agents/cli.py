@@ -197,7 +197,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--seed", type=int, default=7)
     demo.add_argument("--fittings", type=int, default=6, help="fittings in the network")
     demo.add_argument("--agent", default="route_planner")
-    demo.add_argument("--fidelity", default="fast", choices=["full", "fast"])
+    demo.add_argument("--fidelity", default="full", choices=["full", "fast"])
     demo.add_argument(
         "--detector", default="improved", choices=["improved", "thesis", "ground_truth"]
     )
