@@ -187,21 +187,25 @@ def take_turn(
     return Sequence("take_turn", tuple(steps))
 
 
-def pass_straight(
+def _drive_through(
+    name: str,
     option: StructureOption,
-    incoming_diameter: float | None = None,
-    config: RobotConfig | None = None,
-    speed: float = DEFAULT_SPEED,
+    incoming_diameter: float | None,
+    config: RobotConfig | None,
+    speed: float,
+    run_out_diameters: float,
 ) -> Sequence:
-    """Drive straight through the structure until the whole robot is past it."""
+    """Unclamped, drive until the whole robot is ``run_out_diameters`` (x the larger diameter)
+    past the structure, centre and clamp at the option's diameter."""
     c = _cfg(config)
     refused = _refuse(option, c)
     if refused is not None:
         return refused
     d_in = float(incoming_diameter) if incoming_diameter else option.diameter
-    dist = max(option.distance, 0.0) + c.length + 0.5 * max(d_in, option.diameter) + 0.03
+    run_out = run_out_diameters * max(d_in, option.diameter)
+    dist = max(option.distance, 0.0) + c.length + run_out + 0.03
     return Sequence(
-        "pass_straight",
+        name,
         (
             Unclamp(),
             Drive(dist, speed),
@@ -210,6 +214,16 @@ def pass_straight(
             CheckHeading(c.jam_heading),
         ),
     )
+
+
+def pass_straight(
+    option: StructureOption,
+    incoming_diameter: float | None = None,
+    config: RobotConfig | None = None,
+    speed: float = DEFAULT_SPEED,
+) -> Sequence:
+    """Drive straight through the structure until the whole robot is past it."""
+    return _drive_through("pass_straight", option, incoming_diameter, config, speed, 0.5)
 
 
 def pass_reducer(
@@ -219,22 +233,7 @@ def pass_reducer(
     speed: float = DEFAULT_SPEED,
 ) -> Sequence:
     """Drive through a reducer (taper) unclamped and clamp at its outgoing diameter."""
-    c = _cfg(config)
-    refused = _refuse(option, c)
-    if refused is not None:
-        return refused
-    d_in = float(incoming_diameter) if incoming_diameter else option.diameter
-    dist = max(option.distance, 0.0) + c.length + 2.0 * max(d_in, option.diameter) + 0.03
-    return Sequence(
-        "pass_reducer",
-        (
-            Unclamp(),
-            Drive(dist, speed),
-            Centre(),
-            Clamp(option.diameter),
-            CheckHeading(c.jam_heading),
-        ),
-    )
+    return _drive_through("pass_reducer", option, incoming_diameter, config, speed, 2.0)
 
 
 def pass_junction(
