@@ -450,9 +450,6 @@ class _DecisionEnv(gym.Env):
         table = np.zeros((K_OPTIONS, len(OPTION_FEATURES)), dtype=np.float32)
         mask = self.action_masks()
         odo = self.plant.odometry_pose()
-        table[K_OPTIONS - 1, 13] = min(self.way_log.count(odo.position, None), MAX_TAKEN) / (
-            MAX_TAKEN
-        )
         goal = self._goal_point()
         to_goal = None
         if goal is not None:
@@ -461,21 +458,23 @@ class _DecisionEnv(gym.Env):
             to_goal = rel / norm if norm > 1e-9 else None
             if to_goal is not None:  # backing out heads the other way
                 table[K_OPTIONS - 1, 14] = clamp(-float(odo.forward @ to_goal), -1.0, 1.0)
-        if self.decision is not None:
-            for i, o in enumerate(self.decision.options[: K_OPTIONS - 1]):
-                row = table[i]
-                row[0] = float(mask[i])
-                row[1 + KINDS.index(o.kind)] = 1.0
-                row[7] = clamp(o.distance, _LOW[7], _HIGH[7])
-                row[8] = clamp(o.diameter, 0.0, _HIGH[8])
-                row[9], row[10] = math.cos(o.direction), math.sin(o.direction)
-                row[11] = clamp(o.angle, 0.0, math.pi)
-                row[12] = clamp(o.confidence, 0.0, 1.0)
-                way = self._world_way(o, odo)
-                taken = self.way_log.count(odo.position, way)
-                row[13] = min(taken, MAX_TAKEN) / MAX_TAKEN
-                if to_goal is not None:
-                    row[14] = clamp(float(way @ to_goal), -1.0, 1.0)
+        options = self.decision.options[: K_OPTIONS - 1] if self.decision is not None else []
+        ways = [self._world_way(o, odo) for o in options]
+        taken = self.way_log.counts(odo.position, [*ways, None])
+        table[K_OPTIONS - 1, 13] = min(taken[-1], MAX_TAKEN) / MAX_TAKEN
+        for i, o in enumerate(options):
+            row = [0.0] * len(OPTION_FEATURES)
+            row[0] = float(mask[i])
+            row[1 + KINDS.index(o.kind)] = 1.0
+            row[7] = clamp(o.distance, _LOW[7], _HIGH[7])
+            row[8] = clamp(o.diameter, 0.0, _HIGH[8])
+            row[9], row[10] = math.cos(o.direction), math.sin(o.direction)
+            row[11] = clamp(o.angle, 0.0, math.pi)
+            row[12] = clamp(o.confidence, 0.0, 1.0)
+            row[13] = min(taken[i], MAX_TAKEN) / MAX_TAKEN
+            if to_goal is not None:
+                row[14] = clamp(float(ways[i] @ to_goal), -1.0, 1.0)
+            table[i] = row
         back = table[K_OPTIONS - 1]
         back[0] = float(mask[K_OPTIONS - 1])
         back[6] = 1.0

@@ -40,13 +40,27 @@ def frame_from_forward(forward: ArrayLike, up_hint: ArrayLike | None = None) -> 
     ``up_hint`` defaults to world +z; when ``forward`` is (nearly) vertical the hint falls back to
     world +x so that the frame stays well defined. This is the "roll zero" convention.
     """
-    if type(forward) is np.ndarray and forward.shape == (3,) and forward.dtype == np.float64:
-        n = math.sqrt(float(forward @ forward))  # fast path for the common numpy input
+    if up_hint is None and type(forward) is np.ndarray and forward.shape == (3,):
+        # fast path for the common case (numpy input, default hint): plain float arithmetic
+        fx, fy, fz = float(forward[0]), float(forward[1]), float(forward[2])
+        n = math.sqrt(fx * fx + fy * fy + fz * fz)
         if not (n > 1e-12 and math.isfinite(n)):
             raise ValueError(f"forward must be a finite non-zero 3-vector, got {forward.tolist()}")
-        x = forward / n
-    else:
-        x = unit(forward, "forward")
+        fx, fy, fz = fx / n, fy / n, fz / n
+        if abs(fz) <= _VERTICAL_COS:  # hint +z: z = ez - fz * f
+            zx, zy, zz = -fz * fx, -fz * fy, 1.0 - fz * fz
+        else:  # hint +x (forward is nearly vertical, so nearly perpendicular to +x)
+            zx, zy, zz = 1.0 - fx * fx, -fx * fy, -fx * fz
+        m = math.sqrt(zx * zx + zy * zy + zz * zz)
+        zx, zy, zz = zx / m, zy / m, zz / m
+        return np.array(
+            [
+                [fx, zy * fz - zz * fy, zx],
+                [fy, zz * fx - zx * fz, zy],
+                [fz, zx * fy - zy * fx, zz],
+            ]
+        )
+    x = unit(forward, "forward")
     hint = WORLD_UP if up_hint is None else unit(up_hint, "up_hint")
     if abs(float(x @ hint)) > _VERTICAL_COS:
         hint = (
@@ -87,9 +101,8 @@ def direction_from_angles(angle: float, direction: float) -> NDArray[np.float64]
 
     ``direction`` follows DESIGN.md: atan2(z, y), so 0 = left (+y), pi/2 = up (+z), pi = right.
     """
-    return np.array(
-        [np.cos(angle), np.sin(angle) * np.cos(direction), np.sin(angle) * np.sin(direction)]
-    )
+    sa = math.sin(angle)
+    return np.array([math.cos(angle), sa * math.cos(direction), sa * math.sin(direction)])
 
 
 def angles_from_direction(vec_body: ArrayLike) -> tuple[float, float]:

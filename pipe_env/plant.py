@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -72,8 +73,14 @@ class ExecutionTolerance:
 
     def at(self, diameter: float) -> dict[str, float]:
         """The tolerances in a pipe of ``diameter`` metres."""
-        keys = ("distance_early", "distance_late", "direction", "angle_under", "angle_over")
-        return {k: float(np.interp(diameter, self.diameters, getattr(self, k))) for k in keys}
+        return dict(_tolerances_at(self, float(diameter)))
+
+
+@lru_cache(maxsize=256)
+def _tolerances_at(tol: ExecutionTolerance, diameter: float) -> tuple[tuple[str, float], ...]:
+    """:meth:`ExecutionTolerance.at` memoised (a network has a handful of diameters)."""
+    keys = ("distance_early", "distance_late", "direction", "angle_under", "angle_over")
+    return tuple((k, float(np.interp(diameter, tol.diameters, getattr(tol, k)))) for k in keys)
 
 
 @dataclass(frozen=True)
@@ -153,7 +160,7 @@ def match_option(chosen: StructureOption, truth: list[StructureOption]) -> tuple
     """Index of the true way on closest to ``chosen`` and the angle (rad) between their axes."""
     v = option_vector(chosen)
     sep = [math.acos(clamp(v @ option_vector(t), -1.0, 1.0)) for t in truth]
-    k = int(np.argmin(sep))
+    k = min(range(len(sep)), key=sep.__getitem__)
     return k, sep[k]
 
 

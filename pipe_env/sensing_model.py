@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from detector.options import KINDS, StructureOption, option_order
+from pipe_env.geometry import clamp
 
 _SIGMAS = ("distance_sigma", "diameter_sigma", "angle_sigma", "direction_sigma")
 
@@ -134,7 +135,7 @@ class DetectionErrorModel:
             distance=o.distance + s_dist * z[0],
             diameter=max(0.0, o.diameter + s_diam * z[1]) if o.diameter > 0 else 0.0,
             direction=o.direction + s_dir * z[3],
-            angle=float(np.clip(angle, 0.0, math.pi)),
+            angle=clamp(angle, 0.0, math.pi),
             confidence=self.confidence,
         )
 

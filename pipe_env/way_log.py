@@ -35,16 +35,24 @@ class WayLog:
 
     def count(self, position: NDArray[np.float64], way: NDArray[np.float64] | None) -> int:
         """How often ``way`` was taken within ``radius`` of ``position``."""
+        return self.counts(position, [way])[0]
+
+    def counts(
+        self, position: NDArray[np.float64], ways: list[NDArray[np.float64] | None]
+    ) -> list[int]:
+        """:meth:`count` for several ways at one position (the log is searched once)."""
+        out = [0] * len(ways)
         if not self._pos:
-            return 0
-        p = np.asarray(position, dtype=float)
-        rel = np.array(self._pos) - p
-        near = np.einsum("ij,ij->i", rel, rel) < self.radius * self.radius
-        n = 0
-        for i in np.flatnonzero(near):
-            v = self._vec[i]
-            if way is None or v is None:
-                n += int(way is None and v is None)
-            elif float(v @ way) >= self.cos_match:
-                n += 1
-        return n
+            return out
+        px, py, pz = (float(c) for c in position)
+        r2 = self.radius * self.radius
+        for q, v in zip(self._pos, self._vec):
+            dx, dy, dz = float(q[0]) - px, float(q[1]) - py, float(q[2]) - pz
+            if dx * dx + dy * dy + dz * dz >= r2:
+                continue
+            for i, way in enumerate(ways):
+                if way is None or v is None:
+                    out[i] += int(way is None and v is None)
+                elif float(v @ way) >= self.cos_match:
+                    out[i] += 1
+        return out
