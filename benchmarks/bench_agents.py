@@ -5,8 +5,10 @@
    drivable route. Agents: RoutePlanner, GoalGreedy, LeftHand, Random, and the learned
    MaskablePPO policy (``--model``, or trained here first for ``--train-minutes``; its training
    wall time is reported).
-2. Throughput in decisions/s on one core: fast fidelity (random valid actions), and full
-   fidelity (MuJoCo robot, rotating LiDAR, detector) on ``--full-episodes`` episodes.
+2. Throughput in decisions/s on one core, random valid actions, resets included: fast fidelity
+   on a pool of 50 networks (how RL training runs: a network is generated once, then reused)
+   and on a fresh network every episode (generation included); full fidelity (MuJoCo robot,
+   rotating LiDAR, detector) on ``--full-episodes`` episodes of 6-fitting networks.
 3. RoutePlanner in full fidelity with ``detector="improved"`` against ``"ground_truth"``: the
    success gap is what detection errors cost.
 
@@ -14,7 +16,7 @@ The reference measured in the same run is the fast environment's throughput, so 
 speed is also printed as a ratio to it.
 
 Usage: python benchmarks/bench_agents.py [--episodes 200] [--model runs/ppo/best/best_model.zip]
-       [--train-minutes 28] [--full-episodes 20] [--skip-full]
+       [--train-minutes 28] [--full-episodes 20] [--parts agents,throughput,full]
 """
 
 from __future__ import annotations
@@ -32,13 +34,20 @@ import torch
 import pipe_env  # noqa: F401
 from agents.evaluate import EVAL_POOL_SEED, evaluate
 from agents.train import DEFAULT_CONFIG, TrainConfig, train
+from pipe_env.envs import pool_network
 
 torch.set_num_threads(1)
 
 
 def throughput(fidelity: str, episodes: int, env_kwargs: dict, seed: int = 0) -> dict:
-    """Decisions per second with random valid actions, resets included."""
+    """Decisions per second with random valid actions, resets included. A network pool is
+    generated before the clock starts (training reuses it for millions of decisions)."""
     env = gym.make("pipenav/PipeNav-v0", **{**env_kwargs, "fidelity": fidelity})
+    pool = env_kwargs.get("network_pool")
+    if pool:
+        base = env.unwrapped
+        for i in range(pool):
+            pool_network(base.network_config, base.pool_seed, i)
     rng = np.random.default_rng(seed)
     steps = 0
     sim = 0.0
@@ -62,22 +71,11 @@ def throughput(fidelity: str, episodes: int, env_kwargs: dict, seed: int = 0) ->
     }
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--model", default=None, help="a trained MaskablePPO .zip")
-    parser.add_argument("--train-minutes", type=float, default=28.0)
-    parser.add_argument("--train-out", default="runs/bench_ppo")
-    parser.add_argument("--full-episodes", type=int, default=20)
-    parser.add_argument("--skip-full", action="store_true")
-    parser.add_argument("--json", default=None)
-    args = parser.parse_args()
-
-    cfg = TrainConfig.from_yaml(DEFAULT_CONFIG)
-    env_kwargs = {k: v for k, v in cfg.env_kwargs.items() if k not in ("network_pool", "pool_seed")}
-    report: dict = {"episodes": args.episodes, "eval_pool_seed": EVAL_POOL_SEED, "env": env_kwargs}
+def compare_agents(args: argparse.Namespace, env_kwargs: dict, report: dict) -> None:
+    """Part 1: every agent on the held-out networks; trains the policy first without --model."""
     model = args.model
     if model is None:
+        cfg = TrainConfig.from_yaml(DEFAULT_CONFIG)
         cfg.max_minutes = args.train_minutes
         summary = train(cfg, args.train_out, progress_bar=False)
         report["training"] = summary
@@ -126,26 +124,58 @@ def main() -> None:
             f"(target <= 30), {report['training']['timesteps']} decisions"
         )
 
-    fast = throughput("fast", 200, {**env_kwargs, "network_pool": 50})
-    report["throughput"] = {"fast": fast}
-    print("\n## Throughput (one core, random valid actions, resets included)\n")
-    print("| fidelity | decisions | wall s | decisions/s | sim s / wall s | vs fast |")
-    print("|---|---|---|---|---|---|")
-    print(
-        f"| fast | {fast['decisions']} | {fast['wall_s']} | {fast['decisions_per_s']} | "
-        f"{fast['sim_s_per_wall_s']} | 1.00 |"
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--episodes", type=int, default=200)
+    parser.add_argument("--model", default=None, help="a trained MaskablePPO .zip")
+    parser.add_argument("--train-minutes", type=float, default=28.0)
+    parser.add_argument("--train-out", default="runs/bench_ppo")
+    parser.add_argument("--full-episodes", type=int, default=20)
+    parser.add_argument(
+        "--parts",
+        default="agents,throughput,full",
+        help="comma-separated subset of: agents (part 1), throughput (part 2, fast), "
+        "full (part 2 full fidelity and part 3)",
     )
-    if not args.skip_full:
+    parser.add_argument("--json", default=None)
+    args = parser.parse_args()
+    parts = {p.strip() for p in args.parts.split(",") if p.strip()}
+    unknown = parts - {"agents", "throughput", "full"}
+    if unknown:
+        parser.error(f"--parts has {sorted(unknown)}; allowed: agents, throughput, full")
+
+    cfg = TrainConfig.from_yaml(DEFAULT_CONFIG)
+    env_kwargs = {k: v for k, v in cfg.env_kwargs.items() if k not in ("network_pool", "pool_seed")}
+    report: dict = {"episodes": args.episodes, "eval_pool_seed": EVAL_POOL_SEED, "env": env_kwargs}
+    if "agents" in parts:
+        compare_agents(args, env_kwargs, report)
+    fast_rate = None
+    print("\n## Throughput (one core, random valid actions, resets included)\n")
+    print("| fidelity | networks | decisions | wall s | decisions/s | sim s / wall s | vs fast |")
+    print("|---|---|---|---|---|---|---|")
+    report["throughput"] = {}
+    if "throughput" in parts:
+        fast = throughput("fast", 200, {**env_kwargs, "network_pool": 50})
+        fresh = throughput("fast", 100, {**env_kwargs, "network_pool": None})
+        report["throughput"].update(fast=fast, fast_fresh_networks=fresh)
+        fast_rate = fast["decisions_per_s"]
+        for label, r in (("pool of 50", fast), ("fresh each episode", fresh)):
+            print(
+                f"| fast | {label} | {r['decisions']} | {r['wall_s']} | {r['decisions_per_s']} | "
+                f"{r['sim_s_per_wall_s']} | {r['decisions_per_s'] / fast_rate:.2f} |"
+            )
+    if "full" in parts:
         full_kwargs = {
             **env_kwargs,
             "network_config": {"n_fittings": 6, "planar": False, "allow_loops": True},
         }
         full = throughput("full", args.full_episodes, full_kwargs)
         report["throughput"]["full"] = full
+        ratio = f"{full['decisions_per_s'] / fast_rate:.4f}" if fast_rate else "-"
         print(
-            f"| full | {full['decisions']} | {full['wall_s']} | {full['decisions_per_s']} | "
-            f"{full['sim_s_per_wall_s']} | "
-            f"{full['decisions_per_s'] / fast['decisions_per_s']:.4f} |"
+            f"| full | fresh each episode | {full['decisions']} | {full['wall_s']} | "
+            f"{full['decisions_per_s']} | {full['sim_s_per_wall_s']} | {ratio} |"
         )
         print(f"\n## RoutePlanner in full fidelity, {args.full_episodes} held-out networks\n")
         print("| detector | success | jams/episode | decisions/episode |")

@@ -8,6 +8,7 @@ centreline point, local inner diameter, geodesic distance, and poses along a pat
 
 from __future__ import annotations
 
+import math
 from bisect import bisect_right
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -17,7 +18,7 @@ from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
 
-from pipe_env.geometry import Pose, clamp, cross, frame_from_forward, norm3, rotation_about
+from pipe_env.geometry import Pose, clamp, cross, frame_from_forward, norm3
 
 if TYPE_CHECKING:
     from pipe_env.network import PipeNetwork
@@ -59,10 +60,13 @@ class Piece:
             return self.p0 + t * s, t
         assert self.arc_centre is not None and self.arc_normal is not None
         phi = s / self.arc_radius
-        rot = rotation_about(self.arc_normal, phi)
-        radial = rot @ (self.p0 - self.arc_centre)
+        # Rodrigues' rotation of the start radius about the arc normal (unit) by phi
+        k = self.arc_normal / norm3(self.arc_normal)
+        u = self.p0 - self.arc_centre
+        c, sn = math.cos(phi), math.sin(phi)
+        radial = u * c + cross(k, u) * sn + k * (float(k @ u) * (1.0 - c))
         point = self.arc_centre + radial
-        tangent = cross(self.arc_normal, radial)
+        tangent = cross(k, radial)
         return point, tangent / norm3(tangent)
 
     def project(self, point: NDArray[np.float64]) -> float:

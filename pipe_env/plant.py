@@ -158,8 +158,19 @@ def option_vector(option: StructureOption) -> NDArray[np.float64]:
 
 def match_option(chosen: StructureOption, truth: list[StructureOption]) -> tuple[int, float]:
     """Index of the true way on closest to ``chosen`` and the angle (rad) between their axes."""
-    v = option_vector(chosen)
-    sep = [math.acos(clamp(v @ option_vector(t), -1.0, 1.0)) for t in truth]
+    # cosine of the angle between two (angle, direction) axes, without building the vectors
+    ca, sa = math.cos(chosen.angle), math.sin(chosen.angle)
+    sep = [
+        math.acos(
+            clamp(
+                ca * math.cos(t.angle)
+                + sa * math.sin(t.angle) * math.cos(chosen.direction - t.direction),
+                -1.0,
+                1.0,
+            )
+        )
+        for t in truth
+    ]
     k = min(range(len(sep)), key=sep.__getitem__)
     return k, sep[k]
 
