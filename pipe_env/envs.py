@@ -178,7 +178,6 @@ class _DecisionEnv(gym.Env):
             )
         self.network_pool = network_pool
         self.pool_seed = int(pool_seed)
-        self._pool: dict[int, PipeNetwork] = {}
         obs = {
             "options": spaces.Box(
                 np.tile(_LOW, (K_OPTIONS, 1)), np.tile(_HIGH, (K_OPTIONS, 1)), dtype=np.float32
@@ -221,9 +220,7 @@ class _DecisionEnv(gym.Env):
         # a pool of networks, network i generated from seed (pool_seed, i) on first use: episodes
         # sample from a fixed, reproducible set (held-out sets use another pool_seed)
         i = int(self.np_random.integers(self.network_pool))
-        if i not in self._pool:
-            self._pool[i] = pool_network(self.network_config, self.pool_seed, i)
-        return self._pool[i]
+        return pool_network(self.network_config, self.pool_seed, i)
 
     def _make_plant(self, network: PipeNetwork) -> Any:
         if self.fidelity == "fast":

@@ -136,20 +136,20 @@ def segment_distance(
     if a < 1e-18 and e < 1e-18:
         return norm3(r)
     if a < 1e-18:
-        s, t = 0.0, float(np.clip(f / e, 0.0, 1.0))
+        s, t = 0.0, clamp(f / e, 0.0, 1.0)
     else:
         c = float(d1 @ r)
         if e < 1e-18:
-            t, s = 0.0, float(np.clip(-c / a, 0.0, 1.0))
+            t, s = 0.0, clamp(-c / a, 0.0, 1.0)
         else:
             b = float(d1 @ d2)
             denom = a * e - b * b
-            s = float(np.clip((b * f - c * e) / denom, 0.0, 1.0)) if denom > 1e-18 else 0.0
+            s = clamp((b * f - c * e) / denom, 0.0, 1.0) if denom > 1e-18 else 0.0
             t = (b * s + f) / e
             if t < 0.0:
-                t, s = 0.0, float(np.clip(-c / a, 0.0, 1.0))
+                t, s = 0.0, clamp(-c / a, 0.0, 1.0)
             elif t > 1.0:
-                t, s = 1.0, float(np.clip((b - c) / a, 0.0, 1.0))
+                t, s = 1.0, clamp((b - c) / a, 0.0, 1.0)
     return norm3((p0 + d1 * s) - (q0 + d2 * t))
 
 
