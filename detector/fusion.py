@@ -63,6 +63,17 @@ class _Way:
     diam_sum: float
     weight: float
     hits: int
+    radius_sum: float = 0.0  # weighted sum of long-bend radii, over the scans that gave one
+    radius_weight: float = 0.0
+
+    def add(self, v: NDArray[np.float64], diameter: float, radius: float, w: float) -> None:
+        self.vec_sum = self.vec_sum + v * w
+        self.diam_sum += diameter * w
+        self.weight += w
+        self.hits += 1
+        if radius > 0.0:
+            self.radius_sum += radius * w
+            self.radius_weight += w
 
     @property
     def direction(self) -> NDArray[np.float64]:
@@ -72,6 +83,19 @@ class _Way:
     @property
     def diameter(self) -> float:
         return self.diam_sum / self.weight if self.weight > 0 else 0.0
+
+    @property
+    def bend_radius(self) -> float:
+        """A long bend's radius (m) if the scans giving one carry half the weight, else 0."""
+        if self.radius_weight <= 0.0 or 2.0 * self.radius_weight < self.weight:
+            return 0.0
+        return self.radius_sum / self.radius_weight
+
+
+def _new_way(v: NDArray[np.float64], diameter: float, radius: float, w: float) -> _Way:
+    way = _Way(np.zeros(3), 0.0, 0.0, 0)
+    way.add(v, diameter, radius, w)
+    return way
 
 
 @dataclass
@@ -259,7 +283,7 @@ class StructureTracker:
                     math.sin(o.angle) * math.sin(o.direction),
                 ]
             )
-            ways.append((rot @ v, o.diameter))
+            ways.append((rot @ v, o.diameter, o.bend_radius))
         w = max(det.confidence, 1e-3) / max(abs(dist), self.near_distance) ** 2
         return {
             "family": _FAMILY.get(det.kind, det.kind),
@@ -279,7 +303,7 @@ class StructureTracker:
             ref_sum=obs["ref"] * w,
             axis_sum=obs["axis"] * w,
             weight=w,
-            ways=[_Way(v * w, d * w, w, 1) for v, d in obs["ways"]],
+            ways=[_new_way(v, d, rb, w) for v, d, rb in obs["ways"]],
             kind_weight={obs["kind"]: w},
             evidence=obs["confidence"],
             hits=1,
@@ -299,19 +323,16 @@ class StructureTracker:
         tr.kind_weight[obs["kind"]] = tr.kind_weight.get(obs["kind"], 0.0) + w
         tr.evidence += obs["confidence"]
         tr.hits += 1
-        for v, d in obs["ways"]:
+        for v, d, rb in obs["ways"]:
             best, best_ang = None, math.inf
             for way in tr.ways:
                 ang = math.acos(max(-1.0, min(1.0, float(way.direction @ v))))
                 if ang < best_ang:
                     best, best_ang = way, ang
             if best is not None and best_ang <= self.direction_gate:
-                best.vec_sum = best.vec_sum + v * w
-                best.diam_sum += d * w
-                best.weight += w
-                best.hits += 1
+                best.add(v, d, rb, w)
             else:
-                tr.ways.append(_Way(v * w, d * w, w, 1))
+                tr.ways.append(_new_way(v, d, rb, w))
 
     def _distance(self, tr: _Track, pos: NDArray) -> float:
         return float((tr.reference - pos) @ tr.axis)
@@ -342,7 +363,10 @@ class StructureTracker:
             if kind == "closure":
                 angle, direction = 0.0, 0.0
             diameter = 0.0 if kind == "closure" else max(0.0, way.diameter)
-            opts.append(StructureOption(kind, dist, diameter, direction, angle, conf))
+            radius = way.bend_radius if kind == "bend" else 0.0
+            opts.append(
+                StructureOption(kind, dist, diameter, direction, angle, conf, bend_radius=radius)
+            )
         opts.sort(key=option_order)
         det = Detection(
             kind,

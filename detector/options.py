@@ -13,6 +13,9 @@ be compared field by field. Definitions follow DESIGN.md (SI units in the API):
 - ``direction``: roll of the outgoing axis about the incoming axis, measured in the sensor frame
   as atan2(z, y): 0 = left, +pi/2 = up, pi = right, -pi/2 = down. Wrapped to (-pi, pi].
 - ``confidence``: in [0, 1]; 1 for ground truth.
+- ``bend_radius``: centreline radius of a long-radius bend's arc, metres; 0 for a mitre bend,
+  any other kind, or when the method does not estimate it. A turn primitive follows this arc
+  (a tight turn cuts the inside of a wide bend and jams).
 """
 
 from __future__ import annotations
@@ -43,11 +46,12 @@ class StructureOption:
     direction: float = 0.0
     angle: float = 0.0
     confidence: float = 1.0
+    bend_radius: float = 0.0
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"StructureOption.kind must be one of {KINDS}, got {self.kind!r}")
-        for name in ("distance", "diameter", "direction", "angle", "confidence"):
+        for name in ("distance", "diameter", "direction", "angle", "confidence", "bend_radius"):
             value = getattr(self, name)
             if not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ValueError(f"StructureOption.{name} must be a finite number, got {value!r}")
@@ -56,6 +60,8 @@ class StructureOption:
             raise ValueError(f"StructureOption.diameter must be >= 0 m, got {self.diameter}")
         if not 0.0 <= self.angle <= math.pi + 1e-9:
             raise ValueError(f"StructureOption.angle must be in [0, pi] rad, got {self.angle}")
+        if self.bend_radius < 0.0:
+            raise ValueError(f"StructureOption.bend_radius must be >= 0 m, got {self.bend_radius}")
         if not 0.0 <= self.confidence <= 1.0:
             raise ValueError(f"StructureOption.confidence must be in [0, 1], got {self.confidence}")
         object.__setattr__(self, "direction", _wrap(self.direction))
@@ -76,6 +82,7 @@ class StructureOption:
             "direction": self.direction,
             "angle": self.angle,
             "confidence": self.confidence,
+            "bend_radius": self.bend_radius,
         }
 
     @classmethod
@@ -93,9 +100,10 @@ class StructureOption:
             return f"reducer to {self.diameter * 1000:.0f} mm {where}"
         if self.is_straight_on:
             return f"{self.kind}: straight on {where}, {self.diameter * 1000:.0f} mm"
+        radius = f", radius {self.bend_radius * 100:.0f} cm" if self.bend_radius > 0 else ""
         return (
             f"{self.kind}: {math.degrees(self.angle):.0f} deg {direction_name(self.direction)} "
-            f"{where}, {self.diameter * 1000:.0f} mm"
+            f"{where}, {self.diameter * 1000:.0f} mm{radius}"
         )
 
 

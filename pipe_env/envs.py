@@ -29,8 +29,10 @@ Observation (a flat ``Dict``, fixed shapes, finite bounds):
   scan (full fidelity), normalised by the sensor's maximum range; zeros in fast fidelity.
 
 Reward (PipeNav): ``progress`` (decrease of the along-network distance to the goal, m) +
-``goal`` bonus + ``jam`` penalty per jam + ``time`` cost per decision; each term is in
-``info["reward_terms"]``. PipeExplore rewards new pipe length covered by the scans (m).
+``goal`` bonus + ``jam`` penalty per jam (of the chosen way, or while driving on to the next
+decision) + ``time`` cost per decision; each term is in ``info["reward_terms"]``; a jam's cause
+is in ``info["outcome_note"]`` (``drive_jammed_note``, ``auto_jammed_note``). PipeExplore
+rewards new pipe length covered by the scans (m).
 
 Options (keyword arguments of ``gymnasium.make``): ``detector`` in ``"improved"``,
 ``"thesis"``, ``"ground_truth"``; ``fidelity`` ``"fast"`` (kinematic motion, modelled sensing;
@@ -299,6 +301,7 @@ class _DecisionEnv(gym.Env):
             terms["invalid"] = self.reward_invalid
             return self._finish_step(terms, events)
         self.decisions += 1
+        jams_before = self.jams
         assert self.decision is not None
         choice: StructureOption | str = (
             BACK_OUT if action == K_OPTIONS - 1 else self.decision.options[action]
@@ -308,10 +311,11 @@ class _DecisionEnv(gym.Env):
         outcome = self.plant.execute(choice, self._goal_target())
         self._record(outcome)
         events["outcome"] = outcome.status
+        if outcome.note:
+            events["outcome_note"] = outcome.note
         if outcome.status == "jammed":
             self.jams += 1
             events["jammed"] = True
-            terms["jam"] = self.reward_jam
             if self.jams >= self.max_jams:
                 self.terminated = True
             else:  # the robot backed off the structure and senses it again
@@ -324,6 +328,8 @@ class _DecisionEnv(gym.Env):
         else:
             self.decision, adv = self._advance()
             events.update(adv)
+        if self.jams > jams_before:  # the chosen way, or a drive or single way after it
+            terms["jam"] = self.reward_jam * (self.jams - jams_before)
         terms.update(self._progress_terms())
         return self._finish_step(terms, events)
 
@@ -364,6 +370,8 @@ class _DecisionEnv(gym.Env):
                 self._reach_goal(events)
                 return None, events
             assert dec is not None
+            if out.status == "jammed":  # stalled while driving: the robot decides where it is
+                self._count_jam(events, "drive_jammed", out.note)
             self.structures += 1
             self._after_sensing(dec)
             ways = [o for o in dec.options if drivable(o)]
@@ -385,16 +393,21 @@ class _DecisionEnv(gym.Env):
             if outcome.status != "done":
                 events["auto_" + outcome.status] = True
                 if outcome.status == "jammed":
-                    self.jams += 1
-                    events["jammed"] = True
-                    if self.jams >= self.max_jams:
-                        self.terminated = True
+                    self._count_jam(events, "auto_jammed", outcome.note)
                 self.plant.decision = dec
                 self.decision_points.append(dec.pose.position)
                 return dec, events
         self.truncated = True  # a pathological chain of single ways: stop, it is not an outcome
         events["truncated_auto"] = True
         return None, events
+
+    def _count_jam(self, events: dict[str, Any], key: str, note: str) -> None:
+        self.jams += 1
+        events["jammed"] = events[key] = True
+        if note:
+            events[key + "_note"] = note
+        if self.jams >= self.max_jams:
+            self.terminated = True
 
     def _after_sensing(self, dec: Decision) -> None:
         """Record detection errors of a decision against ground truth."""

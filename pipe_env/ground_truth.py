@@ -70,12 +70,15 @@ def options_at(
     kind = OPTION_KIND[g.kind]
     if g.kind == "closure":
         return [StructureOption("closure", distance, 0.0, 0.0, 0.0)]
+    bend_radius = float(g.bend_radius or 0.0) if g.kind == "bend" and g.style == "long" else 0.0
     options = []
     for p in g.ports:
         if p.run_id == entry_run:
             continue
         angle, direction = option_angles(travel, p.axis, pose)
-        options.append(StructureOption(kind, distance, p.diameter, direction, angle))
+        options.append(
+            StructureOption(kind, distance, p.diameter, direction, angle, bend_radius=bend_radius)
+        )
     options.sort(key=option_order)
     return options
 

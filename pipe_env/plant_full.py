@@ -47,6 +47,8 @@ MAX_DRIVE = 4.0
 #: The goal counts as reached within this distance along the network, metres.
 GOAL_TOLERANCE = 0.05
 SCAN_IMAGE_SHAPE = (16, 32)
+#: Sweeps in place to confirm a structure first seen within the trigger distance.
+CONFIRM_RESCANS = 3
 
 
 def scan_image(scan: Scan, shape: tuple[int, int] = SCAN_IMAGE_SHAPE) -> NDArray[np.float32]:
@@ -213,6 +215,7 @@ class PhysicalPlant:
 
     def _on_scan_factory(self, goal: Any):
         blind = [0]
+        rescans = [0]
         verdict: dict[str, Any] = {"why": None}
         t_start = self.executor.time  # the plant's clock catches up after the motion
 
@@ -245,11 +248,22 @@ class PhysicalPlant:
             if blind[0] >= BLIND_SWEEPS:
                 verdict["why"] = "blind"
                 return "stop"
+            window = self.trigger_distance + 0.5 * self.scan_interval
             if track.confirmed and track.detection.options:
                 nearest = min(o.distance for o in track.detection.options)
-                if nearest <= self.trigger_distance + 0.5 * self.scan_interval:
+                if nearest <= window:
                     verdict["why"] = "confirmed"
                     return "stop"
+            # a structure seen within the trigger distance but not confirmed yet (a short run
+            # after a fitting): sweep again in place rather than drive into it unconfirmed
+            if (
+                det.options
+                and min(o.distance for o in det.options) <= window
+                and rescans[0] < CONFIRM_RESCANS
+            ):
+                rescans[0] += 1
+                return "rescan"
+            rescans[0] = 0
             return "continue"
 
         return on_scan, verdict

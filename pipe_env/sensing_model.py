@@ -137,6 +137,7 @@ class DetectionErrorModel:
             direction=o.direction + s_dir * z[3],
             angle=clamp(angle, 0.0, math.pi),
             confidence=self.confidence,
+            bend_radius=o.bend_radius if kind == "bend" else 0.0,
         )
 
 

@@ -89,7 +89,18 @@ SHIFT_BLEND = 0.1
 #: Driven-path samples are kept this far apart, m.
 PATH_STEP = 0.0005
 
+#: Driving with ``drive_until``: when the clamp encoders read this much less than at the last
+#: clamping, the robot has been pushed off the axis (an opening passed without stopping, a
+#: wheel dropped into it); it centres and clamps again before driving on, m.
+RECENTRE_DROP = 0.004
+#: ``drive_until`` sweeps at most this many times in a row without driving (``"rescan"``).
+MAX_RESCANS = 4
+
 STATUSES = ("done", "jammed", "blocked", "dead_end")
+#: What a scan callback may answer: ``"stop"`` ends the sequence or drive; ``"continue"`` goes
+#: on; ``"rescan"`` (``drive_until`` only; elsewhere it means continue) sweeps again in place
+#: before driving, e.g. to confirm a structure seen close ahead.
+SCAN_VERDICTS = ("stop", "continue", "rescan")
 
 OnScan = Callable[[ScanData, "ExecutorState"], str]
 
@@ -645,18 +656,20 @@ class Executor:
                 f"the turn was blocked: heading {math.degrees(err):.0f} deg off the commanded one"
             )
 
-    def _scan(self, on_scan: OnScan | None, rng: np.random.Generator) -> ScanData | None:
+    def _scan(self, on_scan: OnScan | None, rng: np.random.Generator) -> str:
+        """Sweep once and ask ``on_scan``; returns its verdict (``"continue"`` without one)."""
         if self.lidar is None:
-            return None
+            return "continue"
         scan = self.lidar.scan(self.robot.front_pose(), rng, t0=self.time)
         self.time += self.lidar.sweep_duration
-        if on_scan is not None:
-            verdict = on_scan(scan, self.state(rng))
-            if verdict not in ("stop", "continue"):
-                raise ValueError(f"on_scan returned {verdict!r}; allowed: 'stop', 'continue'")
-            if verdict == "stop":
-                raise _ScanStop()
-        return scan
+        if on_scan is None:
+            return "continue"
+        verdict = on_scan(scan, self.state(rng))
+        if verdict not in SCAN_VERDICTS:
+            raise ValueError(f"on_scan returned {verdict!r}; allowed: {SCAN_VERDICTS}")
+        if verdict == "stop":
+            raise _ScanStop()
+        return verdict
 
     def state(self, rng: np.random.Generator | None = None) -> ExecutorState:
         return ExecutorState(
@@ -744,16 +757,29 @@ class Executor:
         speed: float = 0.05,
     ) -> Outcome:
         """Stop-and-scan forward: sweep, ask ``on_scan``, drive ``scan_interval`` m, repeat,
-        until ``on_scan`` says ``"stop"``, ``max_distance`` m are driven, or a jam."""
+        until ``on_scan`` says ``"stop"``, ``max_distance`` m are driven, or a jam.
+
+        ``"rescan"`` sweeps again where the robot stands (at most ``MAX_RESCANS`` times in a
+        row). At every stop the clamp encoders are read: below the reading of the last
+        clamping by more than ``RECENTRE_DROP``, the robot centres and clamps again (a clamped
+        robot is kept on the axis by its V; one pushed off it folds the V further)."""
         if not (math.isfinite(max_distance) and max_distance >= 0):
             raise ValueError(f"max_distance = {max_distance!r} is invalid; allowed: >= 0 m")
         if not (math.isfinite(scan_interval) and 0.001 <= scan_interval <= 1.0):
             raise ValueError(f"scan_interval = {scan_interval!r} is invalid; allowed [1 mm, 1 m]")
         rng = rng if rng is not None else np.random.default_rng(0)
         t0, odo0 = self._begin()
+        clamped = self._alpha > 0.0
+        reference = self.robot.clamped_diameter() if clamped else 0.0
         try:
             while True:
-                self._scan(on_scan, rng)
+                if clamped and self.robot.clamped_diameter() < reference - RECENTRE_DROP:
+                    self._centre(Centre(), rng)
+                    self._clamp(reference)
+                    reference = self.robot.clamped_diameter()
+                for _ in range(MAX_RESCANS + 1):
+                    if self._scan(on_scan, rng) != "rescan":
+                        break
                 left = max_distance - (self.odometer - odo0)
                 if left <= 1e-6:
                     return self._outcome("done", "max distance driven", t0, "drive_until")

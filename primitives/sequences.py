@@ -9,7 +9,9 @@ angles in radians, ``option`` distances from the sensor as DESIGN.md defines the
   roll the front half to the option's direction, bend the steering joint and drive the arc
   through the option's angle, straighten, drive until the whole robot is in the outgoing pipe,
   roll back, centre on the outgoing pipe's axis (the V probes both walls), clamp to the
-  outgoing diameter, check the heading;
+  outgoing diameter, check the heading. The arc is the robot's tightest (``TURN_RADIUS_FACTOR``
+  x D, inside a mitre's corner) unless the option gives a long bend's ``bend_radius``: then the
+  robot follows that arc, reversing first if it decided inside the arc already;
 - :func:`pass_reducer`: drive through the taper unclamped and clamp at the new diameter; a
   reducer to a diameter outside the robot's range is refused before entering (``blocked``);
 - :func:`pass_junction`: a branch is a turn; the way straight on is driven through;
@@ -161,18 +163,22 @@ def take_turn(
     if theta < math.radians(3.0):
         return pass_straight(option, d_in, c, speed)
     radius = max(TURN_RADIUS_FACTOR * d_in, 0.55 * c.pitch)
+    follow_arc = option.bend_radius > radius  # a long bend: its own, wider arc
+    if follow_arc:
+        radius = option.bend_radius
     bend = 2.0 * math.asin(min(c.pitch / (2.0 * radius), 1.0))
     # the front module's centre follows the arc; it starts radius*tan(theta/2) before the
     # reference point, which is option.distance ahead of the sensor
     pre = option.distance + c.lidar_offset - radius * math.tan(0.5 * theta)
-    # start a little early so the arc hugs the inner corner: the front module's outer front
-    # wheel then clears the far corner of a branch's mouth (a tee in a 60 mm pipe)
-    clearance = 0.5 * (min(d_in, option.diameter) - c.width)
-    pre -= TURN_INSIDE * min(max(clearance, 0.0), TURN_INSIDE_MAX)
+    if not follow_arc:
+        # start a little early so the arc hugs the inner corner: the front module's outer
+        # front wheel then clears the far corner of a branch's mouth (a tee in a 60 mm pipe)
+        clearance = 0.5 * (min(d_in, option.diameter) - c.width)
+        pre -= TURN_INSIDE * min(max(clearance, 0.0), TURN_INSIDE_MAX)
     through = c.length + 0.5 * option.diameter + 0.03
     steps: list[Step] = [Unclamp()]
-    if pre > 0:
-        steps.append(Drive(pre, speed))
+    if pre > 0 or (follow_arc and pre < -0.001):
+        steps.append(Drive(pre, speed))  # negative: back up to where a long bend's arc starts
     steps += [
         Roll(option.direction),
         Bend(1, bend),
@@ -195,14 +201,18 @@ def _drive_through(
     speed: float,
     run_out_diameters: float,
 ) -> Sequence:
-    """Unclamped, drive until the whole robot is ``run_out_diameters`` (x the larger diameter)
-    past the structure, centre and clamp at the option's diameter."""
+    """Unclamped, drive until the whole robot is ``run_out_diameters`` (x the larger diameter,
+    x the outgoing one for a reducer: into a narrower pipe a shorter run-out suffices, and a
+    short run after it must not be overshot) past the structure, centre and clamp at the
+    option's diameter."""
     c = _cfg(config)
     refused = _refuse(option, c)
     if refused is not None:
         return refused
     d_in = float(incoming_diameter) if incoming_diameter else option.diameter
-    run_out = run_out_diameters * max(d_in, option.diameter)
+    run_out = run_out_diameters * (
+        option.diameter if option.kind == "reducer" else max(d_in, option.diameter)
+    )
     dist = max(option.distance, 0.0) + c.length + run_out + 0.03
     return Sequence(
         name,

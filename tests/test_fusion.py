@@ -179,3 +179,26 @@ def test_a_way_straight_on_has_direction_zero_after_fusion():
         s = tr.update(tee_run(1.0 - x), np.array([x, 0.0, 0.0]), rot)
     straight_on = [o for o in s.detection.options if o.angle < 0.02]
     assert len(straight_on) == 1 and straight_on[0].direction == 0.0
+
+
+def _long_bend(radius: float):
+    def make(distance: float) -> Detection:
+        option = StructureOption("bend", distance, 0.1, 0.0, math.pi / 2, 0.9, bend_radius=radius)
+        return Detection("bend", [option], 0.9)
+
+    return make
+
+
+def test_a_long_bends_radius_is_fused_and_kept_only_when_most_scans_give_it():
+    tr = StructureTracker(confirm_count=3)
+    radii = iter([0.30, 0.26, 0.28, 0.0])  # the last scan's fit did not resolve the arc
+    s = None
+    for x in (0.5, 0.52, 0.54, 0.56):
+        s = tr.update(_long_bend(next(radii))(1.0 - x), np.array([x, 0.0, 0.0]), EYE)
+    assert s is not None and s.confirmed
+    assert 0.26 < s.detection.options[0].bend_radius < 0.30
+    tr.reset()
+    for x in (0.5, 0.52, 0.54, 0.56):  # mostly mitre-like fits: no radius to follow
+        r = 0.3 if x == 0.5 else 0.0
+        s = tr.update(_long_bend(r)(1.0 - x), np.array([x, 0.0, 0.0]), EYE)
+    assert s.detection.options[0].bend_radius == 0.0

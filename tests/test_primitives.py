@@ -36,12 +36,14 @@ def _ways(net: PipeNetwork, ex: Executor) -> list[tuple[StructureOption, str]]:
     travel = -g.port(entry).axis
     distance = float((g.reference_point(entry) - pose.position) @ travel)
     kind = {"bend": "bend", "tee": "junction", "wye": "junction", "cross": "junction"}[g.kind]
+    radius = float(g.bend_radius or 0.0) if g.style == "long" else 0.0
     out = []
     for p in g.ports:
         if p.run_id == entry:
             continue
         angle, direction = option_angles(travel, p.axis, pose)
-        out.append((StructureOption(kind, distance, p.diameter, direction, angle), p.run_id))
+        option = StructureOption(kind, distance, p.diameter, direction, angle, bend_radius=radius)
+        out.append((option, p.run_id))
     return out
 
 
@@ -103,6 +105,47 @@ def test_take_turn_passes_bend_grid(
     style: str, diameter: float, angle_deg: int, direction_deg: int
 ) -> None:
     _bend_case(style, diameter, angle_deg, direction_deg)
+
+
+def _wide_bend_case(radius_factor: float, diameter: float, angle_deg: int, direction_deg: int):
+    net = layouts.long_bend(
+        diameter, math.radians(angle_deg), math.radians(direction_deg), radius_factor=radius_factor
+    )
+    out, run, want, true = _run(net, _only)
+    assert true.bend_radius == pytest.approx(radius_factor * diameter, rel=1e-6)
+    assert out.status == "done", out.reason
+    assert run == want
+
+
+def test_take_turn_follows_a_wide_long_bend() -> None:
+    """A 3 D bend: a tight turn would cut its inside (it jammed); the robot decides inside the
+    arc already at the trigger distance, backs up to the arc's start and follows it."""
+    _wide_bend_case(3.0, 0.1, 90, 45)
+
+
+def test_a_tight_turn_jams_in_a_wide_long_bend() -> None:
+    """The same bend without the radius (a detector that does not estimate it) jams."""
+    net = layouts.long_bend(0.1, math.radians(90), math.radians(45), radius_factor=3.0)
+    out, _, _, _ = _run(net, _only, bend_radius=-0.3)
+    assert out.status == "jammed"
+
+
+WIDE_BEND_GRID = [
+    (f, d, a, r)
+    for f in (1.0, 2.0, 3.0)
+    for d in DIAMETERS
+    for a in (45, 90)
+    for r in (0, 135)
+    if (f, d, a, r) != (3.0, 0.1, 90, 45)
+]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("factor", "diameter", "angle_deg", "direction_deg"), WIDE_BEND_GRID)
+def test_take_turn_follows_long_bends_of_every_radius(
+    factor: float, diameter: float, angle_deg: int, direction_deg: int
+) -> None:
+    _wide_bend_case(factor, diameter, angle_deg, direction_deg)
 
 
 def _junctions(diameter: float) -> dict[str, PipeNetwork]:
