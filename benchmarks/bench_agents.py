@@ -66,7 +66,7 @@ def throughput(fidelity: str, episodes: int, env_kwargs: dict, seed: int = 0) ->
     return {
         "decisions": steps,
         "wall_s": round(wall, 2),
-        "decisions_per_s": round(steps / wall, 1),
+        "decisions_per_s": round(steps / wall, 3),
         "sim_s_per_wall_s": round(sim / wall, 1),
     }
 

@@ -113,3 +113,21 @@ def test_after_a_jammed_turn_backing_out_reclamps_on_the_axis() -> None:
     assert ex.robot.clamped_diameter() == pytest.approx(0.1, abs=0.0015)
     for i in (0, ex.config.n_modules - 1):
         assert net.centreline.nearest(ex.robot.module_pose(i).position).distance < 0.002
+
+
+def test_drive_until_sweeps_again_in_place_on_rescan_up_to_the_cap() -> None:
+    from primitives.executor import MAX_RESCANS
+
+    ex = Executor.for_network(layouts.straight(0.09, 2.0), lidar="ideal")
+    odometers: list[float] = []
+
+    def on_scan(scan, state) -> str:
+        odometers.append(round(state.odometer, 6))
+        return "stop" if len(odometers) > 2 * (MAX_RESCANS + 1) else "rescan"
+
+    out = ex.drive_until(on_scan, 1.0, scan_interval=0.02)
+    assert out.status == "done"
+    # every stop sweeps MAX_RESCANS + 1 times before the robot drives on
+    per_stop = [odometers.count(v) for v in dict.fromkeys(odometers)]
+    assert per_stop[:2] == [MAX_RESCANS + 1, MAX_RESCANS + 1]
+    assert odometers[MAX_RESCANS + 1] == pytest.approx(odometers[0] + 0.02, abs=1e-6)
