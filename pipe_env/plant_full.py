@@ -213,6 +213,27 @@ class PhysicalPlant:
             return False
         return abs(here.s - gp.s) <= GOAL_TOLERANCE + 0.5 * self.scan_interval
 
+    def _goal_passed(self, goal: Any) -> bool:
+        """True if ``goal`` lies on the run the robot is in, between the fitting it entered the
+        run by and where it stands: a sequence (a turn's run-out) drove over it."""
+        if goal is None:
+            return False
+        gp = (
+            goal
+            if isinstance(goal, EdgePosition)
+            else edge_position(
+                self.network, self.network.centreline.nearest(np.asarray(goal, dtype=float))
+            )
+        )
+        here, towards = locate(self.network, self.pose())
+        if here.run_id != gp.run_id:
+            return False
+        run = self.network.run_by_id[here.run_id]
+        tol = GOAL_TOLERANCE + 0.5 * self.scan_interval
+        if towards == run.b:  # driving towards b: entered at s = 0
+            return gp.s <= here.s + tol
+        return gp.s >= here.s - tol
+
     def _on_scan_factory(self, goal: Any):
         blind = [0]
         rescans = [0]
@@ -368,7 +389,7 @@ class PhysicalPlant:
         self.tracker.reset()
         self._track_state = None
         self.decision = None
-        if self._goal_reached(goal):
+        if self._goal_reached(goal) or self._goal_passed(goal):
             out.status = "goal"
         return out
 
