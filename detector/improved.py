@@ -599,6 +599,7 @@ def _intact(
         return None
     n_wall = cloud.n - n_beyond - n_inside
     diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
+    diag["sensor_offset_pipe"] = [float(v) for v in cloud.pose.position[1:]]
     diag.update(n_wall=n_wall, n_beyond=n_beyond, n_inside=n_inside, n_anomaly=0)
     conf = min(1.0, n_wall / 200.0) * n_wall / cloud.n
     return Detection.straight(confidence=conf, **diag)
@@ -636,6 +637,7 @@ def _detect_in_pipe_frame(
 ) -> Detection:
     valid = cloud.valid
     diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
+    diag["sensor_offset_pipe"] = [float(v) for v in cloud.pose.position[1:]]
     r = np.sqrt(np.square(cloud.xyz[1]) + np.square(cloud.xyz[2]))
     # residual axis error grows with the distance along the axis
     tol = _tolerance(cloud, cfg)

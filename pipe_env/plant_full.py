@@ -49,6 +49,8 @@ GOAL_TOLERANCE = 0.05
 SCAN_IMAGE_SHAPE = (16, 32)
 #: Sweeps in place to confirm a structure first seen within the trigger distance.
 CONFIRM_RESCANS = 3
+#: The robot steers at the pipe-axis point this far ahead of its sensor, m.
+AXIS_LOOKAHEAD = 0.15
 
 
 def scan_image(scan: Scan, shape: tuple[int, int] = SCAN_IMAGE_SHAPE) -> NDArray[np.float32]:
@@ -213,6 +215,31 @@ class PhysicalPlant:
             return False
         return abs(here.s - gp.s) <= GOAL_TOLERANCE + 0.5 * self.scan_interval
 
+    def _follow_axis(self, scan: Scan, det: Any, clamped_diameter: float) -> None:
+        """Steer the next drive onto the pipe axis the sweep shows (pure pursuit of the axis
+        point ``AXIS_LOOKAHEAD`` ahead). The improved detector's pipe-frame fit gives the
+        sensor's offset from the axis and the axis direction; the thesis method and the
+        ground-truth oracle give none, so the improved fit runs for them too: driving is the
+        same robot whatever detector proposes the options. Without it the robot sags and
+        noses down over a metre of pipe (gravity against the soft drive), the clamp reading
+        drops and the far wall looks like a turn."""
+        if det is None or "sensor_offset_pipe" not in det.diagnostics:
+            det = detection.detect(scan, clamped_diameter, method="improved")
+        dg = det.diagnostics
+        offset, axis = dg.get("sensor_offset_pipe"), dg.get("pipe_axis_sensor")
+        if offset is None or axis is None:
+            return
+        a = np.asarray(axis, dtype=float)
+        off = np.asarray(offset, dtype=float)
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(off)) and a[0] > 0.99):
+            return  # no trustworthy fit (over 8 deg of tilt is not a straight pipe)
+        if float(np.hypot(*off)) > 0.3 * clamped_diameter:
+            return
+        target = AXIS_LOOKAHEAD * a / float(np.linalg.norm(a)) - np.array([0.0, *off])
+        # a correction relative to the sensor: expressed in the world through the sensor's
+        # actual orientation (the executor's frame), not the odometry's belief
+        self.executor.aim(self.pose().rotation @ target)
+
     def _goal_passed(self, goal: Any) -> bool:
         """True if ``goal`` lies on the run the robot is in, between the fitting it entered the
         run by and where it stands: a sequence (a turn's run-out) drove over it."""
@@ -251,6 +278,7 @@ class PhysicalPlant:
                 verdict["why"] = "goal"
                 return "stop"
             if self.detector == "ground_truth":
+                self._follow_axis(scan, None, float(state.clamped_diameter))
                 ref = truth[0].distance if truth else math.inf
                 kind = truth[0].kind if truth else "straight"
                 self.detection_log.append(detection_record(now, node, truth, truth, kind))
@@ -259,6 +287,7 @@ class PhysicalPlant:
                     return "stop"
                 return "continue"
             det = detection.detect(scan, float(state.clamped_diameter), method=self.detector)
+            self._follow_axis(scan, det, float(state.clamped_diameter))
             track = self.tracker.update(det, scan.nominal_positions[-1], scan.nominal_rotations[-1])
             self._track_state = track
             fused = track.detection if track.confirmed else det

@@ -671,6 +671,24 @@ class Executor:
             raise _ScanStop()
         return verdict
 
+    def aim(self, direction: NDArray[np.float64], max_angle: float = math.radians(4.0)) -> float:
+        """Between drives (a scan callback): turn the drive heading towards the world
+        ``direction`` by at most ``max_angle`` rad, keeping its roll; returns the angle turned.
+        A robot following the pipe axis it measures (see ``PhysicalPlant``) uses this."""
+        d = np.asarray(direction, dtype=float)
+        n = float(np.linalg.norm(d))
+        if not (math.isfinite(n) and n > 1e-9):
+            raise ValueError(f"direction must be a finite non-zero 3-vector, got {d.tolist()}")
+        d = d / n
+        x = self._F_rot[:, 0]
+        angle = math.acos(max(-1.0, min(1.0, float(x @ d))))
+        axis = np.cross(x, d)
+        if angle < 1e-5 or float(np.linalg.norm(axis)) < 1e-12:
+            return 0.0
+        turn = min(angle, max_angle)
+        self._F_rot = rotation_about(axis, turn) @ self._F_rot
+        return turn
+
     def state(self, rng: np.random.Generator | None = None) -> ExecutorState:
         return ExecutorState(
             self.time, self.odometer, self.robot.clamped_diameter(rng), self.robot.sensor_pose()
