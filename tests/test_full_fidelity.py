@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from pipe_env import layouts
@@ -39,3 +41,56 @@ def test_reducer_below_57_mm_is_blocked_before_the_robot_enters(detector: str) -
         assert res.status == "blocked", (option, res.note)
         assert plant.pose().position == pytest.approx(before, abs=0.002)
     assert any(o.kind == "reducer" and o.diameter < 0.057 for o in dec.options)
+
+
+def _axis_error(plant: PhysicalPlant, net) -> tuple[float, float]:
+    """Sensor offset from the pipe axis (m) and tilt against it (rad)."""
+    pose = plant.pose()
+    cp = net.centreline.nearest(pose.position)
+    cos = min(1.0, abs(float(pose.forward @ cp.tangent)))
+    return cp.distance, math.acos(cos)
+
+
+@pytest.mark.parametrize("follow", [True, False])
+def test_the_robot_follows_the_axis_its_sweeps_measure(follow: bool, monkeypatch) -> None:
+    """After a 45 deg turn upwards, over 1.3 m of 110 mm pipe, the robot stays on the axis
+    steering by its sweeps; without the steering it sags and noses down (what made 3D routes
+    misread the far wall as a turn)."""
+    net = layouts.mitre_bend(0.11, math.radians(45), math.pi / 2, distance=0.4, outlet_length=1.5)
+    if not follow:
+        monkeypatch.setattr(PhysicalPlant, "_follow_axis", lambda self, *a: None)
+    plant = PhysicalPlant(net, detector="ground_truth")
+    dec, _ = plant.advance(None)
+    assert plant.execute(dec.options[0]).status == "done"
+    errors = []
+    inner = plant._on_scan_factory
+
+    def factory(goal):
+        on_scan, verdict = inner(goal)
+
+        def wrapped(scan, state):
+            errors.append(_axis_error(plant, net))
+            return on_scan(scan, state)
+
+        return wrapped, verdict
+
+    monkeypatch.setattr(plant, "_on_scan_factory", factory)
+    dec, out = plant.advance(None)
+    assert out.status != "jammed" and dec is not None and dec.kind == "closure"
+    worst_offset = max(e[0] for e in errors)
+    worst_tilt = max(e[1] for e in errors)
+    if follow:
+        assert worst_offset < 0.0015 and worst_tilt < math.radians(1.0)
+    else:
+        assert worst_offset > 0.0025 or worst_tilt > math.radians(1.5)
+
+
+def test_a_goal_driven_over_by_a_turn_counts_as_reached() -> None:
+    """The goal lies 10 cm into the branch, inside the turn's run-out."""
+    net = layouts.t_junction(0.09, direction=0.0, distance=0.5)
+    plant = PhysicalPlant(net, detector="ground_truth")
+    goal = EdgePosition("r_out1", 0.1, edge_length(net, "r_out1"))
+    dec, _ = plant.advance(goal)
+    branch = [o for o in dec.options if o.angle > 1.0]
+    res = plant.execute(branch[0], goal)
+    assert res.status == "goal"
