@@ -240,11 +240,11 @@ class PhysicalPlant:
         # actual orientation (the executor's frame), not the odometry's belief
         self.executor.aim(self.pose().rotation @ target)
 
-    def _goal_passed(self, goal: Any) -> bool:
-        """True if ``goal`` lies on the run the robot is in, between the fitting it entered the
-        run by and where it stands: a sequence (a turn's run-out) drove over it."""
+    def _goal_ahead(self, goal: Any) -> float | None:
+        """Signed distance (m) along the robot's run from the sensor to ``goal`` (positive
+        ahead), or None if the goal is on another run."""
         if goal is None:
-            return False
+            return None
         gp = (
             goal
             if isinstance(goal, EdgePosition)
@@ -254,12 +254,15 @@ class PhysicalPlant:
         )
         here, towards = locate(self.network, self.pose())
         if here.run_id != gp.run_id:
-            return False
+            return None
         run = self.network.run_by_id[here.run_id]
-        tol = GOAL_TOLERANCE + 0.5 * self.scan_interval
-        if towards == run.b:  # driving towards b: entered at s = 0
-            return gp.s <= here.s + tol
-        return gp.s >= here.s - tol
+        return gp.s - here.s if towards == run.b else here.s - gp.s
+
+    def _goal_passed(self, goal: Any) -> bool:
+        """True if ``goal`` lies on the run the robot is in, between the fitting it entered the
+        run by and where it stands: a sequence (a turn's run-out) drove over it."""
+        ahead = self._goal_ahead(goal)
+        return ahead is not None and ahead <= GOAL_TOLERANCE + 0.5 * self.scan_interval
 
     def _on_scan_factory(self, goal: Any):
         blind = [0]
@@ -328,6 +331,16 @@ class PhysicalPlant:
         self._account(outcome, out)
         self._odometer += abs(float(outcome.travelled))
         why = verdict["why"]
+        ahead = self._goal_ahead(goal) if why in ("confirmed", "blind") else None
+        if ahead is not None and 0.0 <= ahead <= self.trigger_distance + self.scan_interval:
+            # the goal lies between the robot and the structure it stopped for (a goal near a
+            # dead end): drive up to it, as the fast fidelity does
+            from primitives.sequences import go_straight
+
+            last = self.executor.run(go_straight(max(ahead, 0.001)), rng=self.rng)
+            self._account(last, out)
+            self._odometer += abs(float(last.travelled))
+            why = "goal" if last.status == "done" else why
         if why == "goal":
             out.status = "goal"
             return None, out
