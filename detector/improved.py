@@ -136,6 +136,7 @@ class PipeCloud:
     beam_step: float = 0.0  # angle between neighbouring beams of a plane, radians
     xyz_v: NDArray[np.float64] = field(init=False)  # (3, N) pipe frame
     thin: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(init=False, default=None)
+    tol0: NDArray[np.float64] | None = field(init=False, default=None)  # floor + noise part
     _valid: NDArray[np.bool_] | None = field(init=False, default=None)
     _sigma: NDArray[np.float64] | None = field(init=False, default=None)
     _xyz: NDArray[np.float64] | None = field(init=False, default=None)
@@ -311,48 +312,55 @@ def _pct(x: NDArray[np.float64], q: float) -> float:
 # --------------------------------------------------------------------------- axis refinement
 def _axis_pose(params: NDArray[np.float64], sensor_origin: NDArray[np.float64]) -> SensorInPipe:
     """Correction pose: pipe frame whose axis passes through (0, y0, z0) with slopes (a, b)."""
-    y0, z0, a, b = params
-    d = np.array([1.0, a, b])
-    d /= np.linalg.norm(d)
-    # rotation taking the new axis direction d to +x (minimal rotation)
-    v = np.cross(d, X_AXIS)
-    s = float(np.linalg.norm(v))
-    c = float(d @ X_AXIS)
+    y0, z0, a, b = (float(v) for v in params)
+    n = math.sqrt(1.0 + a * a + b * b)
+    d0, d1, d2 = 1.0 / n, a / n, b / n
+    # rotation taking the new axis direction d to +x (minimal rotation about d x X)
+    s = math.hypot(d1, d2)
     if s < 1e-12:
         rot = np.eye(3)
     else:
-        k = v / s
-        kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-        rot = np.eye(3) + s * kx + (1.0 - c) * (kx @ kx)
+        k1, k2 = d2 / s, -d1 / s
+        c1 = 1.0 - d0
+        rot = np.array(
+            [
+                [1.0 - c1, -s * k2, s * k1],
+                [s * k2, 1.0 + c1 * (k1 * k1 - 1.0), c1 * k1 * k2],
+                [-s * k1, c1 * k1 * k2, 1.0 + c1 * (k2 * k2 - 1.0)],
+            ]
+        )
     origin = np.array([0.0, y0, z0])
     # new coordinates: rot @ (p - origin), shifted along x so the sensor origin is at u = 0
-    pos = -rot @ origin
-    pos[0] -= float((rot @ (sensor_origin - origin))[0])
-    return SensorInPipe(pos, rot)
+    pos = -(rot @ origin)
+    pos[0] -= float(rot[0] @ (sensor_origin - origin))
+    return SensorInPipe.trusted(pos, rot)
 
 
 def _cyl_axis_residual(
     sub: NDArray[np.float64], big_r: float, x: NDArray[np.float64], want_jac: bool
 ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """Residual (distance to the axis - R) of points for the axis through (0, y0, z0) along
-    (1, a, b), and its analytic Jacobian."""
-    y0, z0, a, b = x
+    """Residual (distance to the axis - R) of ``(3, N)`` points for the axis through
+    (0, y0, z0) along (1, a, b), and its analytic Jacobian ``(N, 4)``."""
+    y0, z0, a, b = (float(v) for v in x)
     n = math.sqrt(1.0 + a * a + b * b)
-    d = np.array([1.0, a, b]) / n
-    q = sub - np.array([0.0, y0, z0])
-    t = q @ d
-    dist = np.sqrt(np.maximum(np.einsum("ij,ij->i", q, q) - t * t, 1e-18))
+    qu = sub[0]
+    qy = sub[1] - y0
+    qz = sub[2] - z0
+    t = (qu + a * qy + b * qz) * (1.0 / n)
+    dist = qu * qu + qy * qy + qz * qz - t * t
+    np.maximum(dist, 1e-18, out=dist)
+    np.sqrt(dist, out=dist)
     res = dist - big_r
     if not want_jac:
         return res, None
-    jac = np.empty((sub.shape[0], 4))
-    jac[:, 0] = (t * d[1] - q[:, 1]) / dist
-    jac[:, 1] = (t * d[2] - q[:, 2]) / dist
-    dda = (np.array([0.0, 1.0, 0.0]) - d * d[1]) / n
-    ddb = (np.array([0.0, 0.0, 1.0]) - d * d[2]) / n
-    jac[:, 2] = -t * (q @ dda) / dist
-    jac[:, 3] = -t * (q @ ddb) / dist
-    return res, jac
+    inv = 1.0 / dist
+    jac = np.empty((4, qu.size))
+    jac[0] = (t * (a / n) - qy) * inv
+    jac[1] = (t * (b / n) - qz) * inv
+    tn = t * (1.0 / n)
+    jac[2] = tn * jac[0]
+    jac[3] = tn * jac[1]
+    return res, jac.T
 
 
 def _refine_axis(
@@ -380,10 +388,10 @@ def _refine_axis(
         cand = cand[u < u_max]
         if cand.size < 40:
             return cloud.pose, info
-    sub = np.ascontiguousarray(xyz[:, _subsample(cand, cfg.axis_points)].T)
+    sub = np.ascontiguousarray(xyz[:, _subsample(cand, cfg.axis_points)])
     # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
     # gentle taper would pass for a tilted wall), so it is held at the prior
-    span = float(_pct(sub[:, 0], 95) - _pct(sub[:, 0], 5))
+    span = float(_pct(sub[0], 95) - _pct(sub[0], 5))
     tilt_sigma = cfg.prior_tilt if span >= 0.05 else math.radians(0.05)
     prior = np.array([cfg.prior_offset, cfg.prior_offset, tilt_sigma, tilt_sigma])
     info["axis_span"] = span
@@ -509,6 +517,12 @@ def detect_improved(
     try:
         cloud = _prepare(scan, pose0, bias, config)
         if refine_axis:
+            # the given pose explains every return already: straight pipe, nothing to refine
+            diag["axis_pass"] = 0
+            straight = _intact(cloud, big_r, config, diag)
+            if straight is not None:
+                return straight.with_diagnostics(time_s=time.perf_counter() - t0)
+            diag.pop("axis_pass")
             candidates = [(pose0, {})]
             xyz_of = [cloud.xyz_v]
             pose1, info1 = _refine_axis(cloud, big_r, config)
@@ -584,6 +598,13 @@ def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
     return cfg.tol_floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(cloud.xyz[0])
 
 
+def _tolerance_v(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
+    """(N,) radial tolerance of each return (compact order) under the current pose."""
+    if cloud.tol0 is None:
+        cloud.tol0 = cfg.tol_floor + cfg.noise_k * cloud.sigma_v
+    return cloud.tol0 + cfg.axis_slope * np.abs(cloud.xyz_v[0])
+
+
 def _intact(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, diag: dict[str, Any]
 ) -> Detection | None:
@@ -592,11 +613,13 @@ def _intact(
     else); ``None`` otherwise."""
     xyz = cloud.xyz_v
     e = np.sqrt(np.square(xyz[1]) + np.square(xyz[2])) - big_r
-    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_v + cfg.axis_slope * np.abs(xyz[0])
+    tol = _tolerance_v(cloud, cfg)
+    if cloud.n < cfg.min_anomaly_points or np.count_nonzero(np.abs(e) > tol) >= (
+        cfg.min_anomaly_points
+    ):
+        return None
     n_beyond = int(np.count_nonzero(e > tol))
     n_inside = int(np.count_nonzero(e < -tol))
-    if n_beyond + n_inside >= cfg.min_anomaly_points or cloud.n < cfg.min_anomaly_points:
-        return None
     n_wall = cloud.n - n_beyond - n_inside
     diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
     diag.update(n_wall=n_wall, n_beyond=n_beyond, n_inside=n_inside, n_anomaly=0)
@@ -609,7 +632,7 @@ def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> flo
     horizon when there are none."""
     xyz = cloud.xyz_v
     r = np.sqrt(np.square(xyz[1]) + np.square(xyz[2]))
-    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_v + cfg.axis_slope * np.abs(xyz[0])
+    tol = _tolerance_v(cloud, cfg)
     idx = np.flatnonzero(np.abs(r - big_r) > 2.0 * tol)  # returns off the wall
     if idx.size < cfg.min_anomaly_points:
         return cfg.horizon
@@ -745,10 +768,9 @@ def _region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArr
     nz = np.flatnonzero(flat)
     lab = flat[nz]
     counts = np.bincount(lab, minlength=n_lab + 1)
-    rows = nz // labels.shape[1]
-    pairs = np.unique(lab.astype(np.int64) * labels.shape[0] + rows)
-    row_span = np.bincount(pairs // labels.shape[0], minlength=n_lab + 1)
-    return counts, row_span
+    occupied = np.zeros((n_lab + 1, labels.shape[0]), dtype=bool)
+    occupied[lab, nz // labels.shape[1]] = True
+    return counts, np.count_nonzero(occupied, axis=1)
 
 
 def _wrap(a: float) -> float:
@@ -946,47 +968,61 @@ class BranchFit:
     rb: float = 0.0
 
 
+def _line_points(p: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """(x, y, z, y^2 + z^2) of ``(N, 3)`` points as contiguous arrays, for :func:`_line_resjac`."""
+    px, py, pz = (np.ascontiguousarray(p[:, k]) for k in range(3))
+    return px, py, pz, py * py + pz * pz
+
+
 def _line_resjac(
-    p: NDArray, x: NDArray, n_l: int, want_jac: bool
+    pts: tuple[NDArray, NDArray, NDArray, NDArray], x: NDArray, n_l: int, want_jac: bool
 ) -> tuple[NDArray, NDArray | None]:
-    """Residuals of points to the nearest of ``n_l`` outgoing cylinders whose axes meet the
-    incoming axis at ``(x[0], 0, 0)``; parameters per lobe: (theta, phi, rho)."""
-    q = p - np.array([x[0], 0.0, 0.0])
-    qq = np.einsum("ij,ij->i", q, q)
+    """Residuals of points (:func:`_line_points`) to the nearest of ``n_l`` outgoing cylinders
+    whose axes meet the incoming axis at ``(x[0], 0, 0)``; parameters per lobe:
+    (theta, phi, rho)."""
+    px, py, pz, r2 = pts
+    qx = px - x[0]
+    qq = qx * qx + r2
+    if n_l == 1:
+        th, ph, rho = float(x[1]), float(x[2]), float(x[3])
+        ct, st, cp, sp = math.cos(th), math.sin(th), math.cos(ph), math.sin(ph)
+        lat = py * cp + pz * sp
+        t = ct * qx + st * lat
+        dist = qq - t * t
+        np.maximum(dist, 1e-18, out=dist)
+        np.sqrt(dist, out=dist)
+        res = dist - rho
+        if not want_jac:
+            return res, None
+        g = t / dist
+        jac = np.empty((4, px.size))
+        jac[0] = ct * g - qx / dist
+        jac[1] = (st * qx - ct * lat) * g
+        jac[2] = (py * sp - pz * cp) * (st * g)
+        jac[3] = -1.0
+        return res, jac.T
     th, ph, rho = x[1::3], x[2::3], x[3::3]
     ct, st, cp, sp = np.cos(th), np.sin(th), np.cos(ph), np.sin(ph)
-    dirs = np.array([ct, st * cp, st * sp])  # (3, n_l)
-    t_all = q @ dirs  # (N, n_l)
-    dist_all = np.sqrt(np.maximum(qq[:, None] - t_all * t_all, 1e-18))
-    res_all = dist_all - rho
-    if n_l == 1:
-        arg = np.zeros(p.shape[0], dtype=np.intp)
-        best, t, dist = res_all[:, 0], t_all[:, 0], dist_all[:, 0]
-    else:
-        rows = np.arange(p.shape[0])
-        arg = np.argmin(np.abs(res_all), axis=1)  # each return on its nearest cylinder
-        best, t, dist = res_all[rows, arg], t_all[rows, arg], dist_all[rows, arg]
+    lat_all = cp[:, None] * py + sp[:, None] * pz  # (n_l, N)
+    t_all = ct[:, None] * qx + st[:, None] * lat_all
+    dist_all = qq - t_all * t_all
+    np.maximum(dist_all, 1e-18, out=dist_all)
+    np.sqrt(dist_all, out=dist_all)
+    res_all = dist_all - rho[:, None]
+    arg = np.argmin(np.abs(res_all), axis=0)  # each return on its nearest cylinder
+    cols = np.arange(px.size)
+    best = res_all[arg, cols]
     if not want_jac:
         return best, None
-    # (N, n_l): q . d(dir)/d(theta), q . d(dir)/d(phi)
-    d_both = q @ np.array(
-        [[*-st, *(0.0 * st)], [*(ct * cp), *(-st * sp)], [*(ct * sp), *(st * cp)]]
-    )
-    d_th, d_ph = d_both[:, :n_l], d_both[:, n_l:]
-    if n_l == 1:
-        q_th, q_ph, d0 = d_th[:, 0], d_ph[:, 0], dirs[0, 0]
-    else:
-        q_th, q_ph, d0 = d_th[rows, arg], d_ph[rows, arg], dirs[0, arg]
-    jac = np.zeros((p.shape[0], 1 + 3 * n_l))
-    jac[:, 0] = (t * d0 - q[:, 0]) / dist
-    if n_l == 1:
-        jac[:, 1] = -t * q_th / dist
-        jac[:, 2] = -t * q_ph / dist
-        jac[:, 3] = -1.0
-    else:
-        jac[rows, 1 + 3 * arg] = -t * q_th / dist
-        jac[rows, 2 + 3 * arg] = -t * q_ph / dist
-        jac[rows, 3 + 3 * arg] = -1.0
+    t, dist, lat = t_all[arg, cols], dist_all[arg, cols], lat_all[arg, cols]
+    ctk, stk, cpk, spk = ct[arg], st[arg], cp[arg], sp[arg]
+    g = t / dist
+    jac = np.zeros((px.size, 1 + 3 * n_l))
+    jac[:, 0] = ctk * g - qx / dist
+    k = 1 + 3 * arg
+    jac[cols, k] = (stk * qx - ctk * lat) * g
+    jac[cols, k + 1] = (py * spk - pz * cpk) * (stk * g)
+    jac[cols, k + 2] = -1.0
     return best, jac
 
 
@@ -1019,6 +1055,7 @@ def _branches(
     if any_roll:
         sub_idx = _subsample(np.flatnonzero(keep.reshape(-1)), cfg.fit_points)
     p_all = np.ascontiguousarray(cloud.points_at(sub_idx))
+    pts_all = _line_points(p_all)
     tol_med = float(_pct(tol.reshape(-1)[sub_idx], 50.0))
     noise_med = float(_pct(cloud.sigma_r.reshape(-1)[sub_idx], 50.0)) + 0.3e-3
     lobe_pts = []
@@ -1109,7 +1146,7 @@ def _branches(
             step_tol=STEP_TOL,
             anneal=ANNEAL,
             cost_tol=COST_TOL,
-            resjac=lambda v: _line_resjac(p_all, v, n_l, True),
+            resjac=lambda v: _line_resjac(pts_all, v, n_l, True),
         )
 
     x, res, w = free_fit(x0a, lower, upper)
@@ -1132,7 +1169,7 @@ def _branches(
     up_eq[3::3] = big_r
     if not any_roll and bool(np.all(np.abs(x[3::3] - big_r) <= 0.01 * big_r)):
         # the free fit found the clamped radius already: clamping it moves nothing that matters
-        res_eq = _line_resjac(p_all, x_eq, n_l, False)[0]
+        res_eq = _line_resjac(pts_all, x_eq, n_l, False)[0]
         w_eq = tukey_weights(res_eq, c_fin)
     else:
         x_eq, res_eq, w_eq = robust_gauss_newton(
@@ -1147,7 +1184,7 @@ def _branches(
             step_tol=STEP_TOL,
             anneal=ANNEAL,
             cost_tol=COST_TOL,
-            resjac=lambda v: _line_resjac(p_all, v, n_l, True),
+            resjac=lambda v: _line_resjac(pts_all, v, n_l, True),
         )
     cost_free = tukey_cost(res, c_fin)
     cost_eq = tukey_cost(res_eq, c_fin)

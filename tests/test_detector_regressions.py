@@ -10,6 +10,7 @@ from detector_scans import match, scan_layout, wrap
 
 from detector import detect
 from detector.robust import robust_gauss_newton
+from pipe_env.geometry import Pose
 
 
 def test_widening_with_an_end_wall_far_down_is_a_reducer():
@@ -61,11 +62,19 @@ def test_small_end_wall_far_away_stays_a_closure():
 
 
 def test_straight_pipe_takes_the_early_exit():
+    # the nominal pose explains every return: nothing is refined
     scan, _, d = scan_layout("straight", 0.0, diameter=0.1)
     det = detect(scan, d)
     assert det.kind == "straight"
-    assert det.diagnostics["axis_pass"] == 1 and det.diagnostics["n_anomaly"] == 0
+    assert det.diagnostics["axis_pass"] == 0 and det.diagnostics["n_anomaly"] == 0
     assert det.diagnostics["n_wall"] > 1000
+    # an offset sensor: the returns leave the wall tolerance until the axis is refined
+    offset = Pose(np.array([0.0, 0.01, 0.0]), np.eye(3))
+    scan, _, d = scan_layout("straight", 0.0, diameter=0.1, misalignment=offset)
+    det = detect(scan, d)
+    assert det.kind == "straight"
+    assert det.diagnostics["axis_pass"] == 1 and det.diagnostics["n_anomaly"] == 0
+    assert abs(det.diagnostics["axis_offset"][0] + 0.01) < 0.001
     closure, _, d = scan_layout("closure", 0.3, diameter=0.1)
     assert detect(closure, d).kind == "closure"
 
