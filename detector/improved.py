@@ -210,15 +210,25 @@ def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float
 
 #: Unrolled grid and beam directions per scan pattern (plane and beam angles), reused.
 _PATTERNS: dict[bytes, tuple[bool, int, NDArray, NDArray, NDArray, NDArray, float]] = {}
+#: The pattern of the last scan with its angles (consecutive scans share one).
+_LAST_PATTERN: list[tuple[NDArray, NDArray, tuple] | None] = [None]
 
 
 def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray, float]:
     """(wraps, K, flat scan index of each grid cell (G*K,), unit beam direction (3, G*K),
     |sin beta| and |cos beta| (2, G*K), the cells where the half-plane has no such beam, the
     angle between neighbouring beams) of the scan's angle pattern."""
+    last = _LAST_PATTERN[0]
+    if (
+        last is not None
+        and np.array_equal(last[0], scan.plane_angles)
+        and np.array_equal(last[1], scan.beam_angles)
+    ):
+        return last[2]
     key = scan.plane_angles.tobytes() + b"|" + scan.beam_angles.tobytes()
     hit = _PATTERNS.get(key)
     if hit is not None:
+        _LAST_PATTERN[0] = (scan.plane_angles.copy(), scan.beam_angles.copy(), hit)
         return hit
     grid = build_grid(scan)
     steps = np.abs(np.diff(np.sort(scan.beam_angles)))
@@ -243,6 +253,7 @@ def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray,
     if len(_PATTERNS) >= 16:
         _PATTERNS.pop(next(iter(_PATTERNS)))
     _PATTERNS[key] = hit
+    _LAST_PATTERN[0] = (scan.plane_angles.copy(), scan.beam_angles.copy(), hit)
     return hit
 
 

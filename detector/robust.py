@@ -81,7 +81,6 @@ def robust_gauss_newton(
     eps = np.asarray(scales, dtype=float)
     cf = c if c_final is None else c_final
     lam = 1e-3
-    diag_idx = np.arange(n_p)
     if resjac is None:
         if residual is None:
             raise ValueError("robust_gauss_newton needs residual or resjac")
@@ -115,28 +114,33 @@ def robust_gauss_newton(
     r, jac = resjac(x)
     n_anneal = max(1, iterations - 1 if anneal is None else anneal)
     ratio = cf / c
+    step_diag = n_p + 1  # stride of the diagonal in a flattened (n_p, n_p) matrix
     for it in range(iterations):
         ci = c * ratio ** (min(it, n_anneal) / n_anneal)
-        w = tukey_weights(r, ci)
+        r2 = r * r
+        w = 1.0 - r2 * (1.0 / (ci * ci))  # Tukey weights, as tukey_weights(r, ci)
+        np.maximum(w, 0.0, out=w)
+        w *= w
         if float(w.sum()) < n_p + 1:
             break
         jw = jac * w[:, None]
-        h = jac.T @ jw
+        h = np.ascontiguousarray(jac.T @ jw)
         g = r @ jw
+        h_diag = h.reshape(-1)[::step_diag]  # (a view)
         if inv is not None:
-            h[diag_idx, diag_idx] += inv
+            h_diag += inv
             g += inv * (x - pm)
         if fixed is not None:
             h[fixed, :] = 0.0
             h[:, fixed] = 0.0
             h[fixed, fixed] = 1.0
             g[fixed] = 0.0
-        cost0 = float(np.dot(w, r * r))
-        hd = h[diag_idx, diag_idx] + 1e-12
+        cost0 = float(np.dot(w, r2))
+        hd = h_diag + 1e-12
         step_ok = False
         for _ in range(4):
             a = h.copy()
-            a[diag_idx, diag_idx] += lam * hd
+            a.reshape(-1)[::step_diag] += lam * hd
             dx = _solve_spd(a, g)
             if dx is None:
                 lam *= 10.0
