@@ -722,6 +722,11 @@ def _detect_in_pipe_frame(
     # away): fit an outgoing pipe to the inner returns with unknown roll
     pseudo = Lobe(inside_k, 0.0, int(inside_k.sum()))
     alt = _branches(cloud, big_r, [pseudo], keep, wall, tol, cfg, dict(diag), any_roll=True)
+    if det.diagnostics.get("closure_tentative", False):
+        # a wall that looks flat within the range noise but curves: the far wall of a turn
+        # when the fit finds one way on; a pipe across (or a 90 deg turn: the same far wall)
+        # is too ambiguous to overrule the end wall
+        return alt if alt.kind == "bend" else det
     if alt.kind != "straight" and alt.confidence > det.confidence:
         return alt
     return det
@@ -815,7 +820,7 @@ def _axisymmetric(
         on_plane = np.abs(u - u_med) <= tol_u
         frac_plane = float(on_plane.mean())
         diag["closure_plane_fraction"] = frac_plane
-        if frac_plane >= 0.8 and float(_pct(r[on_plane], 5)) < 0.5 * big_r:
+        if np.count_nonzero(on_plane) >= cfg.min_anomaly_points:
             up = u[on_plane]
             dist = float(np.mean(up))
             spread = float(np.std(up))
@@ -827,17 +832,36 @@ def _axisymmetric(
             coef = np.linalg.lstsq(design, up, rcond=None)[0]
             plane_rms = float(np.sqrt(np.mean((up - design @ coef) ** 2)))
             noise_u = float(_pct(cloud.values(anomaly, cloud.sigma_range_v)[on_plane], 50.0))
-            flat = plane_rms <= max(3.0 * noise_u, 0.001)
+            # under range noise a curved wall can pass for a plane: a quadratic surface must
+            # not explain it significantly better with a sag of millimetres (a cap's sag is
+            # the quantisation, a pipe's far wall sags by a good part of its radius)
+            quad = np.concatenate([design, (pp[:, 1:, None] * pp[:, None, 1:]).reshape(-1, 4)], 1)
+            coef_q = np.linalg.lstsq(quad, up, rcond=None)[0]
+            rss_q = float(np.sum((up - quad @ coef_q) ** 2))
+            rss_p = plane_rms**2 * up.size
+            lr_curv = up.size * math.log(max(rss_p, 1e-30) / max(rss_q, 1e-30))
+            sag = float(np.abs(quad[:, 3:] @ coef_q[3:]).max())
+            curved = lr_curv > 25.0 and sag > 0.003
+            flat_plane = plane_rms <= max(3.0 * noise_u, 0.001)
+            flat = flat_plane and not curved
             diag["closure_curved"] = not flat
             diag.update(
                 closure_rms=spread,
                 closure_plane_rms=plane_rms,
+                closure_sag=sag,
+                closure_curvature_lr=lr_curv,
                 closure_coverage=cov,
                 axisymmetric_support=1.0 if flat else 0.0,
             )
-            if spread <= 0.5 * tol_u and flat:
+            plane_seen = frac_plane >= 0.8 and float(_pct(r[on_plane], 5)) < 0.5 * big_r
+            if not plane_seen:  # (not a cap seen head-on: only a clear curvature counts)
+                diag["closure_curved"] = curved
+            if plane_seen and spread <= 0.5 * tol_u and flat_plane:
                 conf = _confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
                 opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
+                # (curved only by the quadratic test: an end wall unless the returns show a
+                # turn; the caller decides)
+                diag["closure_tentative"] = not flat
                 return Detection("closure", [opt], conf, diag)
     # --- reducer: r(u) = R + (R2 - R) clip((u - L) / T, 0, 1)
     if contraction:

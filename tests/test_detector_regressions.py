@@ -138,3 +138,26 @@ def test_noisy_bend_far_away_does_not_turn_back():
     assert abs(o.distance - t.distance) < 0.02
     assert abs(o.angle - t.angle) < math.radians(5.0)
     assert abs(wrap(o.direction - t.direction)) < math.radians(5.0)
+
+
+def test_noisy_far_wall_of_a_turn_is_not_an_end_wall():
+    # under 1 % range noise the far wall of a small turn 40 cm ahead is flat to within the
+    # noise; its curvature (a sag of about a centimetre) still tells it from a cap
+    scan, truth, d = scan_layout(
+        "mitre_bend",
+        0.4,
+        sensor="ydlidar_x4",
+        diameter=0.057,
+        angle=math.radians(75),
+        direction=-2.9,
+    )
+    det = detect(scan, d)
+    assert det.kind == "bend", det.describe()
+    assert det.diagnostics["closure_sag"] > 0.005
+    ((o, t),) = match(det.options, truth)
+    assert abs(o.distance - t.distance) < 0.02
+    assert abs(o.angle - t.angle) < math.radians(5.0)
+    assert abs(wrap(o.direction - t.direction)) < math.radians(5.0)
+    cap, truth, d = scan_layout("closure", 0.4, sensor="ydlidar_x4", diameter=0.057)
+    det = detect(cap, d)
+    assert det.kind == "closure" and det.diagnostics["closure_sag"] < 0.002
