@@ -147,10 +147,14 @@ class PipeCloud:
 
     def _grid(self, values: NDArray, fill: float | bool) -> NDArray:
         g, k = self.shape
-        lead = values.shape[:-1]
-        out = np.full((*lead, g * k), fill, dtype=values.dtype)
-        out[..., self.cell] = values
-        return out.reshape(*lead, g, k)
+        if values.ndim == 1:
+            out = np.full(g * k, fill, dtype=values.dtype)
+            out[self.cell] = values
+            return out.reshape(g, k)
+        out = np.full((values.shape[0], g * k), fill, dtype=values.dtype)
+        for row, vals in zip(out, values):  # (row by row: a faster scatter)
+            row[self.cell] = vals
+        return out.reshape(values.shape[0], g, k)
 
     @property
     def valid(self) -> NDArray[np.bool_]:
@@ -827,19 +831,23 @@ def _axisymmetric(
             cov = _azimuth_coverage(p[on_plane])
             # a cap is flat: a plane (tilted by any residual axis error) must explain it to
             # within the range noise, where the far wall of a pipe seen head-on is curved
-            pp = p[on_plane]
-            design = np.stack([np.ones(up.size), pp[:, 1], pp[:, 2]], axis=1)
-            coef = np.linalg.lstsq(design, up, rcond=None)[0]
-            plane_rms = float(np.sqrt(np.mean((up - design @ coef) ** 2)))
-            noise_u = float(_pct(cloud.values(anomaly, cloud.sigma_range_v)[on_plane], 50.0))
+            # (an even sample of the wall: a few hundred returns pin a plane and a quadric)
+            on_idx = np.flatnonzero(on_plane)
+            pick = on_idx[_subsample(np.arange(on_idx.size), 2 * cfg.fit_points)]
+            pp = p[pick]
+            uq = pp[:, 0]
+            design = np.stack([np.ones(uq.size), pp[:, 1], pp[:, 2]], axis=1)
+            coef = np.linalg.lstsq(design, uq, rcond=None)[0]
+            plane_rms = float(np.sqrt(np.mean((uq - design @ coef) ** 2)))
+            noise_u = float(_pct(cloud.values(anomaly, cloud.sigma_range_v)[pick], 50.0))
             # under range noise a curved wall can pass for a plane: a quadratic surface must
             # not explain it significantly better with a sag of millimetres (a cap's sag is
             # the quantisation, a pipe's far wall sags by a good part of its radius)
             quad = np.concatenate([design, (pp[:, 1:, None] * pp[:, None, 1:]).reshape(-1, 4)], 1)
-            coef_q = np.linalg.lstsq(quad, up, rcond=None)[0]
-            rss_q = float(np.sum((up - quad @ coef_q) ** 2))
-            rss_p = plane_rms**2 * up.size
-            lr_curv = up.size * math.log(max(rss_p, 1e-30) / max(rss_q, 1e-30))
+            coef_q = np.linalg.lstsq(quad, uq, rcond=None)[0]
+            rss_q = float(np.sum((uq - quad @ coef_q) ** 2))
+            rss_p = plane_rms**2 * uq.size
+            lr_curv = uq.size * math.log(max(rss_p, 1e-30) / max(rss_q, 1e-30))
             sag = float(np.abs(quad[:, 3:] @ coef_q[3:]).max())
             curved = lr_curv > 25.0 and sag > 0.003
             flat_plane = plane_rms <= max(3.0 * noise_u, 0.001)

@@ -120,7 +120,7 @@ class SensorInPipe:
     @classmethod
     def identity(cls) -> SensorInPipe:
         """The thesis's assumption: sensor centred and aligned with the pipe axis."""
-        return cls()
+        return cls.trusted(np.zeros(3), np.eye(3))
 
     @classmethod
     def coerce(cls, value: Any) -> SensorInPipe:
