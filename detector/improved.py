@@ -1141,7 +1141,7 @@ def _branches(
                 (np.sin(rolls)[:, None] * st).reshape(-1),
             ]
         )  # (3, RT)
-        lq = lp[_subsample(np.arange(lp.shape[0]), 50 if any_roll else 100)]
+        lq = lp[_subsample(np.arange(lp.shape[0]), 50 if any_roll else 60)]
         qx = lq[None, :, 0] - l_grid[:, None]  # (L, n)
         qq = qx * qx + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]
         lat = lq[:, 1:] @ dirs[1:]  # (n, RT)
