@@ -881,6 +881,16 @@ def _axisymmetric(
     # the start of a taper is one kink in r(u): it needs a denser sample than the other fits
     sub = _subsample(np.arange(u.size), 2 * cfg.fit_points)
     us, rs = u[sub], r[sub]
+    n_lead = 0
+    if contraction:
+        # the wall just before the first returns off it: a gentle taper leaves the wall
+        # tolerance only some way past its start, and the kink needs both sides
+        pw = cloud.points(wall)
+        lead = np.flatnonzero((pw[:, 0] > u_first - 0.15) & (pw[:, 0] < u_first))
+        lead = lead[_subsample(np.arange(lead.size), cfg.fit_points // 2)]
+        n_lead = int(lead.size)
+        us = np.concatenate([us, pw[lead, 0]])
+        rs = np.concatenate([rs, np.hypot(pw[lead, 1], pw[lead, 2])])
     t0 = max(0.01, float(_pct(u, 30)) - u_first)
 
     def resjac(x: NDArray) -> tuple[NDArray, NDArray]:
@@ -912,6 +922,39 @@ def _axisymmetric(
         anneal=ANNEAL,
         cost_tol=COST_TOL,
     )
+    if contraction:
+        # an end wall far down the narrower pipe, seen through it, is no part of the taper:
+        # when grazing beams lose the narrower pipe's own wall, the plateau of the fit sits on
+        # that end wall instead (too narrow, the taper too long). Without it, the taper ends
+        # where its returns end; the end wall, filling the narrower pipe's cross-section,
+        # still bounds its radius from below.
+        u_far = _pct(u, 97.0)
+        far = np.abs(u - u_far) <= 0.003 + 2.0 * tol_med
+        n_far = int(np.count_nonzero(far))
+        far_s = np.concatenate([far[sub], np.zeros(n_lead, dtype=bool)])
+        if (
+            30 <= n_far <= 0.6 * u.size
+            and float(_pct(r[far], 5)) < 0.3 * big_r
+            and np.count_nonzero(~far_s) >= 50
+        ):
+            r_end = float(_pct(r[far], 90.0))
+            if x[2] < r_end < big_r - tol_med:
+                us, rs = us[~far_s], rs[~far_s]
+                x, res, w = robust_gauss_newton(
+                    None,
+                    np.array([x[0], x[1], r_end]),
+                    np.array([1e-4, 1e-4, 1e-5]),
+                    c=max(4.0 * c_fin, 0.01),
+                    iterations=15,
+                    resjac=resjac,
+                    lower=np.array([-0.2, 0.002, r_end]),
+                    upper=np.array([cfg.horizon, 1.0, big_r]),
+                    c_final=c_fin,
+                    step_tol=STEP_TOL,
+                    anneal=ANNEAL,
+                    cost_tol=COST_TOL,
+                )
+                diag["reducer_end_wall_radius"] = r_end
     support = float((w > 0.1).mean())
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     big_l, t_len, r2 = (float(v) for v in x)

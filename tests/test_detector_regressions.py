@@ -161,3 +161,17 @@ def test_noisy_far_wall_of_a_turn_is_not_an_end_wall():
     cap, truth, d = scan_layout("closure", 0.4, sensor="ydlidar_x4", diameter=0.057)
     det = detect(cap, d)
     assert det.kind == "closure" and det.diagnostics["closure_sag"] < 0.002
+
+
+def test_noisy_taper_with_its_narrow_pipe_unseen_is_a_reducer():
+    # grazing beams lose the narrower pipe's wall under ydlidar_x4: the end wall far down it
+    # once stood in for that wall (a plateau far too narrow, a taper too long, or a bend),
+    # and the first returns off the wall come well past the start of a gentle taper
+    scan, truth, d = scan_layout(
+        "reducer", 0.3, sensor="ydlidar_x4", diameter_in=0.1, diameter_out=0.055, taper_length=0.2
+    )
+    det = detect(scan, d)
+    assert det.kind == "reducer", det.describe()
+    assert abs(det.options[0].distance - truth[0].distance) < 0.02
+    assert 0.03 < det.options[0].diameter < 0.075
+    assert det.diagnostics["reducer_end_wall_radius"] > 0.015
