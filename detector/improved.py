@@ -536,7 +536,7 @@ def detect_improved(
             diag["axis_pass"] = 0
             straight = _intact(cloud, big_r, config, diag)
             if straight is not None:
-                return straight.with_diagnostics(time_s=time.perf_counter() - t0)
+                return _timed(straight, t0)
             diag.pop("axis_pass")
             candidates = [(pose0, {})]
             xyz_of = [cloud.xyz_v]
@@ -548,7 +548,7 @@ def detect_improved(
             diag["axis_pass"] = 1
             straight = _intact(cloud, big_r, config, diag)
             if straight is not None:  # no return off the wall under the refined axis
-                return straight.with_diagnostics(time_s=time.perf_counter() - t0)
+                return _timed(straight, t0)
             for key in info1:
                 diag.pop(key)
             diag.pop("axis_pass")
@@ -578,7 +578,14 @@ def detect_improved(
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
-    return det.with_diagnostics(time_s=time.perf_counter() - t0)
+    return _timed(det, t0)
+
+
+def _timed(det: Detection, t0: float) -> Detection:
+    """``det`` with the time since ``t0`` (seconds) in its diagnostics (a finite number added
+    to the detection's own dictionary: nothing to check again)."""
+    det.diagnostics["time_s"] = time.perf_counter() - t0
+    return det
 
 
 def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
