@@ -1249,6 +1249,22 @@ def _branches(
         x0a, lower, upper = prior
         x, res, w = free_fit(x0a, lower, upper)
         diag.update(hole_reference=float(prior[0][0]), hole_prior_used=True)
+    elif not any_roll and _on_deflection_bound(x, lower, upper):
+        # a branch that ends on a deflection bound has not found its pipe: start again from
+        # the best reference point of the coarse grid in another basin (a radius or more
+        # from the first) and keep the better fit
+        far = np.abs(l_grid - l_grid[i_l]) >= big_r
+        if far.any():
+            j_l = int(np.flatnonzero(far)[np.argmin(total[far])])
+            x1 = [float(l_grid[j_l])]
+            for rolls, cost in zip(rolls_of, per_lobe):
+                k = int(np.argmin(cost[j_l]))
+                x1 += [float(thetas[k % thetas.size]), float(rolls[k // thetas.size]), big_r]
+            x_b, res_b, w_b = free_fit(np.array(x1), lower, upper)
+            bound_b = _on_deflection_bound(x_b, lower, upper)
+            if not bound_b and tukey_cost(res_b, c_fin) <= 1.5 * tukey_cost(res, c_fin):
+                x, res, w, x0a = x_b, res_b, w_b, np.array(x1)
+                diag["second_start"] = True
     # --- the outgoing radii: the clamped radius (a standard fitting) unless the returns
     # call for another one. A free radius is poorly observed from a partial view of an
     # opening under range noise, so it is kept only when it fits significantly better
@@ -1295,11 +1311,55 @@ def _branches(
     if weak or lr <= cfg.radius_lr_per_branch * n_l or (free_on_bound and not eq_on_bound):
         x, res, w = x_eq, res_eq, w_eq
     diag["radius_model"] = "clamped" if x is x_eq else "free"
+    across = None
+    if n_l == 2 and not any_roll and abs(_wrap(lobes[0].roll - lobes[1].roll)) > math.radians(150):
+        # two openings on opposite sides: a pipe across (a tee from its stem, a wye from its
+        # branch, the side pipe of a cross), one straight axis through the reference point.
+        # Fitted as one cylinder of the clamped radius, it is kept unless the two free
+        # branches fit significantly better (likelihood ratio, as for the radii)
+        k_main = 0 if lobes[0].n >= lobes[1].n else 1
+        starts = [
+            np.array([x[0], x[1 + 3 * k_main], x[2 + 3 * k_main], big_r]),
+            np.array([x[0], 0.5 * math.pi, lobes[k_main].roll, big_r]),
+            np.array([u_edge + big_r, 0.5 * math.pi, lobes[k_main].roll, big_r]),
+        ]
+        best_a = None
+        for xa0 in starts:
+            xa, res_a, w_a = robust_gauss_newton(
+                None,
+                xa0,
+                np.full(4, 1e-5),
+                c=2.0 * c0,
+                iterations=12,
+                lower=np.array([lower[0], math.radians(25.0), -10.0, big_r]),
+                upper=np.array([upper[0], math.radians(155.0), 10.0, big_r]),
+                c_final=c_fin,
+                step_tol=STEP_TOL,
+                anneal=ANNEAL,
+                cost_tol=COST_TOL,
+                resjac=lambda v: _line_resjac(pts_all, v, 1, True),
+            )
+            cost_a = tukey_cost(res_a, c_fin)
+            if best_a is None or cost_a < best_a[0]:
+                best_a = (cost_a, xa, res_a, w_a)
+        cost_a, xa, res_a, w_a = best_a
+        # (the two branches: three more deflection and roll parameters, two more radii)
+        n_extra = 2 if diag["radius_model"] == "clamped" else 4
+        lr_a = 2.0 * (cost_a - tukey_cost(res, c_fin)) / sigma2
+        diag["across_lr"] = float(lr_a)
+        if lr_a <= 0.5 * cfg.radius_lr_per_branch * max(n_extra, 1):
+            across = xa
+            x, res, w = xa, res_a, w_a
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     support = int((w > 0.1).sum())
     diag.update(fit_rms=rms, fit_support=support, fit_points=int(p_all.shape[0]))
     model = "straight_axes"
-    fits = [BranchFit(x[1 + 3 * k], x[2 + 3 * k], x[3 + 3 * k]) for k in range(n_l)]
+    if across is not None:
+        model = "pipe_across"
+        th_a, ph_a = float(across[1]), float(across[2])
+        fits = [BranchFit(th_a, ph_a, big_r), BranchFit(math.pi - th_a, ph_a + math.pi, big_r)]
+    else:
+        fits = [BranchFit(x[1 + 3 * k], x[2 + 3 * k], x[3 + 3 * k]) for k in range(n_l)]
     if any_roll and w.sum() > 0:
         # a cylinder's axis has no sign: the way on is the half the returns lie along
         f = fits[0]
@@ -1350,6 +1410,13 @@ def _branches(
     ]
     options.sort(key=option_order)
     return Detection(kind, options, conf, diag)
+
+
+def _on_deflection_bound(x: NDArray, lower: NDArray, upper: NDArray) -> bool:
+    """Does a branch's deflection lie within 1 deg of its bounds?"""
+    th = x[1::3]
+    margin = math.radians(1.0)
+    return bool(np.any((th <= lower[1::3] + margin) | (th >= upper[1::3] - margin)))
 
 
 def _hole_prior(

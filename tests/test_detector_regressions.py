@@ -175,3 +175,45 @@ def test_noisy_taper_with_its_narrow_pipe_unseen_is_a_reducer():
     assert abs(det.options[0].distance - truth[0].distance) < 0.02
     assert 0.03 < det.options[0].diameter < 0.075
     assert det.diagnostics["reducer_end_wall_radius"] > 0.015
+
+
+def test_noisy_tee_seen_from_its_stem_is_one_pipe_across():
+    # 40 cm ahead under range noise the two openings of the run are a few grazing returns each;
+    # two free branches once settled on a 25 mm and a 65 mm pipe 120 deg off, where one pipe
+    # across (both ways open) explains the returns better
+    scan, truth, d = scan_layout(
+        "t_junction",
+        0.4,
+        sensor="ydlidar_x4",
+        seed=1,
+        diameter=0.1,
+        branch_diameter=0.1,
+        direction=0.3,
+        entry="stem",
+    )
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    assert det.diagnostics["model"] == "pipe_across"
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < 0.02
+        assert abs(o.angle - t.angle) < math.radians(5.0)
+        assert abs(wrap(o.direction - t.direction)) < math.radians(5.0)
+        assert abs(o.diameter - t.diameter) < 0.002
+
+
+def test_branch_on_its_deflection_bound_is_fitted_again_from_another_start():
+    scan, truth, d = scan_layout(
+        "t_junction",
+        0.4,
+        sensor="ydlidar_x4",
+        seed=2,
+        diameter=0.1,
+        branch_diameter=0.1,
+        direction=1.59,
+        entry="stem",
+    )
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    assert det.diagnostics.get("second_start", False)
+    for o, t in match(det.options, truth):
+        assert abs(o.angle - t.angle) < math.radians(10.0)
