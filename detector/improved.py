@@ -140,6 +140,8 @@ class PipeCloud:
     _valid: NDArray[np.bool_] | None = field(init=False, default=None)
     _sigma: NDArray[np.float64] | None = field(init=False, default=None)
     _xyz: NDArray[np.float64] | None = field(init=False, default=None)
+    _r_v: NDArray[np.float64] | None = field(init=False, default=None)
+    _tol_v: NDArray[np.float64] | None = field(init=False, default=None)
 
     @property
     def n(self) -> int:
@@ -198,11 +200,19 @@ class PipeCloud:
     def set_pose(self, pose: SensorInPipe) -> None:
         self.pose = pose
         self.xyz_v = _transform(pose, self.sensor_v)
-        self._xyz = None
+        self._xyz = self._r_v = self._tol_v = None
+
+    @property
+    def r_v(self) -> NDArray[np.float64]:
+        """(N,) distance of each return from the pipe axis under the current pose."""
+        if self._r_v is None:
+            self._r_v = np.sqrt(np.square(self.xyz_v[1]) + np.square(self.xyz_v[2]))
+        return self._r_v
 
     def restore(self, pose: SensorInPipe, xyz_v: NDArray[np.float64]) -> None:
         """Go back to a pose whose points were computed before."""
-        self.pose, self.xyz_v, self._xyz = pose, xyz_v, None
+        self.pose, self.xyz_v = pose, xyz_v
+        self._xyz = self._r_v = self._tol_v = None
 
 
 def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -388,7 +398,7 @@ def _refine_axis(
     info: dict[str, Any] = {"axis_points": 0}
     if xyz.shape[1] < 20:
         return cloud.pose, info
-    r = np.sqrt(np.square(xyz[1]) + np.square(xyz[2]))
+    r = cloud.r_v
     gate = max(0.35 * big_r, 0.01)
     cand = np.flatnonzero(np.abs(r - big_r) < gate)
     if cand.size < 20:
@@ -624,7 +634,9 @@ def _tolerance_v(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
     """(N,) radial tolerance of each return (compact order) under the current pose."""
     if cloud.tol0 is None:
         cloud.tol0 = cfg.tol_floor + cfg.noise_k * cloud.sigma_v
-    return cloud.tol0 + cfg.axis_slope * np.abs(cloud.xyz_v[0])
+    if cloud._tol_v is None:
+        cloud._tol_v = cloud.tol0 + cfg.axis_slope * np.abs(cloud.xyz_v[0])
+    return cloud._tol_v
 
 
 def _intact(
@@ -633,8 +645,7 @@ def _intact(
     """Straight pipe when fewer than ``min_anomaly_points`` returns leave the wall tolerance
     (no region of anomalies can reach that size, so the classification would find nothing
     else); ``None`` otherwise."""
-    xyz = cloud.xyz_v
-    e = np.sqrt(np.square(xyz[1]) + np.square(xyz[2])) - big_r
+    e = cloud.r_v - big_r
     tol = _tolerance_v(cloud, cfg)
     if cloud.n < cfg.min_anomaly_points or np.count_nonzero(np.abs(e) > tol) >= (
         cfg.min_anomaly_points
@@ -653,7 +664,7 @@ def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> flo
     """Axial position where the wall stops being intact (first significant anomalies); the
     horizon when there are none."""
     xyz = cloud.xyz_v
-    r = np.sqrt(np.square(xyz[1]) + np.square(xyz[2]))
+    r = cloud.r_v
     tol = _tolerance_v(cloud, cfg)
     idx = np.flatnonzero(np.abs(r - big_r) > 2.0 * tol)  # returns off the wall
     if idx.size < cfg.min_anomaly_points:
