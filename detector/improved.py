@@ -9,27 +9,34 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    fit of a cylinder of the clamped radius to the wall points (4 parameters: cross-section
    offset and tilt, with a weak prior towards the known pose when the wall seen is short). This
    removes sensor misalignment (thesis 5.3) without any outside feedback. When fewer returns
-   than a region needs leave the wall tolerance under the refined axis, the scan is straight
-   pipe and nothing else runs (the common case in a run).
+   than a region needs leave the wall tolerance under the given pose, or else under the refined
+   axis, the scan is straight pipe and nothing else runs (the common case in a run).
 2. **Classification.** Each return's radial residual ``r - D/2`` is compared with a per-point
    tolerance from the sensor model in ``scan.spec`` (range noise projected on the radius, plus a
    floor). Non-wall returns are grouped into connected regions of the unrolled scan grid
    (:mod:`detector.grid`); regions too small or one azimuth wide are rejected as clutter.
 3. **Hypotheses.** Returns beyond the wall (``r > D/2``) are *lobes*: openings towards an
    outgoing pipe. Without lobes the structure is axisymmetric: an end wall (a plane
-   perpendicular to the axis, kind ``closure``; flat to within the range noise, which tells it
-   from the curved far wall of a pipe seen head-on) or a reducer (a cone from the wall radius to
-   a new radius fitted as ``r(u)``; a widening starts at the edge where the beams leave the
-   incoming pipe, its cone mostly hidden behind that edge). A far wall seen head-on is fitted as
-   an outgoing pipe of the clamped radius with unknown roll, seen from inside; when it runs on
-   evenly to both sides it is a pipe across (both ways open). With lobes, each lobe is an outgoing
+   perpendicular to the axis, kind ``closure``; flat to within the range noise and no better
+   explained by a quadratic surface with a sag of millimetres, which tells it from the curved
+   far wall of a pipe seen head-on) or a reducer (a cone from the wall radius to a new radius
+   fitted as ``r(u)`` together with the wall just before it; a widening starts at the edge where
+   the beams leave the incoming pipe, its cone mostly hidden behind that edge; an end wall seen
+   through a narrowing is left out of its fit and bounds the narrow radius from below). A far
+   wall seen head-on is fitted as an outgoing pipe of the clamped radius with unknown roll, seen
+   from inside; when it runs on evenly to both sides it is a pipe across (both ways open); when
+   it looks flat within the range noise and only its curvature tells it from an end wall, it
+   overrules the end wall only as a single turn. With lobes, each lobe is an outgoing
    pipe: a cylinder whose axis meets the incoming axis at the reference point ``(L, 0, 0)`` with
    deflection ``angle``, roll ``direction`` and radius ``rho``. Initial values come from a coarse
    grid over ``(L, angle)`` with the lobe's mean roll; all lobes are then refined jointly by
    Tukey-weighted Gauss-Newton on the returns of every lobe (each return assigned to the surface
-   it fits best). A single lobe is also fitted as a long-radius bend (a torus of bend radius
-   ``R_b`` between the two straight pipes, the reference point still where the straight axes
-   meet) and the better fit is kept.
+   it fits best); a branch that ends on a deflection bound is fitted again from another
+   reference point. Two lobes on opposite sides are also fitted as one pipe across (a single
+   cylinder of the clamped radius, both its ways open), kept unless the free branches fit
+   significantly better. A single lobe is also fitted as a long-radius bend (a torus of bend
+   radius ``R_b`` between the two straight pipes, the reference point still where the straight
+   axes meet) and the better fit is kept.
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
    circumference; its option has the clamped diameter. Its side branches are no wider than the
@@ -41,10 +48,12 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    Degenerate inputs (no returns, too few wall returns, fits that fail or leave the physical
    range) give ``straight`` with low confidence, never NaN.
 
-Speed: returns are kept compact and component-first (one ``(3, 3) @ (3, N)`` product per
-pose), the unrolled grid and beam directions are cached per scan pattern, every fit uses a few
-hundred returns, and the robust fits anneal their cut-off over three iterations and then stop
-on a small cost change (:func:`detector.robust.robust_gauss_newton`).
+Speed: a scan whose returns all lie on the wall under the given pose is straight pipe before
+any fit. Returns are kept compact and component-first (one ``(3, 3) @ (3, N)`` product per
+pose; their radii and tolerances cached per pose), the unrolled grid and beam directions are
+cached per scan pattern, every fit uses a few hundred returns with analytic Jacobians, and the
+robust fits anneal their cut-off over three iterations and then stop on a small cost change
+(:func:`detector.robust.robust_gauss_newton`, Cholesky steps).
 
 All lengths in metres, angles in radians.
 """
