@@ -1332,11 +1332,13 @@ def _branches(
         x, res, w = x_eq, res_eq, w_eq
     diag["radius_model"] = "clamped" if x is x_eq else "free"
     across = None
-    if n_l == 2 and not any_roll and abs(_wrap(lobes[0].roll - lobes[1].roll)) > math.radians(150):
-        # two openings on opposite sides: a pipe across (a tee from its stem, a wye from its
-        # branch, the side pipe of a cross), one straight axis through the reference point.
-        # Fitted as one cylinder of the clamped radius, it is kept unless the two free
-        # branches fit significantly better (likelihood ratio, as for the radii)
+    opposite = n_l == 2 and abs(_wrap(lobes[0].roll - lobes[1].roll)) > math.radians(150)
+    if opposite and not any_roll and float(_dir(x[1], x[2]) @ _dir(x[4], x[5])) > -0.985:
+        # two openings on opposite sides, the branches fitted not along one axis: a pipe
+        # across (a tee from its stem, a wye from its branch, the side pipe of a cross)?
+        # One straight axis through the reference point, fitted as one cylinder of the clamped
+        # radius, is kept unless the two branches fit significantly better (likelihood ratio,
+        # as for the radii)
         k_main = 0 if lobes[0].n >= lobes[1].n else 1
         starts = [
             np.array([x[0], x[1 + 3 * k_main], x[2 + 3 * k_main], big_r]),
