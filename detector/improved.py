@@ -31,8 +31,7 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    deflection ``angle``, roll ``direction`` and radius ``rho``. Initial values come from a coarse
    grid over ``(L, angle)`` with the lobe's mean roll; all lobes are then refined jointly by
    Tukey-weighted Gauss-Newton on the returns of every lobe (each return assigned to the surface
-   it fits best); a branch that ends on a deflection bound is fitted again from another
-   reference point. Two lobes on opposite sides are also fitted as one pipe across (a single
+   it fits best). Two lobes on opposite sides are also fitted as one pipe across (a single
    cylinder of the clamped radius, both its ways open), kept unless the free branches fit
    significantly better. A single lobe is also fitted as a long-radius bend (a torus of bend
    radius ``R_b`` between the two straight pipes, the reference point still where the straight
@@ -1252,7 +1251,7 @@ def _branches(
             xs,
             np.full(xs.size, 1e-5),
             c=2.0 * c0,
-            iterations=12,
+            iterations=8,
             lower=lo,
             upper=up,
             c_final=c_fin,
@@ -1269,22 +1268,6 @@ def _branches(
         x0a, lower, upper = prior
         x, res, w = free_fit(x0a, lower, upper)
         diag.update(hole_reference=float(prior[0][0]), hole_prior_used=True)
-    elif not any_roll and _on_deflection_bound(x, lower, upper):
-        # a branch that ends on a deflection bound has not found its pipe: start again from
-        # the best reference point of the coarse grid in another basin (a radius or more
-        # from the first) and keep the better fit
-        far = np.abs(l_grid - l_grid[i_l]) >= big_r
-        if far.any():
-            j_l = int(np.flatnonzero(far)[np.argmin(total[far])])
-            x1 = [float(l_grid[j_l])]
-            for rolls, cost in zip(rolls_of, per_lobe):
-                k = int(np.argmin(cost[j_l]))
-                x1 += [float(thetas[k % thetas.size]), float(rolls[k // thetas.size]), big_r]
-            x_b, res_b, w_b = free_fit(np.array(x1), lower, upper)
-            bound_b = _on_deflection_bound(x_b, lower, upper)
-            if not bound_b and tukey_cost(res_b, c_fin) <= 1.5 * tukey_cost(res, c_fin):
-                x, res, w, x0a = x_b, res_b, w_b, np.array(x1)
-                diag["second_start"] = True
     # --- the outgoing radii: the clamped radius (a standard fitting) unless the returns
     # call for another one. A free radius is poorly observed from a partial view of an
     # opening under range noise, so it is kept only when it fits significantly better
@@ -1432,13 +1415,6 @@ def _branches(
     ]
     options.sort(key=option_order)
     return Detection(kind, options, conf, diag)
-
-
-def _on_deflection_bound(x: NDArray, lower: NDArray, upper: NDArray) -> bool:
-    """Does a branch's deflection lie within 1 deg of its bounds?"""
-    th = x[1::3]
-    margin = math.radians(1.0)
-    return bool(np.any((th <= lower[1::3] + margin) | (th >= upper[1::3] - margin)))
 
 
 def _hole_prior(

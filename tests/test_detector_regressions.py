@@ -199,21 +199,3 @@ def test_noisy_tee_seen_from_its_stem_is_one_pipe_across():
         assert abs(o.angle - t.angle) < math.radians(5.0)
         assert abs(wrap(o.direction - t.direction)) < math.radians(5.0)
         assert abs(o.diameter - t.diameter) < 0.002
-
-
-def test_branch_on_its_deflection_bound_is_fitted_again_from_another_start():
-    scan, truth, d = scan_layout(
-        "t_junction",
-        0.4,
-        sensor="ydlidar_x4",
-        seed=2,
-        diameter=0.1,
-        branch_diameter=0.1,
-        direction=1.59,
-        entry="stem",
-    )
-    det = detect(scan, d)
-    assert det.kind == "junction" and len(det.options) == 2, det.describe()
-    assert det.diagnostics.get("second_start", False)
-    for o, t in match(det.options, truth):
-        assert abs(o.angle - t.angle) < math.radians(10.0)
