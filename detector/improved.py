@@ -937,7 +937,7 @@ def _axisymmetric(
         np.array([u_first, t0, r2]),
         np.array([1e-4, 1e-4, 1e-5]),
         c=max(4.0 * c_fin, 0.01),
-        iterations=15,
+        iterations=10,
         resjac=resjac,
         # a widening starts where the beams leave the incoming pipe: its end edge is seen
         # directly, the cone behind it mostly not
@@ -971,7 +971,7 @@ def _axisymmetric(
                     np.array([x[0], x[1], r_end]),
                     np.array([1e-4, 1e-4, 1e-5]),
                     c=max(4.0 * c_fin, 0.01),
-                    iterations=15,
+                    iterations=10,
                     resjac=resjac,
                     lower=np.array([-0.2, 0.002, r_end]),
                     upper=np.array([cfg.horizon, 1.0, big_r]),
