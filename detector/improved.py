@@ -1335,7 +1335,7 @@ def _branches(
                 xa0,
                 np.full(4, 1e-5),
                 c=2.0 * c0,
-                iterations=12,
+                iterations=8,
                 lower=np.array([lower[0], math.radians(25.0), -10.0, big_r]),
                 upper=np.array([upper[0], math.radians(155.0), 10.0, big_r]),
                 c_final=c_fin,
