@@ -13,8 +13,11 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    axis, the scan is straight pipe and nothing else runs (the common case in a run).
 2. **Classification.** Each return's radial residual ``r - D/2`` is compared with a per-point
    tolerance from the sensor model in ``scan.spec`` (range noise projected on the radius, plus a
-   floor). Non-wall returns are grouped into connected regions of the unrolled scan grid
-   (:mod:`detector.grid`); regions too small or one azimuth wide are rejected as clutter.
+   floor; for a noiseless sensor whose wall the refined axis fits to a fraction of a millimetre,
+   the floor for returns beyond the wall shrinks towards that scatter, down to 0.8 mm, so the
+   openings of small pipes far ahead show). Non-wall returns are grouped into connected regions
+   of the unrolled scan grid (:mod:`detector.grid`); regions too small or one azimuth wide are
+   rejected as clutter.
 3. **Hypotheses.** Returns beyond the wall (``r > D/2``) are *lobes*: openings towards an
    outgoing pipe. Without lobes the structure is axisymmetric: an end wall (a plane
    perpendicular to the axis, kind ``closure``; flat to within the range noise and no better
@@ -145,6 +148,7 @@ class PipeCloud:
     xyz_v: NDArray[np.float64] = field(init=False)  # (3, N) pipe frame
     thin: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(init=False, default=None)
     tol0: NDArray[np.float64] | None = field(init=False, default=None)  # floor + noise part
+    floor: float | None = field(init=False, default=None)  # tolerance floor for the regions
     _valid: NDArray[np.bool_] | None = field(init=False, default=None)
     _sigma: NDArray[np.float64] | None = field(init=False, default=None)
     _xyz: NDArray[np.float64] | None = field(init=False, default=None)
@@ -592,6 +596,11 @@ def detect_improved(
                 cloud.restore(pose, xyz_of[best])
             else:
                 cloud.set_pose(pose)
+            # a noiseless wall fitted closely: the tolerance floor shrinks towards its scatter
+            rms = info.get("axis_rms")
+            if rms is not None and float(_pct(cloud.sigma_v, 90.0)) < 0.0005:
+                cloud.floor = min(config.tol_floor, max(0.0008, 6.0 * float(rms)))
+                diag["tolerance_floor"] = cloud.floor
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
@@ -635,7 +644,8 @@ def _wall_count(
 
 def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
     """(G, K) radial tolerance of each return: floor, sensor noise and residual axis error."""
-    return cfg.tol_floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(cloud.xyz[0])
+    floor = cfg.tol_floor if cloud.floor is None else cloud.floor
+    return floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(cloud.xyz[0])
 
 
 def _tolerance_v(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
@@ -704,9 +714,11 @@ def _detect_in_pipe_frame(
     # residual axis error grows with the distance along the axis
     tol = _tolerance(cloud, cfg)
     e = np.where(valid, r - big_r, 0.0)
-    wall = valid & (np.abs(e) <= tol)
+    # (a lowered floor serves the openings only: returns beyond the wall)
+    tol_in = tol if cloud.floor is None else tol + (cfg.tol_floor - cloud.floor)
+    wall = valid & (e <= tol) & (e >= -tol_in)
     beyond = valid & (e > tol)
-    inside = valid & (e < -tol)
+    inside = valid & (e < -tol_in)
     n_valid = int(valid.sum())
     diag.update(n_wall=int(wall.sum()), n_beyond=int(beyond.sum()), n_inside=int(inside.sum()))
     if n_valid < cfg.min_anomaly_points:
@@ -784,7 +796,8 @@ def _find_lobes(
         n = int(counts[k])
         p = cloud.points(m)
         depth = float(_pct(np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2])), 90)) - big_r
-        if depth < max(0.006, 0.1 * big_r):
+        floor = cfg.tol_floor if cloud.floor is None else cloud.floor
+        if depth < max(3.0 * floor, 0.1 * big_r):
             continue  # a shallow sliver (seam leaks, noise), not an opening
         roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
         lobes.append(Lobe(m, roll, n))
@@ -962,6 +975,8 @@ def _axisymmetric(
             30 <= n_far <= 0.6 * u.size
             and float(_pct(r[far], 5)) < 0.3 * big_r
             and np.count_nonzero(~far_s) >= 50
+            # (returns spread along a taper, not mostly on one wall: the far wall of a turn)
+            and diag.get("closure_plane_fraction", 0.0) < 0.8
         ):
             r_end = float(_pct(r[far], 90.0))
             if x[2] < r_end < big_r - tol_med:
@@ -987,7 +1002,8 @@ def _axisymmetric(
     if not contraction:
         # the first returns off the wall lie a tolerance out on the cone: where the cone
         # (when seen) reaches the wall radius is the start of the widening
-        cone = r < r2 - 2.0 * tol_med
+        # (not an end wall far down the wider pipe)
+        cone = (r < r2 - max(2.0 * tol_med, 0.005)) & (u < u_first + 0.3)
         if np.count_nonzero(cone) >= 20:
             a_u, b_u = _robust_line(r[cone], u[cone])
             if math.isfinite(a_u + b_u * big_r):

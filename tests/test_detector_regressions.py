@@ -199,3 +199,19 @@ def test_noisy_tee_seen_from_its_stem_is_one_pipe_across():
         assert abs(o.angle - t.angle) < math.radians(5.0)
         assert abs(wrap(o.direction - t.direction)) < math.radians(5.0)
         assert abs(o.diameter - t.diameter) < 0.002
+
+
+def test_small_tee_far_along_its_run_is_seen_by_a_noiseless_sensor():
+    # a 57 mm tee 30 cm ahead: the returns through its opening lie only a few millimetres
+    # beyond the wall, inside the 2 mm tolerance floor; a noiseless sensor whose wall fits to a
+    # tenth of a millimetre can afford a floor of one millimetre
+    scan, truth, d = scan_layout(
+        "t_junction", 0.3, diameter=0.057, branch_diameter=0.057, direction=-2.58, entry="run"
+    )
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    assert det.diagnostics["tolerance_floor"] < 0.0015
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < 0.01
+        assert abs(o.angle - t.angle) < math.radians(1.0)
+        assert abs(wrap(o.direction - t.direction)) < math.radians(2.0)
