@@ -741,7 +741,14 @@ def _detect_in_pipe_frame(
         return Detection.straight(confidence=conf, **diag)
     beyond_k = beyond & keep
     inside_k = inside & keep
-    lobes = _find_lobes(cloud, beyond_k, big_r, cfg)
+    # regions with no inside returns keep their labels among the returns beyond the wall
+    pre = None
+    if n_lab:
+        mixed = np.zeros(n_lab + 1, dtype=bool)
+        mixed[labels[inside_k]] = True
+        if not mixed[labels[beyond_k]].any():
+            pre = (np.where(beyond_k, labels, 0), n_lab)
+    lobes = _find_lobes(cloud, beyond_k, big_r, cfg, pre)
     diag["n_lobes"] = len(lobes)
     if lobes:
         # an expansion: returns beyond the wall all around and hardly any inside
@@ -783,9 +790,14 @@ class Lobe:
 
 
 def _find_lobes(
-    cloud: PipeCloud, beyond: NDArray[np.bool_], big_r: float, cfg: ImprovedConfig
+    cloud: PipeCloud,
+    beyond: NDArray[np.bool_],
+    big_r: float,
+    cfg: ImprovedConfig,
+    labelled: tuple[NDArray[np.int32], int] | None = None,
 ) -> list[Lobe]:
-    labels, n_lab = label_regions(beyond, cloud.wraps)
+    """Openings: regions of returns beyond the wall (``labelled``: their regions, when known)."""
+    labels, n_lab = label_regions(beyond, cloud.wraps) if labelled is None else labelled
     if n_lab == 0:
         return []
     lobes: list[Lobe] = []
