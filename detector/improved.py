@@ -1243,14 +1243,22 @@ def _branches(
         qq = qx * qx + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]
         lat = lq[:, 1:] @ dirs[1:]  # (n, RT)
         t = qx[:, :, None] * dirs[0] + lat[None]  # (L, n, RT)
-        res = np.sqrt(np.maximum(qq[..., None] - t * t, 0.0)) - big_r
-        sq = np.minimum(res * res, c0 * c0)
+        # squared residual to the wall, capped (in place: these arrays are the largest here)
+        sq = t * t
+        np.subtract(qq[..., None], sq, out=sq)
+        np.maximum(sq, 0.0, out=sq)
+        np.sqrt(sq, out=sq)
+        sq -= big_r
+        np.square(sq, out=sq)
+        np.minimum(sq, c0 * c0, out=sq)
         # the sensor sees every wall from inside its pipe: the wall normal (away from the
         # axis) must not face the sensor; a cylinder behind the returns (the same patch
         # seen from outside) is penalised like an outlier
         qp = qx * lq[None, :, 0] + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]  # q . p
         dp = lq[:, 0:1] * dirs[0] + lat  # (n, RT): d . p
-        sq = np.where(qp[..., None] - t * dp[None] < 0.0, c0 * c0, sq)
+        t *= dp[None]
+        np.subtract(qp[..., None], t, out=t)
+        np.copyto(sq, c0 * c0, where=t < 0.0)
         cost = sq.mean(axis=1)  # (L, RT)
         per_lobe.append(cost)
         total += cost.min(axis=1)
