@@ -8,7 +8,9 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    else the thesis's centred-and-aligned assumption), then the pipe axis is refined by a robust
    fit of a cylinder of the clamped radius to the wall points (4 parameters: cross-section
    offset and tilt, with a weak prior towards the known pose when the wall seen is short). This
-   removes sensor misalignment (thesis 5.3) without any outside feedback. When fewer returns
+   removes sensor misalignment (thesis 5.3) without any outside feedback; when the given pose
+   already explains the wall before the structure, only the fit over that whole stretch of wall
+   runs (from the given pose), not the first, wider one. When fewer returns
    than a region needs leave the wall tolerance under the given pose, or else under the refined
    axis, the scan is straight pipe and nothing else runs (the common case in a run).
 2. **Classification.** Each return's radial residual ``r - D/2`` is compared with a per-point
@@ -561,37 +563,48 @@ def detect_improved(
                 return _timed(straight, t0)
             diag.pop("axis_pass")
             candidates = [(pose0, {})]
+            passes = [0]  # the pass each candidate pose comes from
             xyz_of = [cloud.xyz_v]
-            pose1, info1 = _refine_axis(cloud, big_r, config)
-            candidates.append((pose1, info1))
-            cloud.set_pose(pose1)
-            xyz_of.append(cloud.xyz_v)
-            diag.update(info1)
-            diag["axis_pass"] = 1
-            straight = _intact(cloud, big_r, config, diag)
-            if straight is not None:  # no return off the wall under the refined axis
-                return _timed(straight, t0)
-            for key in info1:
-                diag.pop(key)
-            diag.pop("axis_pass")
+            u_start0 = _structure_start(cloud, big_r, config)
+            moved = False
+            first_pass = not _wall_consistent(cloud, big_r, config, u_start0)
+            diag["axis_first_pass"] = first_pass
+            if not first_pass:
+                # the given pose explains the wall before the structure: only the second
+                # pass (from that pose) refines it
+                u_start = u_start0
+            else:
+                pose1, info1 = _refine_axis(cloud, big_r, config)
+                candidates.append((pose1, info1))
+                passes.append(1)
+                cloud.set_pose(pose1)
+                xyz_of.append(cloud.xyz_v)
+                diag.update(info1)
+                diag["axis_pass"] = 1
+                straight = _intact(cloud, big_r, config, diag)
+                if straight is not None:  # no return off the wall under the refined axis
+                    return _timed(straight, t0)
+                for key in info1:
+                    diag.pop(key)
+                diag.pop("axis_pass")
+                u_start = _structure_start(cloud, big_r, config)
+                moved = _pose_moved(pose0, pose1, big_r)
             # second pass: all of the intact wall before the structure
-            u_start = _structure_start(cloud, big_r, config)
             pose2, info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
             if info2.get("axis_points", 0) >= 40:
                 info2["axis_wall_until"] = u_start
                 candidates.append((pose2, info2))
+                passes.append(2)
             # keep the pose that explains the most wall returns before the structure (a fit
             # pulled by the structure's own returns, e.g. tilted onto one side of a taper,
             # explains fewer of them)
             cloud.restore(pose0, xyz_of[0])
-            u_near = u_start
-            if _pose_moved(pose0, pose1, big_r):
-                u_near = min(u_start, _structure_start(cloud, big_r, config))
+            u_near = min(u_start, u_start0) if moved else u_start
             scores = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
             best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
             pose, info = candidates[best]
             diag.update(info)
-            diag["axis_pass"] = best
+            diag["axis_pass"] = passes[best]
             if best < len(xyz_of):
                 cloud.restore(pose, xyz_of[best])
             else:
@@ -606,6 +619,20 @@ def detect_improved(
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
     return _timed(det, t0)
+
+
+def _wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float) -> bool:
+    """Do at least 200 returns lie before ``u_max`` (at least 15 cm) along the axis, all but
+    1 % of them within the wall tolerance under the current pose?"""
+    if u_max < 0.15:  # (a short stretch of wall: the first pass's wider view helps)
+        return False
+    near = cloud.xyz_v[0] < u_max
+    n_near = int(np.count_nonzero(near))
+    if n_near < 200:
+        return False
+    e = cloud.r_v - big_r
+    n_off = int(np.count_nonzero(near & (np.abs(e) > _tolerance_v(cloud, cfg))))
+    return n_off <= 0.01 * n_near
 
 
 def _timed(det: Detection, t0: float) -> Detection:
@@ -1334,6 +1361,28 @@ def _branches(
             cost_tol=COST_TOL,
             resjac=lambda v: _line_resjac(pts_all, v, n_l, True),
         )
+    if any_roll:
+        # (a far wall seen head-on fits a pipe deflected by theta and its mirror image deflected
+        # by pi - theta about nearly as well: the mirror of the solution is a second start)
+        x_m = x_eq.copy()
+        x_m[1], x_m[2] = math.pi - x_eq[1], x_eq[2] + math.pi
+        x_m[1] = min(max(x_m[1], lo_eq[1]), up_eq[1])
+        x_m, res_m, w_m = robust_gauss_newton(
+            None,
+            x_m,
+            np.full(x_m.size, 1e-5),
+            c=2.0 * c_fin,
+            iterations=8,
+            lower=lo_eq,
+            upper=up_eq,
+            c_final=c_fin,
+            step_tol=STEP_TOL,
+            anneal=ANNEAL,
+            cost_tol=COST_TOL,
+            resjac=lambda v: _line_resjac(pts_all, v, n_l, True),
+        )
+        if tukey_cost(res_m, c_fin) < tukey_cost(res_eq, c_fin):
+            x_eq, res_eq, w_eq = x_m, res_m, w_m
     cost_free = tukey_cost(res, c_fin)
     cost_eq = tukey_cost(res_eq, c_fin)
     n_in = max(int((w > 0.1).sum()), 1)

@@ -215,3 +215,15 @@ def test_small_tee_far_along_its_run_is_seen_by_a_noiseless_sensor():
         assert abs(o.distance - t.distance) < 0.01
         assert abs(o.angle - t.angle) < math.radians(1.0)
         assert abs(wrap(o.direction - t.direction)) < math.radians(2.0)
+
+
+def test_first_axis_pass_only_when_the_given_pose_misses_the_wall():
+    scan, truth, d = scan_layout("closure", 0.3, diameter=0.1)
+    det = detect(scan, d)
+    assert det.kind == "closure" and not det.diagnostics["axis_first_pass"]
+    assert abs(det.options[0].distance - truth[0].distance) < 0.005
+    offset = Pose(np.array([0.0, 0.01, 0.0]), np.eye(3))
+    scan, truth, d = scan_layout("closure", 0.3, diameter=0.1, misalignment=offset)
+    det = detect(scan, d)
+    assert det.kind == "closure" and det.diagnostics["axis_first_pass"]
+    assert abs(det.options[0].distance - truth[0].distance) < 0.005
