@@ -319,8 +319,13 @@ def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedCon
     sig_rel = float(spec.get("noise_sigma_rel", 0.0))
     res = float(spec.get("range_resolution", 0.0))
     jitter = float(spec.get("angular_jitter", 0.0))
-    sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
-    sigma_r = sigma_range * tr[0] + ranges * jitter * tr[1]
+    if sig_rel != 0.0:
+        sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
+    else:  # (the same numbers, without the per-return terms that vanish)
+        sigma_range = np.full(ranges.size, math.sqrt(sig**2 + (res**2) / 12.0))
+    sigma_r = sigma_range * tr[0]
+    if jitter != 0.0:
+        sigma_r += ranges * jitter * tr[1]
     cloud = PipeCloud(
         wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose, beam_step
     )
