@@ -22,6 +22,11 @@ from detector.options import KINDS, StructureOption, option_order
 def clean_diagnostics(value: Any) -> Any:
     """A copy of ``value`` with numpy scalars/arrays as Python numbers/lists and every
     non-finite float replaced by ``None``."""
+    kind = type(value)
+    if kind is float:
+        return value if math.isfinite(value) else None
+    if kind is int or kind is str or kind is bool or value is None:
+        return value
     if isinstance(value, dict):
         return {str(k): clean_diagnostics(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

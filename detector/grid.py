@@ -85,8 +85,18 @@ def build_grid(scan: Scan) -> ScanGrid:
 def label_regions(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32], int]:
     """Connected regions (8-neighbourhood) of a grid mask, joined across the row seam when the
     grid wraps. Returns ``(labels, n)`` with labels 1..n and 0 for background."""
-    labels, n = ndimage.label(mask, structure=_EIGHT)
-    labels = labels.astype(np.int32, copy=False)
+    cols = np.flatnonzero(mask.any(axis=0))
+    if cols.size == 0:
+        return np.zeros(mask.shape, dtype=np.int32), 0
+    c0, c1 = int(cols[0]), int(cols[-1]) + 1
+    if c1 - c0 < mask.shape[1]:
+        # only the columns that hold the mask (the numbering is the same: raster order)
+        part, n = ndimage.label(mask[:, c0:c1], structure=_EIGHT)
+        labels = np.zeros(mask.shape, dtype=np.int32)
+        labels[:, c0:c1] = part
+    else:
+        labels, n = ndimage.label(mask, structure=_EIGHT)
+        labels = labels.astype(np.int32, copy=False)
     if n == 0 or not wraps or mask.shape[0] < 3:
         return labels, int(n)
     first, last = labels[0], labels[-1]

@@ -8,28 +8,39 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    else the thesis's centred-and-aligned assumption), then the pipe axis is refined by a robust
    fit of a cylinder of the clamped radius to the wall points (4 parameters: cross-section
    offset and tilt, with a weak prior towards the known pose when the wall seen is short). This
-   removes sensor misalignment (thesis 5.3) without any outside feedback. When fewer returns
-   than a region needs leave the wall tolerance under the refined axis, the scan is straight
-   pipe and nothing else runs (the common case in a run).
+   removes sensor misalignment (thesis 5.3) without any outside feedback; when the given pose
+   already explains the wall before the structure, only the fit over that whole stretch of wall
+   runs (from the given pose), not the first, wider one. When fewer returns
+   than a region needs leave the wall tolerance under the given pose, or else under the refined
+   axis, the scan is straight pipe and nothing else runs (the common case in a run).
 2. **Classification.** Each return's radial residual ``r - D/2`` is compared with a per-point
    tolerance from the sensor model in ``scan.spec`` (range noise projected on the radius, plus a
-   floor). Non-wall returns are grouped into connected regions of the unrolled scan grid
-   (:mod:`detector.grid`); regions too small or one azimuth wide are rejected as clutter.
+   floor; for a noiseless sensor whose wall the refined axis fits to a fraction of a millimetre,
+   the floor for returns beyond the wall shrinks towards that scatter, down to 0.8 mm, so the
+   openings of small pipes far ahead show). Non-wall returns are grouped into connected regions
+   of the unrolled scan grid (:mod:`detector.grid`); regions too small or one azimuth wide are
+   rejected as clutter.
 3. **Hypotheses.** Returns beyond the wall (``r > D/2``) are *lobes*: openings towards an
    outgoing pipe. Without lobes the structure is axisymmetric: an end wall (a plane
-   perpendicular to the axis, kind ``closure``; flat to within the range noise, which tells it
-   from the curved far wall of a pipe seen head-on) or a reducer (a cone from the wall radius to
-   a new radius fitted as ``r(u)``; a widening starts at the edge where the beams leave the
-   incoming pipe, its cone mostly hidden behind that edge). A far wall seen head-on is fitted as
-   an outgoing pipe of the clamped radius with unknown roll, seen from inside; when it runs on
-   evenly to both sides it is a pipe across (both ways open). With lobes, each lobe is an outgoing
+   perpendicular to the axis, kind ``closure``; flat to within the range noise and no better
+   explained by a quadratic surface with a sag of millimetres, which tells it from the curved
+   far wall of a pipe seen head-on) or a reducer (a cone from the wall radius to a new radius
+   fitted as ``r(u)`` together with the wall just before it; a widening starts at the edge where
+   the beams leave the incoming pipe, its cone mostly hidden behind that edge; an end wall seen
+   through a narrowing is left out of its fit and bounds the narrow radius from below). A far
+   wall seen head-on is fitted as an outgoing pipe of the clamped radius with unknown roll, seen
+   from inside; when it runs on evenly to both sides it is a pipe across (both ways open); when
+   it looks flat within the range noise and only its curvature tells it from an end wall, it
+   overrules the end wall only as a single turn. With lobes, each lobe is an outgoing
    pipe: a cylinder whose axis meets the incoming axis at the reference point ``(L, 0, 0)`` with
    deflection ``angle``, roll ``direction`` and radius ``rho``. Initial values come from a coarse
    grid over ``(L, angle)`` with the lobe's mean roll; all lobes are then refined jointly by
    Tukey-weighted Gauss-Newton on the returns of every lobe (each return assigned to the surface
-   it fits best). A single lobe is also fitted as a long-radius bend (a torus of bend radius
-   ``R_b`` between the two straight pipes, the reference point still where the straight axes
-   meet) and the better fit is kept.
+   it fits best). Two lobes on opposite sides are also fitted as one pipe across (a single
+   cylinder of the clamped radius, both its ways open), kept unless the free branches fit
+   significantly better. A single lobe is also fitted as a long-radius bend (a torus of bend
+   radius ``R_b`` between the two straight pipes, the reference point still where the straight
+   axes meet) and the better fit is kept.
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
    circumference; its option has the clamped diameter. Its side branches are no wider than the
@@ -41,10 +52,12 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    Degenerate inputs (no returns, too few wall returns, fits that fail or leave the physical
    range) give ``straight`` with low confidence, never NaN.
 
-Speed: returns are kept compact and component-first (one ``(3, 3) @ (3, N)`` product per
-pose), the unrolled grid and beam directions are cached per scan pattern, every fit uses a few
-hundred returns, and the robust fits anneal their cut-off over three iterations and then stop
-on a small cost change (:func:`detector.robust.robust_gauss_newton`).
+Speed: a scan whose returns all lie on the wall under the given pose is straight pipe before
+any fit. Returns are kept compact and component-first (one ``(3, 3) @ (3, N)`` product per
+pose; their radii and tolerances cached per pose), the unrolled grid and beam directions are
+cached per scan pattern, every fit uses a few hundred returns with analytic Jacobians, and the
+robust fits anneal their cut-off over three iterations and then stop on a small cost change
+(:func:`detector.robust.robust_gauss_newton`, Cholesky steps).
 
 All lengths in metres, angles in radians.
 """
@@ -136,9 +149,13 @@ class PipeCloud:
     beam_step: float = 0.0  # angle between neighbouring beams of a plane, radians
     xyz_v: NDArray[np.float64] = field(init=False)  # (3, N) pipe frame
     thin: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(init=False, default=None)
+    tol0: NDArray[np.float64] | None = field(init=False, default=None)  # floor + noise part
+    floor: float | None = field(init=False, default=None)  # tolerance floor for the regions
     _valid: NDArray[np.bool_] | None = field(init=False, default=None)
     _sigma: NDArray[np.float64] | None = field(init=False, default=None)
     _xyz: NDArray[np.float64] | None = field(init=False, default=None)
+    _r_v: NDArray[np.float64] | None = field(init=False, default=None)
+    _tol_v: NDArray[np.float64] | None = field(init=False, default=None)
 
     @property
     def n(self) -> int:
@@ -146,10 +163,14 @@ class PipeCloud:
 
     def _grid(self, values: NDArray, fill: float | bool) -> NDArray:
         g, k = self.shape
-        lead = values.shape[:-1]
-        out = np.full((*lead, g * k), fill, dtype=values.dtype)
-        out[..., self.cell] = values
-        return out.reshape(*lead, g, k)
+        if values.ndim == 1:
+            out = np.full(g * k, fill, dtype=values.dtype)
+            out[self.cell] = values
+            return out.reshape(g, k)
+        out = np.full((values.shape[0], g * k), fill, dtype=values.dtype)
+        for row, vals in zip(out, values):  # (row by row: a faster scatter)
+            row[self.cell] = vals
+        return out.reshape(values.shape[0], g, k)
 
     @property
     def valid(self) -> NDArray[np.bool_]:
@@ -193,11 +214,19 @@ class PipeCloud:
     def set_pose(self, pose: SensorInPipe) -> None:
         self.pose = pose
         self.xyz_v = _transform(pose, self.sensor_v)
-        self._xyz = None
+        self._xyz = self._r_v = self._tol_v = None
+
+    @property
+    def r_v(self) -> NDArray[np.float64]:
+        """(N,) distance of each return from the pipe axis under the current pose."""
+        if self._r_v is None:
+            self._r_v = np.sqrt(np.square(self.xyz_v[1]) + np.square(self.xyz_v[2]))
+        return self._r_v
 
     def restore(self, pose: SensorInPipe, xyz_v: NDArray[np.float64]) -> None:
         """Go back to a pose whose points were computed before."""
-        self.pose, self.xyz_v, self._xyz = pose, xyz_v, None
+        self.pose, self.xyz_v = pose, xyz_v
+        self._xyz = self._r_v = self._tol_v = None
 
 
 def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -209,15 +238,25 @@ def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float
 
 #: Unrolled grid and beam directions per scan pattern (plane and beam angles), reused.
 _PATTERNS: dict[bytes, tuple[bool, int, NDArray, NDArray, NDArray, NDArray, float]] = {}
+#: The pattern of the last scan with its angles (consecutive scans share one).
+_LAST_PATTERN: list[tuple[NDArray, NDArray, tuple] | None] = [None]
 
 
 def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray, float]:
     """(wraps, K, flat scan index of each grid cell (G*K,), unit beam direction (3, G*K),
     |sin beta| and |cos beta| (2, G*K), the cells where the half-plane has no such beam, the
     angle between neighbouring beams) of the scan's angle pattern."""
+    last = _LAST_PATTERN[0]
+    if (
+        last is not None
+        and np.array_equal(last[0], scan.plane_angles)
+        and np.array_equal(last[1], scan.beam_angles)
+    ):
+        return last[2]
     key = scan.plane_angles.tobytes() + b"|" + scan.beam_angles.tobytes()
     hit = _PATTERNS.get(key)
     if hit is not None:
+        _LAST_PATTERN[0] = (scan.plane_angles.copy(), scan.beam_angles.copy(), hit)
         return hit
     grid = build_grid(scan)
     steps = np.abs(np.diff(np.sort(scan.beam_angles)))
@@ -242,6 +281,7 @@ def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray,
     if len(_PATTERNS) >= 16:
         _PATTERNS.pop(next(iter(_PATTERNS)))
     _PATTERNS[key] = hit
+    _LAST_PATTERN[0] = (scan.plane_angles.copy(), scan.beam_angles.copy(), hit)
     return hit
 
 
@@ -279,8 +319,13 @@ def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedCon
     sig_rel = float(spec.get("noise_sigma_rel", 0.0))
     res = float(spec.get("range_resolution", 0.0))
     jitter = float(spec.get("angular_jitter", 0.0))
-    sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
-    sigma_r = sigma_range * tr[0] + ranges * jitter * tr[1]
+    if sig_rel != 0.0:
+        sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
+    else:  # (the same numbers, without the per-return terms that vanish)
+        sigma_range = np.full(ranges.size, math.sqrt(sig**2 + (res**2) / 12.0))
+    sigma_r = sigma_range * tr[0]
+    if jitter != 0.0:
+        sigma_r += ranges * jitter * tr[1]
     cloud = PipeCloud(
         wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose, beam_step
     )
@@ -311,48 +356,55 @@ def _pct(x: NDArray[np.float64], q: float) -> float:
 # --------------------------------------------------------------------------- axis refinement
 def _axis_pose(params: NDArray[np.float64], sensor_origin: NDArray[np.float64]) -> SensorInPipe:
     """Correction pose: pipe frame whose axis passes through (0, y0, z0) with slopes (a, b)."""
-    y0, z0, a, b = params
-    d = np.array([1.0, a, b])
-    d /= np.linalg.norm(d)
-    # rotation taking the new axis direction d to +x (minimal rotation)
-    v = np.cross(d, X_AXIS)
-    s = float(np.linalg.norm(v))
-    c = float(d @ X_AXIS)
+    y0, z0, a, b = (float(v) for v in params)
+    n = math.sqrt(1.0 + a * a + b * b)
+    d0, d1, d2 = 1.0 / n, a / n, b / n
+    # rotation taking the new axis direction d to +x (minimal rotation about d x X)
+    s = math.hypot(d1, d2)
     if s < 1e-12:
         rot = np.eye(3)
     else:
-        k = v / s
-        kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-        rot = np.eye(3) + s * kx + (1.0 - c) * (kx @ kx)
+        k1, k2 = d2 / s, -d1 / s
+        c1 = 1.0 - d0
+        rot = np.array(
+            [
+                [1.0 - c1, -s * k2, s * k1],
+                [s * k2, 1.0 + c1 * (k1 * k1 - 1.0), c1 * k1 * k2],
+                [-s * k1, c1 * k1 * k2, 1.0 + c1 * (k2 * k2 - 1.0)],
+            ]
+        )
     origin = np.array([0.0, y0, z0])
     # new coordinates: rot @ (p - origin), shifted along x so the sensor origin is at u = 0
-    pos = -rot @ origin
-    pos[0] -= float((rot @ (sensor_origin - origin))[0])
-    return SensorInPipe(pos, rot)
+    pos = -(rot @ origin)
+    pos[0] -= float(rot[0] @ (sensor_origin - origin))
+    return SensorInPipe.trusted(pos, rot)
 
 
 def _cyl_axis_residual(
     sub: NDArray[np.float64], big_r: float, x: NDArray[np.float64], want_jac: bool
 ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """Residual (distance to the axis - R) of points for the axis through (0, y0, z0) along
-    (1, a, b), and its analytic Jacobian."""
-    y0, z0, a, b = x
+    """Residual (distance to the axis - R) of ``(3, N)`` points for the axis through
+    (0, y0, z0) along (1, a, b), and its analytic Jacobian ``(N, 4)``."""
+    y0, z0, a, b = (float(v) for v in x)
     n = math.sqrt(1.0 + a * a + b * b)
-    d = np.array([1.0, a, b]) / n
-    q = sub - np.array([0.0, y0, z0])
-    t = q @ d
-    dist = np.sqrt(np.maximum(np.einsum("ij,ij->i", q, q) - t * t, 1e-18))
+    qu = sub[0]
+    qy = sub[1] - y0
+    qz = sub[2] - z0
+    t = (qu + a * qy + b * qz) * (1.0 / n)
+    dist = qu * qu + qy * qy + qz * qz - t * t
+    np.maximum(dist, 1e-18, out=dist)
+    np.sqrt(dist, out=dist)
     res = dist - big_r
     if not want_jac:
         return res, None
-    jac = np.empty((sub.shape[0], 4))
-    jac[:, 0] = (t * d[1] - q[:, 1]) / dist
-    jac[:, 1] = (t * d[2] - q[:, 2]) / dist
-    dda = (np.array([0.0, 1.0, 0.0]) - d * d[1]) / n
-    ddb = (np.array([0.0, 0.0, 1.0]) - d * d[2]) / n
-    jac[:, 2] = -t * (q @ dda) / dist
-    jac[:, 3] = -t * (q @ ddb) / dist
-    return res, jac
+    inv = 1.0 / dist
+    jac = np.empty((4, qu.size))
+    jac[0] = (t * (a / n) - qy) * inv
+    jac[1] = (t * (b / n) - qz) * inv
+    tn = t * (1.0 / n)
+    jac[2] = tn * jac[0]
+    jac[3] = tn * jac[1]
+    return res, jac.T
 
 
 def _refine_axis(
@@ -365,7 +417,7 @@ def _refine_axis(
     info: dict[str, Any] = {"axis_points": 0}
     if xyz.shape[1] < 20:
         return cloud.pose, info
-    r = np.sqrt(np.square(xyz[1]) + np.square(xyz[2]))
+    r = cloud.r_v
     gate = max(0.35 * big_r, 0.01)
     cand = np.flatnonzero(np.abs(r - big_r) < gate)
     if cand.size < 20:
@@ -380,10 +432,10 @@ def _refine_axis(
         cand = cand[u < u_max]
         if cand.size < 40:
             return cloud.pose, info
-    sub = np.ascontiguousarray(xyz[:, _subsample(cand, cfg.axis_points)].T)
+    sub = np.ascontiguousarray(xyz[:, _subsample(cand, cfg.axis_points)])
     # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
     # gentle taper would pass for a tilted wall), so it is held at the prior
-    span = float(_pct(sub[:, 0], 95) - _pct(sub[:, 0], 5))
+    span = float(_pct(sub[0], 95) - _pct(sub[0], 5))
     tilt_sigma = cfg.prior_tilt if span >= 0.05 else math.radians(0.05)
     prior = np.array([cfg.prior_offset, cfg.prior_offset, tilt_sigma, tilt_sigma])
     info["axis_span"] = span
@@ -509,47 +561,90 @@ def detect_improved(
     try:
         cloud = _prepare(scan, pose0, bias, config)
         if refine_axis:
-            candidates = [(pose0, {})]
-            xyz_of = [cloud.xyz_v]
-            pose1, info1 = _refine_axis(cloud, big_r, config)
-            candidates.append((pose1, info1))
-            cloud.set_pose(pose1)
-            xyz_of.append(cloud.xyz_v)
-            diag.update(info1)
-            diag["axis_pass"] = 1
+            # the given pose explains every return already: straight pipe, nothing to refine
+            diag["axis_pass"] = 0
             straight = _intact(cloud, big_r, config, diag)
-            if straight is not None:  # no return off the wall under the refined axis
-                return straight.with_diagnostics(time_s=time.perf_counter() - t0)
-            for key in info1:
-                diag.pop(key)
+            if straight is not None:
+                return _timed(straight, t0)
             diag.pop("axis_pass")
+            candidates = [(pose0, {})]
+            passes = [0]  # the pass each candidate pose comes from
+            xyz_of = [cloud.xyz_v]
+            u_start0 = _structure_start(cloud, big_r, config)
+            moved = False
+            first_pass = not _wall_consistent(cloud, big_r, config, u_start0)
+            diag["axis_first_pass"] = first_pass
+            if not first_pass:
+                # the given pose explains the wall before the structure: only the second
+                # pass (from that pose) refines it
+                u_start = u_start0
+            else:
+                pose1, info1 = _refine_axis(cloud, big_r, config)
+                candidates.append((pose1, info1))
+                passes.append(1)
+                cloud.set_pose(pose1)
+                xyz_of.append(cloud.xyz_v)
+                diag.update(info1)
+                diag["axis_pass"] = 1
+                straight = _intact(cloud, big_r, config, diag)
+                if straight is not None:  # no return off the wall under the refined axis
+                    return _timed(straight, t0)
+                for key in info1:
+                    diag.pop(key)
+                diag.pop("axis_pass")
+                u_start = _structure_start(cloud, big_r, config)
+                moved = _pose_moved(pose0, pose1, big_r)
             # second pass: all of the intact wall before the structure
-            u_start = _structure_start(cloud, big_r, config)
             pose2, info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
             if info2.get("axis_points", 0) >= 40:
                 info2["axis_wall_until"] = u_start
                 candidates.append((pose2, info2))
+                passes.append(2)
             # keep the pose that explains the most wall returns before the structure (a fit
             # pulled by the structure's own returns, e.g. tilted onto one side of a taper,
             # explains fewer of them)
             cloud.restore(pose0, xyz_of[0])
-            u_near = u_start
-            if _pose_moved(pose0, pose1, big_r):
-                u_near = min(u_start, _structure_start(cloud, big_r, config))
+            u_near = min(u_start, u_start0) if moved else u_start
             scores = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
             best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
             pose, info = candidates[best]
             diag.update(info)
-            diag["axis_pass"] = best
+            diag["axis_pass"] = passes[best]
             if best < len(xyz_of):
                 cloud.restore(pose, xyz_of[best])
             else:
                 cloud.set_pose(pose)
+            # a noiseless wall fitted closely: the tolerance floor shrinks towards its scatter
+            rms = info.get("axis_rms")
+            if rms is not None and float(_pct(cloud.sigma_v, 90.0)) < 0.0005:
+                cloud.floor = min(config.tol_floor, max(0.0008, 6.0 * float(rms)))
+                diag["tolerance_floor"] = cloud.floor
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
-    return det.with_diagnostics(time_s=time.perf_counter() - t0)
+    return _timed(det, t0)
+
+
+def _wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float) -> bool:
+    """Do at least 200 returns lie before ``u_max`` (at least 15 cm) along the axis, all but
+    1 % of them within the wall tolerance under the current pose?"""
+    if u_max < 0.15:  # (a short stretch of wall: the first pass's wider view helps)
+        return False
+    near = cloud.xyz_v[0] < u_max
+    n_near = int(np.count_nonzero(near))
+    if n_near < 200:
+        return False
+    e = cloud.r_v - big_r
+    n_off = int(np.count_nonzero(near & (np.abs(e) > _tolerance_v(cloud, cfg))))
+    return n_off <= 0.01 * n_near
+
+
+def _timed(det: Detection, t0: float) -> Detection:
+    """``det`` with the time since ``t0`` (seconds) in its diagnostics (a finite number added
+    to the detection's own dictionary: nothing to check again)."""
+    det.diagnostics["time_s"] = time.perf_counter() - t0
+    return det
 
 
 def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
@@ -581,7 +676,17 @@ def _wall_count(
 
 def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
     """(G, K) radial tolerance of each return: floor, sensor noise and residual axis error."""
-    return cfg.tol_floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(cloud.xyz[0])
+    floor = cfg.tol_floor if cloud.floor is None else cloud.floor
+    return floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(cloud.xyz[0])
+
+
+def _tolerance_v(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
+    """(N,) radial tolerance of each return (compact order) under the current pose."""
+    if cloud.tol0 is None:
+        cloud.tol0 = cfg.tol_floor + cfg.noise_k * cloud.sigma_v
+    if cloud._tol_v is None:
+        cloud._tol_v = cloud.tol0 + cfg.axis_slope * np.abs(cloud.xyz_v[0])
+    return cloud._tol_v
 
 
 def _intact(
@@ -590,13 +695,14 @@ def _intact(
     """Straight pipe when fewer than ``min_anomaly_points`` returns leave the wall tolerance
     (no region of anomalies can reach that size, so the classification would find nothing
     else); ``None`` otherwise."""
-    xyz = cloud.xyz_v
-    e = np.sqrt(np.square(xyz[1]) + np.square(xyz[2])) - big_r
-    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_v + cfg.axis_slope * np.abs(xyz[0])
+    e = cloud.r_v - big_r
+    tol = _tolerance_v(cloud, cfg)
+    if cloud.n < cfg.min_anomaly_points or np.count_nonzero(np.abs(e) > tol) >= (
+        cfg.min_anomaly_points
+    ):
+        return None
     n_beyond = int(np.count_nonzero(e > tol))
     n_inside = int(np.count_nonzero(e < -tol))
-    if n_beyond + n_inside >= cfg.min_anomaly_points or cloud.n < cfg.min_anomaly_points:
-        return None
     n_wall = cloud.n - n_beyond - n_inside
     diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
     diag["sensor_offset_pipe"] = [float(v) for v in cloud.pose.position[1:]]
@@ -609,8 +715,8 @@ def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> flo
     """Axial position where the wall stops being intact (first significant anomalies); the
     horizon when there are none."""
     xyz = cloud.xyz_v
-    r = np.sqrt(np.square(xyz[1]) + np.square(xyz[2]))
-    tol = cfg.tol_floor + cfg.noise_k * cloud.sigma_v + cfg.axis_slope * np.abs(xyz[0])
+    r = cloud.r_v
+    tol = _tolerance_v(cloud, cfg)
     idx = np.flatnonzero(np.abs(r - big_r) > 2.0 * tol)  # returns off the wall
     if idx.size < cfg.min_anomaly_points:
         return cfg.horizon
@@ -642,9 +748,11 @@ def _detect_in_pipe_frame(
     # residual axis error grows with the distance along the axis
     tol = _tolerance(cloud, cfg)
     e = np.where(valid, r - big_r, 0.0)
-    wall = valid & (np.abs(e) <= tol)
+    # (a lowered floor serves the openings only: returns beyond the wall)
+    tol_in = tol if cloud.floor is None else tol + (cfg.tol_floor - cloud.floor)
+    wall = valid & (e <= tol) & (e >= -tol_in)
     beyond = valid & (e > tol)
-    inside = valid & (e < -tol)
+    inside = valid & (e < -tol_in)
     n_valid = int(valid.sum())
     diag.update(n_wall=int(wall.sum()), n_beyond=int(beyond.sum()), n_inside=int(inside.sum()))
     if n_valid < cfg.min_anomaly_points:
@@ -667,7 +775,14 @@ def _detect_in_pipe_frame(
         return Detection.straight(confidence=conf, **diag)
     beyond_k = beyond & keep
     inside_k = inside & keep
-    lobes = _find_lobes(cloud, beyond_k, big_r, cfg)
+    # regions with no inside returns keep their labels among the returns beyond the wall
+    pre = None
+    if n_lab:
+        mixed = np.zeros(n_lab + 1, dtype=bool)
+        mixed[labels[inside_k]] = True
+        if not mixed[labels[beyond_k]].any():
+            pre = (np.where(beyond_k, labels, 0), n_lab)
+    lobes = _find_lobes(cloud, beyond_k, big_r, cfg, pre)
     diag["n_lobes"] = len(lobes)
     if lobes:
         # an expansion: returns beyond the wall all around and hardly any inside
@@ -690,6 +805,11 @@ def _detect_in_pipe_frame(
     # away): fit an outgoing pipe to the inner returns with unknown roll
     pseudo = Lobe(inside_k, 0.0, int(inside_k.sum()))
     alt = _branches(cloud, big_r, [pseudo], keep, wall, tol, cfg, dict(diag), any_roll=True)
+    if det.diagnostics.get("closure_tentative", False):
+        # a wall that looks flat within the range noise but curves: the far wall of a turn
+        # when the fit finds one way on; a pipe across (or a 90 deg turn: the same far wall)
+        # is too ambiguous to overrule the end wall
+        return alt if alt.kind == "bend" else det
     if alt.kind != "straight" and alt.confidence > det.confidence:
         return alt
     return det
@@ -704,9 +824,14 @@ class Lobe:
 
 
 def _find_lobes(
-    cloud: PipeCloud, beyond: NDArray[np.bool_], big_r: float, cfg: ImprovedConfig
+    cloud: PipeCloud,
+    beyond: NDArray[np.bool_],
+    big_r: float,
+    cfg: ImprovedConfig,
+    labelled: tuple[NDArray[np.int32], int] | None = None,
 ) -> list[Lobe]:
-    labels, n_lab = label_regions(beyond, cloud.wraps)
+    """Openings: regions of returns beyond the wall (``labelled``: their regions, when known)."""
+    labels, n_lab = label_regions(beyond, cloud.wraps) if labelled is None else labelled
     if n_lab == 0:
         return []
     lobes: list[Lobe] = []
@@ -717,7 +842,8 @@ def _find_lobes(
         n = int(counts[k])
         p = cloud.points(m)
         depth = float(_pct(np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2])), 90)) - big_r
-        if depth < max(0.006, 0.1 * big_r):
+        floor = cfg.tol_floor if cloud.floor is None else cloud.floor
+        if depth < max(3.0 * floor, 0.1 * big_r):
             continue  # a shallow sliver (seam leaks, noise), not an opening
         roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
         lobes.append(Lobe(m, roll, n))
@@ -747,10 +873,9 @@ def _region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArr
     nz = np.flatnonzero(flat)
     lab = flat[nz]
     counts = np.bincount(lab, minlength=n_lab + 1)
-    rows = nz // labels.shape[1]
-    pairs = np.unique(lab.astype(np.int64) * labels.shape[0] + rows)
-    row_span = np.bincount(pairs // labels.shape[0], minlength=n_lab + 1)
-    return counts, row_span
+    occupied = np.zeros((n_lab + 1, labels.shape[0]), dtype=bool)
+    occupied[lab, nz // labels.shape[1]] = True
+    return counts, np.count_nonzero(occupied, axis=1)
 
 
 def _wrap(a: float) -> float:
@@ -784,29 +909,52 @@ def _axisymmetric(
         on_plane = np.abs(u - u_med) <= tol_u
         frac_plane = float(on_plane.mean())
         diag["closure_plane_fraction"] = frac_plane
-        if frac_plane >= 0.8 and float(_pct(r[on_plane], 5)) < 0.5 * big_r:
+        if np.count_nonzero(on_plane) >= cfg.min_anomaly_points:
             up = u[on_plane]
             dist = float(np.mean(up))
             spread = float(np.std(up))
             cov = _azimuth_coverage(p[on_plane])
             # a cap is flat: a plane (tilted by any residual axis error) must explain it to
             # within the range noise, where the far wall of a pipe seen head-on is curved
-            pp = p[on_plane]
-            design = np.stack([np.ones(up.size), pp[:, 1], pp[:, 2]], axis=1)
-            coef = np.linalg.lstsq(design, up, rcond=None)[0]
-            plane_rms = float(np.sqrt(np.mean((up - design @ coef) ** 2)))
-            noise_u = float(_pct(cloud.values(anomaly, cloud.sigma_range_v)[on_plane], 50.0))
-            flat = plane_rms <= max(3.0 * noise_u, 0.001)
+            # (an even sample of the wall: a few hundred returns pin a plane and a quadric)
+            on_idx = np.flatnonzero(on_plane)
+            pick = on_idx[_subsample(np.arange(on_idx.size), 2 * cfg.fit_points)]
+            pp = p[pick]
+            uq = pp[:, 0]
+            design = np.stack([np.ones(uq.size), pp[:, 1], pp[:, 2]], axis=1)
+            coef = np.linalg.lstsq(design, uq, rcond=None)[0]
+            plane_rms = float(np.sqrt(np.mean((uq - design @ coef) ** 2)))
+            noise_u = float(_pct(cloud.values(anomaly, cloud.sigma_range_v)[pick], 50.0))
+            # under range noise a curved wall can pass for a plane: a quadratic surface must
+            # not explain it significantly better with a sag of millimetres (a cap's sag is
+            # the quantisation, a pipe's far wall sags by a good part of its radius)
+            quad = np.concatenate([design, (pp[:, 1:, None] * pp[:, None, 1:]).reshape(-1, 4)], 1)
+            coef_q = np.linalg.lstsq(quad, uq, rcond=None)[0]
+            rss_q = float(np.sum((uq - quad @ coef_q) ** 2))
+            rss_p = plane_rms**2 * uq.size
+            lr_curv = uq.size * math.log(max(rss_p, 1e-30) / max(rss_q, 1e-30))
+            sag = float(np.abs(quad[:, 3:] @ coef_q[3:]).max())
+            curved = lr_curv > 25.0 and sag > 0.003
+            flat_plane = plane_rms <= max(3.0 * noise_u, 0.001)
+            flat = flat_plane and not curved
             diag["closure_curved"] = not flat
             diag.update(
                 closure_rms=spread,
                 closure_plane_rms=plane_rms,
+                closure_sag=sag,
+                closure_curvature_lr=lr_curv,
                 closure_coverage=cov,
                 axisymmetric_support=1.0 if flat else 0.0,
             )
-            if spread <= 0.5 * tol_u and flat:
+            plane_seen = frac_plane >= 0.8 and float(_pct(r[on_plane], 5)) < 0.5 * big_r
+            if not plane_seen:  # (not a cap seen head-on: only a clear curvature counts)
+                diag["closure_curved"] = curved
+            if plane_seen and spread <= 0.5 * tol_u and flat_plane:
                 conf = _confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
                 opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
+                # (curved only by the quadratic test: an end wall unless the returns show a
+                # turn; the caller decides)
+                diag["closure_tentative"] = not flat
                 return Detection("closure", [opt], conf, diag)
     # --- reducer: r(u) = R + (R2 - R) clip((u - L) / T, 0, 1)
     if contraction:
@@ -818,6 +966,16 @@ def _axisymmetric(
     # the start of a taper is one kink in r(u): it needs a denser sample than the other fits
     sub = _subsample(np.arange(u.size), 2 * cfg.fit_points)
     us, rs = u[sub], r[sub]
+    n_lead = 0
+    if contraction:
+        # the wall just before the first returns off it: a gentle taper leaves the wall
+        # tolerance only some way past its start, and the kink needs both sides
+        pw = cloud.points(wall)
+        lead = np.flatnonzero((pw[:, 0] > u_first - 0.15) & (pw[:, 0] < u_first))
+        lead = lead[_subsample(np.arange(lead.size), cfg.fit_points // 2)]
+        n_lead = int(lead.size)
+        us = np.concatenate([us, pw[lead, 0]])
+        rs = np.concatenate([rs, np.hypot(pw[lead, 1], pw[lead, 2])])
     t0 = max(0.01, float(_pct(u, 30)) - u_first)
 
     def resjac(x: NDArray) -> tuple[NDArray, NDArray]:
@@ -838,7 +996,7 @@ def _axisymmetric(
         np.array([u_first, t0, r2]),
         np.array([1e-4, 1e-4, 1e-5]),
         c=max(4.0 * c_fin, 0.01),
-        iterations=15,
+        iterations=10,
         resjac=resjac,
         # a widening starts where the beams leave the incoming pipe: its end edge is seen
         # directly, the cone behind it mostly not
@@ -849,13 +1007,49 @@ def _axisymmetric(
         anneal=ANNEAL,
         cost_tol=COST_TOL,
     )
+    if contraction:
+        # an end wall far down the narrower pipe, seen through it, is no part of the taper:
+        # when grazing beams lose the narrower pipe's own wall, the plateau of the fit sits on
+        # that end wall instead (too narrow, the taper too long). Without it, the taper ends
+        # where its returns end; the end wall, filling the narrower pipe's cross-section,
+        # still bounds its radius from below.
+        u_far = _pct(u, 97.0)
+        far = np.abs(u - u_far) <= 0.003 + 2.0 * tol_med
+        n_far = int(np.count_nonzero(far))
+        far_s = np.concatenate([far[sub], np.zeros(n_lead, dtype=bool)])
+        if (
+            30 <= n_far <= 0.6 * u.size
+            and float(_pct(r[far], 5)) < 0.3 * big_r
+            and np.count_nonzero(~far_s) >= 50
+            # (returns spread along a taper, not mostly on one wall: the far wall of a turn)
+            and diag.get("closure_plane_fraction", 0.0) < 0.8
+        ):
+            r_end = float(_pct(r[far], 90.0))
+            if x[2] < r_end < big_r - tol_med:
+                us, rs = us[~far_s], rs[~far_s]
+                x, res, w = robust_gauss_newton(
+                    None,
+                    np.array([x[0], x[1], r_end]),
+                    np.array([1e-4, 1e-4, 1e-5]),
+                    c=max(4.0 * c_fin, 0.01),
+                    iterations=10,
+                    resjac=resjac,
+                    lower=np.array([-0.2, 0.002, r_end]),
+                    upper=np.array([cfg.horizon, 1.0, big_r]),
+                    c_final=c_fin,
+                    step_tol=STEP_TOL,
+                    anneal=ANNEAL,
+                    cost_tol=COST_TOL,
+                )
+                diag["reducer_end_wall_radius"] = r_end
     support = float((w > 0.1).mean())
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     big_l, t_len, r2 = (float(v) for v in x)
     if not contraction:
         # the first returns off the wall lie a tolerance out on the cone: where the cone
         # (when seen) reaches the wall radius is the start of the widening
-        cone = r < r2 - 2.0 * tol_med
+        # (not an end wall far down the wider pipe)
+        cone = (r < r2 - max(2.0 * tol_med, 0.005)) & (u < u_first + 0.3)
         if np.count_nonzero(cone) >= 20:
             a_u, b_u = _robust_line(r[cone], u[cone])
             if math.isfinite(a_u + b_u * big_r):
@@ -948,47 +1142,61 @@ class BranchFit:
     rb: float = 0.0
 
 
+def _line_points(p: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """(x, y, z, y^2 + z^2) of ``(N, 3)`` points as contiguous arrays, for :func:`_line_resjac`."""
+    px, py, pz = (np.ascontiguousarray(p[:, k]) for k in range(3))
+    return px, py, pz, py * py + pz * pz
+
+
 def _line_resjac(
-    p: NDArray, x: NDArray, n_l: int, want_jac: bool
+    pts: tuple[NDArray, NDArray, NDArray, NDArray], x: NDArray, n_l: int, want_jac: bool
 ) -> tuple[NDArray, NDArray | None]:
-    """Residuals of points to the nearest of ``n_l`` outgoing cylinders whose axes meet the
-    incoming axis at ``(x[0], 0, 0)``; parameters per lobe: (theta, phi, rho)."""
-    q = p - np.array([x[0], 0.0, 0.0])
-    qq = np.einsum("ij,ij->i", q, q)
+    """Residuals of points (:func:`_line_points`) to the nearest of ``n_l`` outgoing cylinders
+    whose axes meet the incoming axis at ``(x[0], 0, 0)``; parameters per lobe:
+    (theta, phi, rho)."""
+    px, py, pz, r2 = pts
+    qx = px - x[0]
+    qq = qx * qx + r2
+    if n_l == 1:
+        th, ph, rho = float(x[1]), float(x[2]), float(x[3])
+        ct, st, cp, sp = math.cos(th), math.sin(th), math.cos(ph), math.sin(ph)
+        lat = py * cp + pz * sp
+        t = ct * qx + st * lat
+        dist = qq - t * t
+        np.maximum(dist, 1e-18, out=dist)
+        np.sqrt(dist, out=dist)
+        res = dist - rho
+        if not want_jac:
+            return res, None
+        g = t / dist
+        jac = np.empty((4, px.size))
+        jac[0] = ct * g - qx / dist
+        jac[1] = (st * qx - ct * lat) * g
+        jac[2] = (py * sp - pz * cp) * (st * g)
+        jac[3] = -1.0
+        return res, jac.T
     th, ph, rho = x[1::3], x[2::3], x[3::3]
     ct, st, cp, sp = np.cos(th), np.sin(th), np.cos(ph), np.sin(ph)
-    dirs = np.array([ct, st * cp, st * sp])  # (3, n_l)
-    t_all = q @ dirs  # (N, n_l)
-    dist_all = np.sqrt(np.maximum(qq[:, None] - t_all * t_all, 1e-18))
-    res_all = dist_all - rho
-    if n_l == 1:
-        arg = np.zeros(p.shape[0], dtype=np.intp)
-        best, t, dist = res_all[:, 0], t_all[:, 0], dist_all[:, 0]
-    else:
-        rows = np.arange(p.shape[0])
-        arg = np.argmin(np.abs(res_all), axis=1)  # each return on its nearest cylinder
-        best, t, dist = res_all[rows, arg], t_all[rows, arg], dist_all[rows, arg]
+    lat_all = cp[:, None] * py + sp[:, None] * pz  # (n_l, N)
+    t_all = ct[:, None] * qx + st[:, None] * lat_all
+    dist_all = qq - t_all * t_all
+    np.maximum(dist_all, 1e-18, out=dist_all)
+    np.sqrt(dist_all, out=dist_all)
+    res_all = dist_all - rho[:, None]
+    arg = np.argmin(np.abs(res_all), axis=0)  # each return on its nearest cylinder
+    cols = np.arange(px.size)
+    best = res_all[arg, cols]
     if not want_jac:
         return best, None
-    # (N, n_l): q . d(dir)/d(theta), q . d(dir)/d(phi)
-    d_both = q @ np.array(
-        [[*-st, *(0.0 * st)], [*(ct * cp), *(-st * sp)], [*(ct * sp), *(st * cp)]]
-    )
-    d_th, d_ph = d_both[:, :n_l], d_both[:, n_l:]
-    if n_l == 1:
-        q_th, q_ph, d0 = d_th[:, 0], d_ph[:, 0], dirs[0, 0]
-    else:
-        q_th, q_ph, d0 = d_th[rows, arg], d_ph[rows, arg], dirs[0, arg]
-    jac = np.zeros((p.shape[0], 1 + 3 * n_l))
-    jac[:, 0] = (t * d0 - q[:, 0]) / dist
-    if n_l == 1:
-        jac[:, 1] = -t * q_th / dist
-        jac[:, 2] = -t * q_ph / dist
-        jac[:, 3] = -1.0
-    else:
-        jac[rows, 1 + 3 * arg] = -t * q_th / dist
-        jac[rows, 2 + 3 * arg] = -t * q_ph / dist
-        jac[rows, 3 + 3 * arg] = -1.0
+    t, dist, lat = t_all[arg, cols], dist_all[arg, cols], lat_all[arg, cols]
+    ctk, stk, cpk, spk = ct[arg], st[arg], cp[arg], sp[arg]
+    g = t / dist
+    jac = np.zeros((px.size, 1 + 3 * n_l))
+    jac[:, 0] = ctk * g - qx / dist
+    k = 1 + 3 * arg
+    jac[cols, k] = (stk * qx - ctk * lat) * g
+    jac[cols, k + 1] = (py * spk - pz * cpk) * (stk * g)
+    jac[cols, k + 2] = -1.0
     return best, jac
 
 
@@ -1021,6 +1229,7 @@ def _branches(
     if any_roll:
         sub_idx = _subsample(np.flatnonzero(keep.reshape(-1)), cfg.fit_points)
     p_all = np.ascontiguousarray(cloud.points_at(sub_idx))
+    pts_all = _line_points(p_all)
     tol_med = float(_pct(tol.reshape(-1)[sub_idx], 50.0))
     noise_med = float(_pct(cloud.sigma_r.reshape(-1)[sub_idx], 50.0)) + 0.3e-3
     lobe_pts = []
@@ -1063,19 +1272,27 @@ def _branches(
                 (np.sin(rolls)[:, None] * st).reshape(-1),
             ]
         )  # (3, RT)
-        lq = lp[_subsample(np.arange(lp.shape[0]), 50 if any_roll else 100)]
+        lq = lp[_subsample(np.arange(lp.shape[0]), 50 if any_roll else 60)]
         qx = lq[None, :, 0] - l_grid[:, None]  # (L, n)
         qq = qx * qx + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]
         lat = lq[:, 1:] @ dirs[1:]  # (n, RT)
         t = qx[:, :, None] * dirs[0] + lat[None]  # (L, n, RT)
-        res = np.sqrt(np.maximum(qq[..., None] - t * t, 0.0)) - big_r
-        sq = np.minimum(res * res, c0 * c0)
+        # squared residual to the wall, capped (in place: these arrays are the largest here)
+        sq = t * t
+        np.subtract(qq[..., None], sq, out=sq)
+        np.maximum(sq, 0.0, out=sq)
+        np.sqrt(sq, out=sq)
+        sq -= big_r
+        np.square(sq, out=sq)
+        np.minimum(sq, c0 * c0, out=sq)
         # the sensor sees every wall from inside its pipe: the wall normal (away from the
         # axis) must not face the sensor; a cylinder behind the returns (the same patch
         # seen from outside) is penalised like an outlier
         qp = qx * lq[None, :, 0] + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]  # q . p
         dp = lq[:, 0:1] * dirs[0] + lat  # (n, RT): d . p
-        sq = np.where(qp[..., None] - t * dp[None] < 0.0, c0 * c0, sq)
+        t *= dp[None]
+        np.subtract(qp[..., None], t, out=t)
+        np.copyto(sq, c0 * c0, where=t < 0.0)
         cost = sq.mean(axis=1)  # (L, RT)
         per_lobe.append(cost)
         total += cost.min(axis=1)
@@ -1104,14 +1321,14 @@ def _branches(
             xs,
             np.full(xs.size, 1e-5),
             c=2.0 * c0,
-            iterations=12,
+            iterations=8,
             lower=lo,
             upper=up,
             c_final=c_fin,
             step_tol=STEP_TOL,
             anneal=ANNEAL,
             cost_tol=COST_TOL,
-            resjac=lambda v: _line_resjac(p_all, v, n_l, True),
+            resjac=lambda v: _line_resjac(pts_all, v, n_l, True),
         )
 
     x, res, w = free_fit(x0a, lower, upper)
@@ -1134,7 +1351,7 @@ def _branches(
     up_eq[3::3] = big_r
     if not any_roll and bool(np.all(np.abs(x[3::3] - big_r) <= 0.01 * big_r)):
         # the free fit found the clamped radius already: clamping it moves nothing that matters
-        res_eq = _line_resjac(p_all, x_eq, n_l, False)[0]
+        res_eq = _line_resjac(pts_all, x_eq, n_l, False)[0]
         w_eq = tukey_weights(res_eq, c_fin)
     else:
         x_eq, res_eq, w_eq = robust_gauss_newton(
@@ -1149,8 +1366,30 @@ def _branches(
             step_tol=STEP_TOL,
             anneal=ANNEAL,
             cost_tol=COST_TOL,
-            resjac=lambda v: _line_resjac(p_all, v, n_l, True),
+            resjac=lambda v: _line_resjac(pts_all, v, n_l, True),
         )
+    if any_roll:
+        # (a far wall seen head-on fits a pipe deflected by theta and its mirror image deflected
+        # by pi - theta about nearly as well: the mirror of the solution is a second start)
+        x_m = x_eq.copy()
+        x_m[1], x_m[2] = math.pi - x_eq[1], x_eq[2] + math.pi
+        x_m[1] = min(max(x_m[1], lo_eq[1]), up_eq[1])
+        x_m, res_m, w_m = robust_gauss_newton(
+            None,
+            x_m,
+            np.full(x_m.size, 1e-5),
+            c=2.0 * c_fin,
+            iterations=8,
+            lower=lo_eq,
+            upper=up_eq,
+            c_final=c_fin,
+            step_tol=STEP_TOL,
+            anneal=ANNEAL,
+            cost_tol=COST_TOL,
+            resjac=lambda v: _line_resjac(pts_all, v, n_l, True),
+        )
+        if tukey_cost(res_m, c_fin) < tukey_cost(res_eq, c_fin):
+            x_eq, res_eq, w_eq = x_m, res_m, w_m
     cost_free = tukey_cost(res, c_fin)
     cost_eq = tukey_cost(res_eq, c_fin)
     n_in = max(int((w > 0.1).sum()), 1)
@@ -1167,11 +1406,57 @@ def _branches(
     if weak or lr <= cfg.radius_lr_per_branch * n_l or (free_on_bound and not eq_on_bound):
         x, res, w = x_eq, res_eq, w_eq
     diag["radius_model"] = "clamped" if x is x_eq else "free"
+    across = None
+    opposite = n_l == 2 and abs(_wrap(lobes[0].roll - lobes[1].roll)) > math.radians(150)
+    if opposite and not any_roll and float(_dir(x[1], x[2]) @ _dir(x[4], x[5])) > -0.985:
+        # two openings on opposite sides, the branches fitted not along one axis: a pipe
+        # across (a tee from its stem, a wye from its branch, the side pipe of a cross)?
+        # One straight axis through the reference point, fitted as one cylinder of the clamped
+        # radius, is kept unless the two branches fit significantly better (likelihood ratio,
+        # as for the radii)
+        k_main = 0 if lobes[0].n >= lobes[1].n else 1
+        starts = [
+            np.array([x[0], x[1 + 3 * k_main], x[2 + 3 * k_main], big_r]),
+            np.array([x[0], 0.5 * math.pi, lobes[k_main].roll, big_r]),
+            np.array([u_edge + big_r, 0.5 * math.pi, lobes[k_main].roll, big_r]),
+        ]
+        best_a = None
+        for xa0 in starts:
+            xa, res_a, w_a = robust_gauss_newton(
+                None,
+                xa0,
+                np.full(4, 1e-5),
+                c=2.0 * c0,
+                iterations=8,
+                lower=np.array([lower[0], math.radians(25.0), -10.0, big_r]),
+                upper=np.array([upper[0], math.radians(155.0), 10.0, big_r]),
+                c_final=c_fin,
+                step_tol=STEP_TOL,
+                anneal=ANNEAL,
+                cost_tol=COST_TOL,
+                resjac=lambda v: _line_resjac(pts_all, v, 1, True),
+            )
+            cost_a = tukey_cost(res_a, c_fin)
+            if best_a is None or cost_a < best_a[0]:
+                best_a = (cost_a, xa, res_a, w_a)
+        cost_a, xa, res_a, w_a = best_a
+        # (the two branches: three more deflection and roll parameters, two more radii)
+        n_extra = 2 if diag["radius_model"] == "clamped" else 4
+        lr_a = 2.0 * (cost_a - tukey_cost(res, c_fin)) / sigma2
+        diag["across_lr"] = float(lr_a)
+        if lr_a <= 0.5 * cfg.radius_lr_per_branch * max(n_extra, 1):
+            across = xa
+            x, res, w = xa, res_a, w_a
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     support = int((w > 0.1).sum())
     diag.update(fit_rms=rms, fit_support=support, fit_points=int(p_all.shape[0]))
     model = "straight_axes"
-    fits = [BranchFit(x[1 + 3 * k], x[2 + 3 * k], x[3 + 3 * k]) for k in range(n_l)]
+    if across is not None:
+        model = "pipe_across"
+        th_a, ph_a = float(across[1]), float(across[2])
+        fits = [BranchFit(th_a, ph_a, big_r), BranchFit(math.pi - th_a, ph_a + math.pi, big_r)]
+    else:
+        fits = [BranchFit(x[1 + 3 * k], x[2 + 3 * k], x[3 + 3 * k]) for k in range(n_l)]
     if any_roll and w.sum() > 0:
         # a cylinder's axis has no sign: the way on is the half the returns lie along
         f = fits[0]

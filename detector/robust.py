@@ -12,6 +12,8 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dgesv as _dgesv
+from scipy.linalg.lapack import dposv as _dposv
 
 
 def tukey_weights(res: NDArray[np.float64], c: float) -> NDArray[np.float64]:
@@ -79,7 +81,6 @@ def robust_gauss_newton(
     eps = np.asarray(scales, dtype=float)
     cf = c if c_final is None else c_final
     lam = 1e-3
-    diag_idx = np.arange(n_p)
     if resjac is None:
         if residual is None:
             raise ValueError("robust_gauss_newton needs residual or resjac")
@@ -108,43 +109,50 @@ def robust_gauss_newton(
         pinned = np.asarray(lower, dtype=float) >= np.asarray(upper, dtype=float)
         if pinned.any():
             fixed = np.flatnonzero(pinned)
+    lo = None if lower is None else np.asarray(lower, dtype=float)
+    up = None if upper is None else np.asarray(upper, dtype=float)
     r, jac = resjac(x)
-    w = tukey_weights(r, c)
     n_anneal = max(1, iterations - 1 if anneal is None else anneal)
+    ratio = cf / c
+    step_diag = n_p + 1  # stride of the diagonal in a flattened (n_p, n_p) matrix
     for it in range(iterations):
-        ci = c * (cf / c) ** (min(it, n_anneal) / n_anneal)
-        w = tukey_weights(r, ci)
+        ci = c * ratio ** (min(it, n_anneal) / n_anneal)
+        r2 = r * r
+        w = 1.0 - r2 * (1.0 / (ci * ci))  # Tukey weights, as tukey_weights(r, ci)
+        np.maximum(w, 0.0, out=w)
+        w *= w
         if float(w.sum()) < n_p + 1:
             break
         jw = jac * w[:, None]
-        h = jac.T @ jw
-        g = jw.T @ r
+        h = np.ascontiguousarray(jac.T @ jw)
+        g = r @ jw
+        h_diag = h.reshape(-1)[::step_diag]  # (a view)
         if inv is not None:
-            h[diag_idx, diag_idx] += inv
-            g = g + inv * (x - pm)
+            h_diag += inv
+            g += inv * (x - pm)
         if fixed is not None:
             h[fixed, :] = 0.0
             h[:, fixed] = 0.0
             h[fixed, fixed] = 1.0
             g[fixed] = 0.0
-        cost0 = float(np.dot(w, r * r))
-        hd = h[diag_idx, diag_idx] + 1e-12
+        cost0 = float(np.dot(w, r2))
+        hd = h_diag + 1e-12
         step_ok = False
         for _ in range(4):
-            a = h + np.diag(lam * hd)
-            try:
-                dx = -np.linalg.solve(a, g)
-            except np.linalg.LinAlgError:
+            a = h.copy()
+            a.reshape(-1)[::step_diag] += lam * hd
+            dx = _solve_spd(a, g)
+            if dx is None:
                 lam *= 10.0
                 continue
-            xn = x + dx
-            if lower is not None:
-                xn = np.maximum(xn, lower)
-            if upper is not None:
-                xn = np.minimum(xn, upper)
+            xn = x - dx
+            if lo is not None:
+                np.maximum(xn, lo, out=xn)
+            if up is not None:
+                np.minimum(xn, up, out=xn)
             rn, jn = resjac(xn)
             cost1 = float(np.dot(w, rn * rn))
-            if not math.isfinite(cost1) or not math.isfinite(float(rn.sum())):
+            if not math.isfinite(cost1):
                 lam *= 10.0
                 continue
             if cost1 <= cost0 * (1.0 + 1e-9) or lam > 1e3:
@@ -162,6 +170,16 @@ def robust_gauss_newton(
             break
     w = tukey_weights(r, cf)
     return x, r, w
+
+
+def _solve_spd(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """Solution of ``a x = b`` for a small symmetric positive definite ``a`` (Cholesky;
+    LU when ``a`` is not positive definite); ``None`` when ``a`` is singular."""
+    _, sol, info = _dposv(a, b)
+    if info == 0:
+        return sol
+    _, _, sol, info = _dgesv(a, b)
+    return sol if info == 0 else None
 
 
 def tukey_cost(res: NDArray[np.float64], c: float) -> float:

@@ -109,9 +109,18 @@ class SensorInPipe:
         object.__setattr__(self, "rotation", r)
 
     @classmethod
+    def trusted(cls, position: NDArray[np.float64], rotation: NDArray[np.float64]) -> SensorInPipe:
+        """A pose from a (3,) position and a (3, 3) rotation known to be valid (built by the
+        detector itself from a rotation formula), without the checks of the constructor."""
+        pose = object.__new__(cls)
+        object.__setattr__(pose, "position", position)
+        object.__setattr__(pose, "rotation", rotation)
+        return pose
+
+    @classmethod
     def identity(cls) -> SensorInPipe:
         """The thesis's assumption: sensor centred and aligned with the pipe axis."""
-        return cls()
+        return cls.trusted(np.zeros(3), np.eye(3))
 
     @classmethod
     def coerce(cls, value: Any) -> SensorInPipe:
@@ -163,7 +172,7 @@ class SensorInPipe:
 
     def compose(self, inner: SensorInPipe) -> SensorInPipe:
         """``self`` maps frame A to the pipe frame; ``inner`` maps the sensor to frame A."""
-        return SensorInPipe(
+        return SensorInPipe.trusted(
             self.rotation @ inner.position + self.position, self.rotation @ inner.rotation
         )
 

@@ -10,6 +10,7 @@ from detector_scans import match, scan_layout, wrap
 
 from detector import detect
 from detector.robust import robust_gauss_newton
+from pipe_env.geometry import Pose
 
 
 def test_widening_with_an_end_wall_far_down_is_a_reducer():
@@ -61,11 +62,19 @@ def test_small_end_wall_far_away_stays_a_closure():
 
 
 def test_straight_pipe_takes_the_early_exit():
+    # the nominal pose explains every return: nothing is refined
     scan, _, d = scan_layout("straight", 0.0, diameter=0.1)
     det = detect(scan, d)
     assert det.kind == "straight"
-    assert det.diagnostics["axis_pass"] == 1 and det.diagnostics["n_anomaly"] == 0
+    assert det.diagnostics["axis_pass"] == 0 and det.diagnostics["n_anomaly"] == 0
     assert det.diagnostics["n_wall"] > 1000
+    # an offset sensor: the returns leave the wall tolerance until the axis is refined
+    offset = Pose(np.array([0.0, 0.01, 0.0]), np.eye(3))
+    scan, _, d = scan_layout("straight", 0.0, diameter=0.1, misalignment=offset)
+    det = detect(scan, d)
+    assert det.kind == "straight"
+    assert det.diagnostics["axis_pass"] == 1 and det.diagnostics["n_anomaly"] == 0
+    assert abs(det.diagnostics["axis_offset"][0] + 0.01) < 0.001
     closure, _, d = scan_layout("closure", 0.3, diameter=0.1)
     assert detect(closure, d).kind == "closure"
 
@@ -129,3 +138,92 @@ def test_noisy_bend_far_away_does_not_turn_back():
     assert abs(o.distance - t.distance) < 0.02
     assert abs(o.angle - t.angle) < math.radians(5.0)
     assert abs(wrap(o.direction - t.direction)) < math.radians(5.0)
+
+
+def test_noisy_far_wall_of_a_turn_is_not_an_end_wall():
+    # under 1 % range noise the far wall of a small turn 40 cm ahead is flat to within the
+    # noise; its curvature (a sag of about a centimetre) still tells it from a cap
+    scan, truth, d = scan_layout(
+        "mitre_bend",
+        0.4,
+        sensor="ydlidar_x4",
+        diameter=0.057,
+        angle=math.radians(75),
+        direction=-2.9,
+    )
+    det = detect(scan, d)
+    assert det.kind == "bend", det.describe()
+    assert det.diagnostics["closure_sag"] > 0.005
+    ((o, t),) = match(det.options, truth)
+    assert abs(o.distance - t.distance) < 0.02
+    assert abs(o.angle - t.angle) < math.radians(5.0)
+    assert abs(wrap(o.direction - t.direction)) < math.radians(5.0)
+    cap, truth, d = scan_layout("closure", 0.4, sensor="ydlidar_x4", diameter=0.057)
+    det = detect(cap, d)
+    assert det.kind == "closure" and det.diagnostics["closure_sag"] < 0.002
+
+
+def test_noisy_taper_with_its_narrow_pipe_unseen_is_a_reducer():
+    # grazing beams lose the narrower pipe's wall under ydlidar_x4: the end wall far down it
+    # once stood in for that wall (a plateau far too narrow, a taper too long, or a bend),
+    # and the first returns off the wall come well past the start of a gentle taper
+    scan, truth, d = scan_layout(
+        "reducer", 0.3, sensor="ydlidar_x4", diameter_in=0.1, diameter_out=0.055, taper_length=0.2
+    )
+    det = detect(scan, d)
+    assert det.kind == "reducer", det.describe()
+    assert abs(det.options[0].distance - truth[0].distance) < 0.02
+    assert 0.03 < det.options[0].diameter < 0.075
+    assert det.diagnostics["reducer_end_wall_radius"] > 0.015
+
+
+def test_noisy_tee_seen_from_its_stem_is_one_pipe_across():
+    # 40 cm ahead under range noise the two openings of the run are a few grazing returns each;
+    # two free branches once settled on a 25 mm and a 65 mm pipe 120 deg off, where one pipe
+    # across (both ways open) explains the returns better
+    scan, truth, d = scan_layout(
+        "t_junction",
+        0.4,
+        sensor="ydlidar_x4",
+        seed=1,
+        diameter=0.1,
+        branch_diameter=0.1,
+        direction=0.3,
+        entry="stem",
+    )
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    assert det.diagnostics["model"] == "pipe_across"
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < 0.02
+        assert abs(o.angle - t.angle) < math.radians(5.0)
+        assert abs(wrap(o.direction - t.direction)) < math.radians(5.0)
+        assert abs(o.diameter - t.diameter) < 0.002
+
+
+def test_small_tee_far_along_its_run_is_seen_by_a_noiseless_sensor():
+    # a 57 mm tee 30 cm ahead: the returns through its opening lie only a few millimetres
+    # beyond the wall, inside the 2 mm tolerance floor; a noiseless sensor whose wall fits to a
+    # tenth of a millimetre can afford a floor of one millimetre
+    scan, truth, d = scan_layout(
+        "t_junction", 0.3, diameter=0.057, branch_diameter=0.057, direction=-2.58, entry="run"
+    )
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    assert det.diagnostics["tolerance_floor"] < 0.0015
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < 0.01
+        assert abs(o.angle - t.angle) < math.radians(1.0)
+        assert abs(wrap(o.direction - t.direction)) < math.radians(2.0)
+
+
+def test_first_axis_pass_only_when_the_given_pose_misses_the_wall():
+    scan, truth, d = scan_layout("closure", 0.3, diameter=0.1)
+    det = detect(scan, d)
+    assert det.kind == "closure" and not det.diagnostics["axis_first_pass"]
+    assert abs(det.options[0].distance - truth[0].distance) < 0.005
+    offset = Pose(np.array([0.0, 0.01, 0.0]), np.eye(3))
+    scan, truth, d = scan_layout("closure", 0.3, diameter=0.1, misalignment=offset)
+    det = detect(scan, d)
+    assert det.kind == "closure" and det.diagnostics["axis_first_pass"]
+    assert abs(det.options[0].distance - truth[0].distance) < 0.005
