@@ -1497,12 +1497,26 @@ def _branches(
     options: list[StructureOption] = []
     for f in fits:
         angle, direction = option_direction(_dir(f.theta, f.phi), cloud.pose)
-        options.append(StructureOption("bend", big_l, 2.0 * float(f.rho), direction, angle, conf))
+        # a long bend's arc radius (torus model; 0 for the straight-axes model) for the turn
+        radius = float(f.rb) if model == "torus" else 0.0
+        options.append(
+            StructureOption(
+                "bend", big_l, 2.0 * float(f.rho), direction, angle, conf, bend_radius=radius
+            )
+        )
     if straight_on:
         options.append(StructureOption("junction", big_l, 2.0 * big_r, 0.0, 0.0, conf * cov_on))
     kind = "bend" if len(options) == 1 else "junction"
     options = [
-        StructureOption(kind, o.distance, o.diameter, o.direction, o.angle, o.confidence)
+        StructureOption(
+            kind,
+            o.distance,
+            o.diameter,
+            o.direction,
+            o.angle,
+            o.confidence,
+            bend_radius=o.bend_radius if kind == "bend" else 0.0,
+        )
         for o in options
     ]
     options.sort(key=option_order)
