@@ -200,16 +200,17 @@ class PhysicalPlant:
         node, entry = fitting_ahead(self.network, pose)
         return node, entry, options_at(self.network, node, entry, pose)
 
+    def _goal_edge(self, goal: Any) -> EdgePosition:
+        """A goal point (or its edge position) as an edge position."""
+        if isinstance(goal, EdgePosition):
+            return goal
+        point = np.asarray(goal, dtype=float)
+        return edge_position(self.network, self.network.centreline.nearest(point))
+
     def _goal_reached(self, goal: Any) -> bool:
         if goal is None:
             return False
-        gp = (
-            goal
-            if isinstance(goal, EdgePosition)
-            else edge_position(
-                self.network, self.network.centreline.nearest(np.asarray(goal, dtype=float))
-            )
-        )
+        gp = self._goal_edge(goal)
         here = self.edge_position()
         if here.run_id != gp.run_id:
             return False
@@ -245,13 +246,7 @@ class PhysicalPlant:
         ahead), or None if the goal is on another run."""
         if goal is None:
             return None
-        gp = (
-            goal
-            if isinstance(goal, EdgePosition)
-            else edge_position(
-                self.network, self.network.centreline.nearest(np.asarray(goal, dtype=float))
-            )
-        )
+        gp = self._goal_edge(goal)
         here, towards = locate(self.network, self.pose())
         if here.run_id != gp.run_id:
             return None
