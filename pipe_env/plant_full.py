@@ -8,11 +8,15 @@
   :class:`detector.fusion.StructureTracker` with the robot's own sensor pose. The robot stops
   when a structure is confirmed with its reference point within the trigger distance, when the
   goal is reached, or - failing safe - when the sensor goes blind (too few returns to see the
-  pipe ahead: the LS02 in a small pipe). A blind stop is offered as a dead end.
+  pipe ahead: the LS02 in a small pipe). A blind stop is offered as a dead end. A structure
+  first seen within the trigger distance is swept again in place until confirmed. After every
+  sweep the robot steers onto the pipe axis the sweep measures (the improved fit's sensor
+  offset and axis direction, whatever detector proposes the options). A goal between the robot
+  and the structure it stopped for is driven up to.
 - ``execute``: the chosen option becomes a primitive sequence
   (:func:`primitives.sequences.for_option`) that the executor runs with real contacts; a jam
   makes the robot back off to where it decided and sense again; backing out reverses along the
-  driven path to the last junction.
+  driven path to the last junction. A goal the sequence drove over counts as reached.
 
 With ``detector="ground_truth"`` the robot still drives and turns physically, but the options
 come from the plant drawing at the pose where a real detector would have confirmed them (the

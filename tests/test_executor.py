@@ -146,3 +146,31 @@ def test_aim_turns_the_drive_heading_by_at_most_its_limit() -> None:
     assert ex.aim(ex._F_rot[:, 0]) == 0.0
     with pytest.raises(ValueError, match="direction"):
         ex.aim(np.zeros(3))
+
+
+def test_drive_until_recentres_when_the_clamp_reading_drops(monkeypatch) -> None:
+    """A clamp reading 5 mm below the last clamping means the robot was pushed off the axis:
+    it centres and clamps again before driving on (and not while the reading holds)."""
+    ex = Executor.for_network(layouts.straight(0.09, 2.0), lidar="ideal")
+    real_reading = ex.robot.clamped_diameter
+    pushed = {"now": False}
+    monkeypatch.setattr(
+        ex.robot,
+        "clamped_diameter",
+        lambda rng=None: real_reading(rng) - (0.005 if pushed["now"] else 0.0),
+    )
+    centred = []
+    real_centre = ex._centre
+    monkeypatch.setattr(
+        ex, "_centre", lambda step, rng: (centred.append(1), real_centre(step, rng))
+    )
+    sweeps = []
+
+    def on_scan(scan, state) -> str:
+        sweeps.append(state.odometer)
+        pushed["now"] = len(sweeps) == 2  # pushed off after the second stop's sweep
+        return "stop" if len(sweeps) == 4 else "continue"
+
+    out = ex.drive_until(on_scan, 1.0, scan_interval=0.02)
+    assert out.status == "done"
+    assert len(centred) == 1
