@@ -10,7 +10,8 @@ Reproduces the thesis experiments (its table 4.1) and extends them:
   closures, reducers, at every diameter of the robot's range with random roll directions;
 - the sensor from 40 cm down to 10 cm before the structure (the thesis window);
 - the ideal sensor, then ``ydlidar_x4`` and ``ls02`` noise, then misalignment (sensor offset up to
-  20 % of D and tilt up to 4 deg, thesis 5.3);
+  20 % of D and tilt up to 4 deg, thesis 5.3), then a clamped diameter off by up to 2 mm (the
+  clamp's encoder error);
 - false alarms on straight pipe.
 
 Ground truth is ``PipeNetwork.structures_ahead`` at the true sensor pose. Per kind: the
@@ -498,6 +499,37 @@ def misalignment_study(
     return text, sweep
 
 
+def clamp_error_study(runner: Runner, distances: np.ndarray, errors_mm: list[float]) -> str:
+    """The clamped diameter off by ``errors_mm`` (the clamp's encoder error), ideal sensor,
+    100 mm: a gentle reducer (the kind a wrong radius hurts most), a bend, a tee, a cap."""
+    cases = [
+        Case(
+            "reducer 100 to 88 mm / 8 cm",
+            "reducer",
+            {"diameter_in": 0.1, "diameter_out": 0.088, "taper_length": 0.08},
+            0.1,
+        ),
+        Case(
+            "mitre bend 60 deg",
+            "mitre_bend",
+            {"diameter": 0.1, "angle": math.radians(60), "direction": 1.0},
+            0.1,
+        ),
+        Case("T junction (run)", "t_junction", {"diameter": 0.1, "direction": -2.0}, 0.1),
+        Case("closure", "closure", {"diameter": 0.1}, 0.1),
+    ]
+    recs: list[Record] = []
+    for err in errors_mm:
+        for case in cases:
+            c = Case(case.group, case.layout, case.params, case.diameter + 1e-3 * err)
+            recs += runner.run_case(c, "ideal", distances, "clamp error")
+    return summarise(
+        recs,
+        f"Clamped diameter off by {', '.join(f'{e:+g}' for e in errors_mm)} mm, ideal sensor, "
+        "100 mm",
+    )
+
+
 def plots(out: Path, series_3d: list, sweep: list, planar: list) -> list[str]:
     try:
         import matplotlib
@@ -642,6 +674,12 @@ def main(argv: list[str] | None = None) -> int:
         runner, np.linspace(0.40, 0.10, 3 if quick else 7), offsets, tilts
     )
     sections.append(mis_text)
+    # clamped-diameter (encoder) error
+    sections.append(
+        clamp_error_study(
+            runner, np.linspace(0.40, 0.10, 3 if quick else 7), [-2.0, -1.0, 1.0, 2.0]
+        )
+    )
     # false alarms
     sections.append(straight_false_alarms(runner, sensors, 60 if quick else 400, diameters))
     # speed

@@ -87,6 +87,8 @@ STEP_TOL = 1e-6
 ANNEAL = 3
 #: ... or once a step lowers the robust cost by less than this fraction.
 COST_TOL = 1e-4
+#: The wall's own radius replaces the clamped one when they differ by more than this, m.
+RADIUS_DEAD_BAND = 0.00025
 
 
 @dataclass(frozen=True)
@@ -108,6 +110,8 @@ class ImprovedConfig:
             beyond a junction for a straight-on option.
         radius_lr_per_branch: likelihood-ratio threshold (per outgoing pipe) above which a
             free outgoing radius replaces the clamped one.
+        max_radius_correction: largest change of the clamped radius that the wall returns
+            may make (the encoders' error; the thesis checks the diameter to +-5 mm).
     """
 
     tol_floor: float = 0.002
@@ -123,6 +127,7 @@ class ImprovedConfig:
     prior_tilt: float = math.radians(3.0)
     straight_on_coverage: float = 0.5
     radius_lr_per_branch: float = 12.0
+    max_radius_correction: float = 0.003
 
 
 DEFAULT_CONFIG = ImprovedConfig()
@@ -614,8 +619,11 @@ def detect_improved(
                 cloud.restore(pose, xyz_of[best])
             else:
                 cloud.set_pose(pose)
+            # the clamp's encoders read the diameter to a millimetre or two; the wall before
+            # the structure, seen all around, measures it better
+            big_r = _wall_radius(cloud, big_r, config, u_near, diag)
             # a noiseless wall fitted closely: the tolerance floor shrinks towards its scatter
-            rms = info.get("axis_rms")
+            rms = diag.get("wall_radius_rms", info.get("axis_rms"))
             if rms is not None and float(_pct(cloud.sigma_v, 90.0)) < 0.0005:
                 cloud.floor = min(config.tol_floor, max(0.0008, 6.0 * float(rms)))
                 diag["tolerance_floor"] = cloud.floor
@@ -624,6 +632,32 @@ def detect_improved(
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
     return _timed(det, t0)
+
+
+def _wall_radius(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float, diag: dict[str, Any]
+) -> float:
+    """The pipe radius (m) the wall returns before ``u_max`` give under the current pose: their
+    median distance from the axis, when at least 100 returns within ``max_radius_correction``
+    (plus their tolerance) of the clamped radius ``big_r`` cover most of the circumference;
+    ``big_r`` otherwise. Records ``wall_radius`` and the returns' scatter about it
+    (``wall_radius_rms``, 1.4826 MAD, m) in ``diag``. Corrections below ``RADIUS_DEAD_BAND``
+    are not made (the clamp reading is as good as the fit there)."""
+    xyz = cloud.xyz_v
+    e = cloud.r_v - big_r
+    sel = (xyz[0] < u_max) & (np.abs(e) <= cfg.max_radius_correction + _tolerance_v(cloud, cfg))
+    n = int(np.count_nonzero(sel))
+    if n < 100:
+        return big_r
+    pts = xyz[:, sel]
+    if _azimuth_coverage(pts.T) < 0.75:
+        return big_r
+    de = float(np.median(e[sel]))
+    if not RADIUS_DEAD_BAND <= abs(de) <= cfg.max_radius_correction:
+        return big_r
+    diag["wall_radius"] = big_r + de
+    diag["wall_radius_rms"] = float(mad_sigma(e[sel] - de))
+    return big_r + de
 
 
 def _wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float) -> bool:
@@ -1312,7 +1346,7 @@ def _branches(
     hole = None
     if straight_on and not any_roll:
         prior = (x0a.copy(), lower.copy(), upper.copy())
-        hole = _hole_prior(cloud, big_r, lobes, lobe_pts, wall, u_edge, c0, *prior)
+        hole = _hole_prior(cloud, big_r, lobes, lobe_pts, wall, tol, u_edge, c0, *prior)
     c_fin = max(3.0 * tol_med, 0.003)
 
     def free_fit(xs: NDArray, lo: NDArray, up: NDArray) -> tuple[NDArray, NDArray, NDArray]:
@@ -1344,12 +1378,15 @@ def _branches(
     # (likelihood ratio against the residual noise, a few units per extra parameter).
     # (a far wall seen head-on is too small a part of a pipe to size it: clamped from the
     # coarse start)
+    # (the standard radius of a side branch whose hole in the run's wall is clearly narrower
+    # is the hole's)
+    std_r = np.array([h[3] for h in hole]) if hole is not None else np.full(n_l, big_r)
     x_eq = x0a.copy() if any_roll else x.copy()
-    x_eq[3::3] = big_r
+    x_eq[3::3] = std_r
     lo_eq, up_eq = lower.copy(), upper.copy()
-    lo_eq[3::3] = big_r
-    up_eq[3::3] = big_r
-    if not any_roll and bool(np.all(np.abs(x[3::3] - big_r) <= 0.01 * big_r)):
+    lo_eq[3::3] = std_r
+    up_eq[3::3] = std_r
+    if not any_roll and bool(np.all(np.abs(x[3::3] - std_r) <= 0.01 * big_r)):
         # the free fit found the clamped radius already: clamping it moves nothing that matters
         res_eq = _line_resjac(pts_all, x_eq, n_l, False)[0]
         w_eq = tukey_weights(res_eq, c_fin)
@@ -1405,7 +1442,10 @@ def _branches(
     weak = any_roll or bool(diag.get("hole_prior_used", False))  # too little to size a pipe
     if weak or lr <= cfg.radius_lr_per_branch * n_l or (free_on_bound and not eq_on_bound):
         x, res, w = x_eq, res_eq, w_eq
-    diag["radius_model"] = "clamped" if x is x_eq else "free"
+    if x is x_eq:
+        diag["radius_model"] = "clamped" if bool(np.all(std_r == big_r)) else "hole"
+    else:
+        diag["radius_model"] = "free"
     across = None
     opposite = n_l == 2 and abs(_wrap(lobes[0].roll - lobes[1].roll)) > math.radians(150)
     if opposite and not any_roll and float(_dir(x[1], x[2]) @ _dir(x[4], x[5])) > -0.985:
@@ -1441,7 +1481,7 @@ def _branches(
                 best_a = (cost_a, xa, res_a, w_a)
         cost_a, xa, res_a, w_a = best_a
         # (the two branches: three more deflection and roll parameters, two more radii)
-        n_extra = 2 if diag["radius_model"] == "clamped" else 4
+        n_extra = 4 if diag["radius_model"] == "free" else 2
         lr_a = 2.0 * (cost_a - tukey_cost(res, c_fin)) / sigma2
         diag["across_lr"] = float(lr_a)
         if lr_a <= 0.5 * cfg.radius_lr_per_branch * max(n_extra, 1):
@@ -1529,6 +1569,7 @@ def _hole_prior(
     lobes: list[Lobe],
     lobe_pts: list[NDArray],
     wall: NDArray[np.bool_],
+    tol: NDArray[np.float64],
     u_edge: float,
     c0: float,
     x0: NDArray,
@@ -1537,31 +1578,42 @@ def _hole_prior(
 ) -> list[tuple[float, float, float]] | None:
     """Side branches of a run that goes on, seen far away: the few returns through an opening
     leave the branch's deflection and the reference point ill-determined, but the hole in the
-    run's wall is plain. A branch of radius ``R`` deflected by ``theta`` cuts a hole of
-    half-length ``R / sin(theta)`` centred ``R cot(theta)`` past the reference point; the
-    start (``x0``) and the bounds of the fit are set from it, in place. Returns the centre and
-    half-length of each lobe's hole and how far off they may be seen; ``None`` (nothing
-    changed) when a hole is not found for every lobe."""
+    run's wall is plain. A branch of radius ``rho`` deflected by ``theta`` cuts a hole of
+    half-length ``rho / sin(theta)`` centred ``R cot(theta)`` past the reference point, and
+    ``asin(rho / R)`` wide on either side of its roll (a narrower branch: a narrower hole);
+    the start (``x0``) and the bounds of the fit are set from it, in place. Returns the centre,
+    half-length, how far off they may be seen, and the branch radius (``R`` unless the hole
+    is clearly narrower) of each lobe's hole; ``None`` (nothing changed) when a hole is not
+    found for every lobe."""
     u_grid = cloud.xyz[0]
     near_u = wall & (u_grid > u_edge - 2.0 * big_r) & (u_grid < u_edge + 8.0 * big_r)
     p_w = cloud.points(near_u)
+    tol_w = float(np.median(tol[near_u])) if near_u.any() else 0.0
     u_w = p_w[:, 0]
     phi_w = np.arctan2(p_w[:, 2], p_w[:, 1])
     ths = np.radians(np.arange(30.0, 150.1, 2.5))
     sin_t, cos_t = np.sin(ths), np.cos(ths)
     ells, thetas, slack = [], [], []
-    holes: list[tuple[float, float, float]] = []
+    holes: list[tuple[float, float, float, float]] = []
     for lb, lp in zip(lobes, lobe_pts):
-        near = np.abs(np.mod(phi_w - lb.roll + math.pi, 2.0 * math.pi) - math.pi)
+        ang = np.mod(phi_w - lb.roll + math.pi, 2.0 * math.pi) - math.pi
+        near = np.abs(ang)
         us = np.sort(u_w[near < math.radians(15.0)])
         if us.size < 10:
             return None
         gaps = np.diff(us)
-        i = int(np.argmax(gaps))
-        if gaps[i] < big_r:
+        # the widest gap for its place: far away the beams meet the wall sparsely, so a gap
+        # is measured against the axial spacing of neighbouring beams there
+        mid_u = 0.5 * (us[1:] + us[:-1])
+        beam_spacing = np.maximum(mid_u * mid_u / big_r * cloud.beam_step, 1e-3)
+        i = int(np.argmax(gaps / beam_spacing))
+        if gaps[i] < 0.5 * big_r:
             return None
         half = 0.5 * float(gaps[i])
         centre = 0.5 * float(us[i] + us[i + 1])
+        rho = _hole_radius(ang, u_w, centre, half, big_r, tol_w)
+        if gaps[i] < rho:
+            return None
         # each edge is known to within the axial spacing of neighbouring beams there
         step = centre * centre / big_r * cloud.beam_step
         spacing = float(np.median(gaps[max(0, i - 5) : i + 6]))  # of the returns seen
@@ -1574,9 +1626,9 @@ def _hole_prior(
         lat = lq[:, 1] * math.cos(lb.roll) + lq[:, 2] * math.sin(lb.roll)  # (n,)
         t = qx * cos_t[:, None] + lat[None, :] * sin_t[:, None]
         qq = qx * qx + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]
-        res = np.sqrt(np.maximum(qq - t * t, 0.0)) - big_r
+        res = np.sqrt(np.maximum(qq - t * t, 0.0)) - rho
         cost = np.minimum(res * res, c0 * c0).mean(axis=1)
-        excess = np.maximum(0.0, big_r / sin_t - half) / max(spacing, 0.005)
+        excess = np.maximum(0.0, rho / sin_t - half) / max(spacing, 0.005)
         cost += c0 * c0 * np.minimum(1.0, 0.25 * excess * excess)
         cost = np.where(ths > 0.5 * math.pi + 1e-6, cost / 0.7, cost)  # forward branches first
         j = int(np.argmin(cost))
@@ -1585,34 +1637,61 @@ def _hole_prior(
         thetas.append(best[1])
         ells.append(best[2])
         slack.append(max(0.25 * big_r, 0.5 * step))
-        holes.append((centre, half, slack[-1]))
+        holes.append((centre, half, slack[-1], rho))
     ell = float(np.mean(ells))
     d_ell = max(slack) + float(np.ptp(ells))
     x0[0] = ell
     lower[0], upper[0] = ell - d_ell, ell + d_ell
     for k, th in enumerate(thetas):
         x0[1 + 3 * k] = th
+        x0[3 + 3 * k] = holes[k][3]
         lower[1 + 3 * k] = max(lower[1 + 3 * k], th - math.radians(7.5))
         upper[1 + 3 * k] = min(upper[1 + 3 * k], th + math.radians(7.5))
     return holes
 
 
+def _hole_radius(
+    ang: NDArray[np.float64],
+    u: NDArray[np.float64],
+    centre: float,
+    half: float,
+    big_r: float,
+    tol: float,
+) -> float:
+    """Radius (m) of the branch whose hole in the run's wall (radius ``big_r``) is centred at
+    ``centre`` along the axis, ``half`` long each way, from the hole's width around the
+    branch's roll, measured between the nearest wall returns on either side (``ang``: their
+    angles from the roll, rad; ``u``: along the axis) across its middle. A beam at angle
+    ``phi`` from the roll meets the branch's wall ``rho / sin(phi)`` from the axis, within the
+    wall tolerance ``tol`` of the run's wall (and so counted as wall) once
+    ``sin(phi) >= rho / (R + tol)``: the nearest wall returns lie at that angle. ``big_r``
+    unless the hole is clearly (10 %) narrower than a full-size branch's."""
+    mid = np.abs(u - centre) < 0.4 * half
+    a = ang[mid]
+    left, right = a[a > 0.0], a[a < 0.0]
+    if left.size == 0 or right.size == 0:
+        return big_r
+    width = 0.5 * float(left.min() - right.max())
+    rho = (big_r + tol) * math.sin(min(width, 0.5 * math.pi))
+    return max(rho, 0.25 * big_r) if rho < 0.9 * big_r else big_r
+
+
 def _fits_hole(
     x: NDArray,
-    holes: list[tuple[float, float, float]],
+    holes: list[tuple[float, float, float, float]],
     big_r: float,
     lower: NDArray,
     upper: NDArray,
 ) -> bool:
     """Does a branch fit put every branch where its hole in the run's wall is seen, without
     resting on a deflection bound?"""
-    for k, (centre, half, slack) in enumerate(holes):
+    for k, (centre, half, slack, rho) in enumerate(holes):
         th = float(x[1 + 3 * k])
         if th <= lower[1 + 3 * k] + math.radians(1.0) or th >= upper[1 + 3 * k] - math.radians(1.0):
             return False
         if abs(float(x[0]) + big_r / math.tan(th) - centre) > slack:
             return False
-        if big_r / math.sin(th) > half + slack:  # (a hole may look longer, never shorter)
+        if rho / math.sin(th) > half + slack:  # (a hole may look longer, never shorter)
             return False
     return True
 

@@ -227,3 +227,19 @@ def test_first_axis_pass_only_when_the_given_pose_misses_the_wall():
     det = detect(scan, d)
     assert det.kind == "closure" and det.diagnostics["axis_first_pass"]
     assert abs(det.options[0].distance - truth[0].distance) < 0.005
+
+
+def test_narrow_side_branch_is_sized_by_its_hole():
+    # a 68 mm branch of a 100 mm run: the hole prior once assumed a full-size branch, pulled
+    # the wye's 45 deg branch to 73 deg and the reference point 3.4 cm off, and clamped the
+    # branch to the run's diameter; the hole's width around its roll sizes the branch
+    for layout, distance, direction in (("y_junction", 0.3, 0.7071), ("t_junction", 0.2, -1.79)):
+        scan, truth, d = scan_layout(
+            layout, distance, diameter=0.1, branch_diameter=0.068, direction=direction, entry="run"
+        )
+        det = detect(scan, d)
+        assert det.kind == "junction" and len(det.options) == 2, det.describe()
+        for o, t in match(det.options, truth):
+            assert abs(o.distance - t.distance) < 0.01
+            assert abs(o.diameter - t.diameter) < 0.002
+            assert abs(o.angle - t.angle) < math.radians(1.0)
