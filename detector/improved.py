@@ -1451,14 +1451,15 @@ def _branches(
     if opposite and not any_roll and float(_dir(x[1], x[2]) @ _dir(x[4], x[5])) > -0.985:
         # two openings on opposite sides, the branches fitted not along one axis: a pipe
         # across (a tee from its stem, a wye from its branch, the side pipe of a cross)?
-        # One straight axis through the reference point, fitted as one cylinder of the clamped
+        # One straight axis through the reference point, fitted as one cylinder of the standard
         # radius, is kept unless the two branches fit significantly better (likelihood ratio,
         # as for the radii)
         k_main = 0 if lobes[0].n >= lobes[1].n else 1
+        r_a = float(np.mean(std_r))  # (the side pipe of a cross may be narrower than the run)
         starts = [
-            np.array([x[0], x[1 + 3 * k_main], x[2 + 3 * k_main], big_r]),
-            np.array([x[0], 0.5 * math.pi, lobes[k_main].roll, big_r]),
-            np.array([u_edge + big_r, 0.5 * math.pi, lobes[k_main].roll, big_r]),
+            np.array([x[0], x[1 + 3 * k_main], x[2 + 3 * k_main], r_a]),
+            np.array([x[0], 0.5 * math.pi, lobes[k_main].roll, r_a]),
+            np.array([u_edge + big_r, 0.5 * math.pi, lobes[k_main].roll, r_a]),
         ]
         best_a = None
         for xa0 in starts:
@@ -1468,8 +1469,8 @@ def _branches(
                 np.full(4, 1e-5),
                 c=2.0 * c0,
                 iterations=8,
-                lower=np.array([lower[0], math.radians(25.0), -10.0, big_r]),
-                upper=np.array([upper[0], math.radians(155.0), 10.0, big_r]),
+                lower=np.array([lower[0], math.radians(25.0), -10.0, r_a]),
+                upper=np.array([upper[0], math.radians(155.0), 10.0, r_a]),
                 c_final=c_fin,
                 step_tol=STEP_TOL,
                 anneal=ANNEAL,
@@ -1494,7 +1495,8 @@ def _branches(
     if across is not None:
         model = "pipe_across"
         th_a, ph_a = float(across[1]), float(across[2])
-        fits = [BranchFit(th_a, ph_a, big_r), BranchFit(math.pi - th_a, ph_a + math.pi, big_r)]
+        r_a = float(across[3])
+        fits = [BranchFit(th_a, ph_a, r_a), BranchFit(math.pi - th_a, ph_a + math.pi, r_a)]
     else:
         fits = [BranchFit(x[1 + 3 * k], x[2 + 3 * k], x[3 + 3 * k]) for k in range(n_l)]
     if any_roll and w.sum() > 0:
