@@ -89,6 +89,9 @@ ANNEAL = 3
 COST_TOL = 1e-4
 #: The wall's own radius replaces the clamped one when they differ by more than this, m.
 RADIUS_DEAD_BAND = 0.00025
+#: The wall this far along the axis beyond the nearest returns (m) gives the first estimate of
+#: the pipe radius.
+NEAR_WALL = 0.03
 
 
 @dataclass(frozen=True)
@@ -565,6 +568,11 @@ def detect_improved(
     diag: dict[str, Any] = {"method": "improved", "n_points": int(scan.n_valid)}
     try:
         cloud = _prepare(scan, pose0, bias, config)
+        # the clamp's encoders read the diameter to a millimetre or two: the wall right around
+        # the sensor (nearer than any structure in view) measures it first, the wall before
+        # the structure again once the axis is refined
+        u_nearest = _pct(cloud.xyz_v[0], 1.0)
+        big_r = _wall_radius(cloud, big_r, config, u_nearest + NEAR_WALL, diag)
         if refine_axis:
             # the given pose explains every return already: straight pipe, nothing to refine
             diag["axis_pass"] = 0
@@ -619,8 +627,6 @@ def detect_improved(
                 cloud.restore(pose, xyz_of[best])
             else:
                 cloud.set_pose(pose)
-            # the clamp's encoders read the diameter to a millimetre or two; the wall before
-            # the structure, seen all around, measures it better
             big_r = _wall_radius(cloud, big_r, config, u_near, diag)
             # a noiseless wall fitted closely: the tolerance floor shrinks towards its scatter
             rms = diag.get("wall_radius_rms", info.get("axis_rms"))
