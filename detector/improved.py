@@ -444,6 +444,11 @@ def _refine_axis(
     # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
     # gentle taper would pass for a tilted wall), so it is held at the prior
     span = float(_pct(sub[0], 95) - _pct(sub[0], 5))
+    if u_max is not None and span < 0.02:
+        # a thin ring of wall right before the structure: where a wide arc starts, already
+        # curving, it would pull the axis off (the returns before it are out of view)
+        info["axis_span"] = span
+        return cloud.pose, info
     tilt_sigma = cfg.prior_tilt if span >= 0.05 else math.radians(0.05)
     prior = np.array([cfg.prior_offset, cfg.prior_offset, tilt_sigma, tilt_sigma])
     info["axis_span"] = span
@@ -619,6 +624,13 @@ def detect_improved(
             cloud.restore(pose0, xyz_of[0])
             u_near = min(u_start, u_start0) if moved else u_start
             scores = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
+            # a refinement whose cylinder misses its own wall returns by several times their
+            # noise fitted a curved wall (the arc of a wide bend filling the whole view): the
+            # given pose stands
+            rms_cap = _straight_wall_rms(cloud)
+            for k, (_, inf) in enumerate(candidates):
+                if k and inf.get("axis_rms", 0.0) > rms_cap:
+                    scores[k] = -1
             best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
             pose, info = candidates[best]
             diag.update(info)
@@ -646,9 +658,10 @@ def _wall_radius(
     """The pipe radius (m) the wall returns before ``u_max`` give under the current pose: their
     median distance from the axis, when at least 100 returns within ``max_radius_correction``
     (plus their tolerance) of the clamped radius ``big_r`` cover most of the circumference;
-    ``big_r`` otherwise. Records ``wall_radius`` and the returns' scatter about it
-    (``wall_radius_rms``, 1.4826 MAD, m) in ``diag``. Corrections below ``RADIUS_DEAD_BAND``
-    are not made (the clamp reading is as good as the fit there)."""
+    ``big_r`` otherwise, and when they scatter about it by more than their noise explains (a
+    curved wall: no straight pipe in view). Records ``wall_radius`` and the returns' scatter
+    about it (``wall_radius_rms``, 1.4826 MAD, m) in ``diag``. Corrections below
+    ``RADIUS_DEAD_BAND`` are not made (the clamp reading is as good as the fit there)."""
     xyz = cloud.xyz_v
     e = cloud.r_v - big_r
     sel = (xyz[0] < u_max) & (np.abs(e) <= cfg.max_radius_correction + _tolerance_v(cloud, cfg))
@@ -661,9 +674,18 @@ def _wall_radius(
     de = float(np.median(e[sel]))
     if not RADIUS_DEAD_BAND <= abs(de) <= cfg.max_radius_correction:
         return big_r
+    spread = float(mad_sigma(e[sel] - de))
+    if spread > _straight_wall_rms(cloud):  # not a straight wall about this axis
+        return big_r
     diag["wall_radius"] = big_r + de
-    diag["wall_radius_rms"] = float(mad_sigma(e[sel] - de))
+    diag["wall_radius_rms"] = spread
     return big_r + de
+
+
+def _straight_wall_rms(cloud: PipeCloud) -> float:
+    """Largest scatter (m) of wall returns about a straight cylinder that the returns' own
+    noise explains: 4 x their median radial noise, at least 0.6 mm."""
+    return max(4.0 * float(_pct(cloud.sigma_v, 50.0)), 0.0006)
 
 
 def _wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float) -> bool:
@@ -1736,8 +1758,24 @@ def _fit_torus(
     lower = np.array([-0.5, math.radians(5.0), -10.0, 0.5 * big_r, 0.2 * big_r])
     upper = np.array([3.0, math.radians(175.0), 10.0, 2.0 * big_r, 8.0 * big_r])
     best = None
-    for rb_factor in (1.75,):  # starts from 1.25 and 2.5 D converged alike
-        x0 = np.array([big_l, f.theta, f.phi, big_r, rb_factor * 2.0 * big_r])
+    # starts: the straight-axes fit with a 1.75 D arc; and a 3 D arc of 60 deg starting where
+    # the returns leave the incoming pipe (near the start of a wide arc the straight-axes fit
+    # settles on a shallow deflection far too near)
+    u_arc = float(_pct(sub[:, 0], 2.0))
+    rb_wide = 3.0 * 2.0 * big_r
+    starts = [
+        np.array([big_l, f.theta, f.phi, big_r, 1.75 * 2.0 * big_r]),
+        np.array(
+            [
+                u_arc + rb_wide * math.tan(math.radians(30.0)),
+                math.radians(60.0),
+                f.phi,
+                big_r,
+                rb_wide,
+            ]
+        ),
+    ]
+    for x0 in starts:
         x, res, w = robust_gauss_newton(
             None,
             x0,

@@ -243,3 +243,28 @@ def test_narrow_side_branch_is_sized_by_its_hole():
             assert abs(o.distance - t.distance) < 0.01
             assert abs(o.diameter - t.diameter) < 0.002
             assert abs(o.angle - t.angle) < math.radians(1.0)
+
+
+def test_wide_bend_seen_from_just_before_its_arc_keeps_the_given_axis():
+    # a 3 D bend whose arc starts 3-4 cm ahead: every return lies on the arc; the axis refined
+    # from them was pulled 4-10 mm towards the turn and the bend came out at 27 deg instead of
+    # its 50 deg in view. The given pose stands when the wall is no straight cylinder.
+    scan, truth, d = scan_layout(
+        "long_bend", 0.2, diameter=0.125, angle=1.0146, direction=2.5518, radius_factor=2.3947
+    )
+    det = detect(scan, d)
+    assert det.kind == "bend", det.describe()
+    ((o, t),) = match(det.options, truth)
+    assert abs(o.bend_radius - t.bend_radius) < 0.01
+    assert abs(o.angle - t.angle) < math.radians(8.0)
+    assert abs(o.distance - t.distance) < 0.03
+    scan, truth, d = scan_layout(
+        "long_bend", 0.3, diameter=0.1, angle=1.4937, direction=1.5883, radius_factor=2.9549
+    )
+    det = detect(scan, d)
+    assert det.kind == "bend", det.describe()
+    assert det.diagnostics["sensor_offset_pipe"] == [0.0, 0.0]
+    ((o, t),) = match(det.options, truth)
+    assert abs(o.bend_radius - t.bend_radius) < 0.01
+    # the end of the arc is out of view: the angle is a lower bound, and flagged as one
+    assert math.radians(45.0) < o.angle <= t.angle and det.diagnostics["angle_lower_bound"]
