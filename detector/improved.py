@@ -115,6 +115,9 @@ class ImprovedConfig:
             free outgoing radius replaces the clamped one.
         max_radius_correction: largest change of the clamped radius that the wall returns
             may make (the encoders' error; the thesis checks the diameter to +-5 mm).
+        far_wall_min_lean: a far wall seen head-on gives the way on only when its returns lie
+            on average at least this many radii (of the clamped pipe) along the fitted axis
+            from the axis' foot; nearer, the direction is undetermined and no turn is reported.
     """
 
     tol_floor: float = 0.002
@@ -131,6 +134,7 @@ class ImprovedConfig:
     straight_on_coverage: float = 0.5
     radius_lr_per_branch: float = 12.0
     max_radius_correction: float = 0.003
+    far_wall_min_lean: float = 0.15
 
 
 DEFAULT_CONFIG = ImprovedConfig()
@@ -871,6 +875,8 @@ def _detect_in_pipe_frame(
         # a wall that looks flat within the range noise but curves: the far wall of a turn
         # when the fit finds one way on; a pipe across (or a 90 deg turn: the same far wall)
         # is too ambiguous to overrule the end wall
+        if alt.diagnostics.get("reason") == "far wall: way on undetermined":
+            det.diagnostics["far_wall_way_undetermined"] = True
         return alt if alt.kind == "bend" else det
     if alt.kind != "straight" and alt.confidence > det.confidence:
         return alt
@@ -1540,8 +1546,18 @@ def _branches(
             # the far wall runs on evenly to both sides of the axis' foot: a pipe across,
             # both its ways open (a tee seen from its stem)
             fits = [f, flipped]
-        elif float(np.sum(w * along)) < 0.0:
-            fits = [flipped]
+        else:
+            # (the returns' mean position along the axis, from its foot, m)
+            lean = float(np.sum(w * along)) / max(float(w.sum()), 1e-9)
+            diag["far_wall_lean"] = lean / big_r
+            if abs(lean) < cfg.far_wall_min_lean * big_r:
+                # the far wall lies about evenly to both sides of the axis' foot (a turn by
+                # about 90 deg seen head-on, its opening unseen): it shows a way on, not which
+                # of the two; a guess would be the mirror image as often as not
+                diag["reason"] = "far wall: way on undetermined"
+                return Detection.straight(confidence=0.0, **diag)
+            if lean < 0.0:
+                fits = [flipped]
     big_l = float(x[0])
     # --- a single way on that the straight model explains poorly: a long-radius bend (torus)
     lower_bound = False

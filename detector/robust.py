@@ -112,20 +112,25 @@ def robust_gauss_newton(
     lo = None if lower is None else np.asarray(lower, dtype=float)
     up = None if upper is None else np.asarray(upper, dtype=float)
     r, jac = resjac(x)
+    jt = jac.T  # (n_p, N): component-first (the analytic Jacobians are built that way)
     n_anneal = max(1, iterations - 1 if anneal is None else anneal)
     ratio = cf / c
     step_diag = n_p + 1  # stride of the diagonal in a flattened (n_p, n_p) matrix
+    w = np.empty_like(r)
+    jw = np.empty((n_p, r.size))
     for it in range(iterations):
         ci = c * ratio ** (min(it, n_anneal) / n_anneal)
         r2 = r * r
-        w = 1.0 - r2 * (1.0 / (ci * ci))  # Tukey weights, as tukey_weights(r, ci)
+        # Tukey weights, as tukey_weights(r, ci)
+        np.multiply(r2, -1.0 / (ci * ci), out=w)
+        w += 1.0
         np.maximum(w, 0.0, out=w)
         w *= w
         if float(w.sum()) < n_p + 1:
             break
-        jw = jac * w[:, None]
-        h = np.ascontiguousarray(jac.T @ jw)
-        g = r @ jw
+        np.multiply(jt, w, out=jw)
+        h = jw @ jt.T
+        g = jw @ r
         h_diag = h.reshape(-1)[::step_diag]  # (a view)
         if inv is not None:
             h_diag += inv
@@ -157,7 +162,7 @@ def robust_gauss_newton(
                 continue
             if cost1 <= cost0 * (1.0 + 1e-9) or lam > 1e3:
                 dx = xn - x  # the step taken (bounds may have clipped it)
-                x, r, jac = xn, rn, jn
+                x, r, jt = xn, rn, jn.T
                 lam = max(lam / 3.0, 1e-6)
                 step_ok = True
                 break
