@@ -89,6 +89,9 @@ ANNEAL = 3
 COST_TOL = 1e-4
 #: The wall's own radius replaces the clamped one when they differ by more than this, m.
 RADIUS_DEAD_BAND = 0.00025
+#: Less straight wall than this in view along the axis (m) before a structure: the given pose
+#: stands when it explains that wall.
+SHORT_WALL_VIEW = 0.05
 #: The wall this far along the axis beyond the nearest returns (m) gives the first estimate of
 #: the pipe radius.
 NEAR_WALL = 0.03
@@ -627,7 +630,7 @@ def detect_improved(
             # explains fewer of them)
             cloud.restore(pose0, xyz_of[0])
             u_near = min(u_start, u_start0) if moved else u_start
-            scores = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
+            scores = [_wall_count(cloud, big_r, config, p, u_near)[0] for p, _ in candidates]
             # a refinement whose cylinder misses its own wall returns by several times their
             # noise fitted a curved wall (the arc of a wide bend filling the whole view): the
             # given pose stands
@@ -636,6 +639,13 @@ def detect_improved(
                 if k and inf.get("axis_rms", 0.0) > rms_cap:
                     scores[k] = -1
             best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
+            if best and u_start0 - u_nearest < SHORT_WALL_VIEW:
+                # hardly any straight wall in view before the structure: a refinement can only
+                # lean on the structure (a cylinder tilted about the nearest wall, pivoting
+                # onto the arc of a turn); the given pose stands when it explains that wall
+                n_ok, n_seen = _wall_count(cloud, big_r, config, pose0, u_start0)
+                if n_seen >= 40 and n_ok >= 0.9 * n_seen:
+                    best = 0
             pose, info = candidates[best]
             diag.update(info)
             diag["axis_pass"] = passes[best]
@@ -722,9 +732,10 @@ def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
 
 def _wall_count(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, pose: SensorInPipe, u_max: float
-) -> int:
+) -> tuple[int, int]:
     """Returns within the wall tolerance of the clamped radius under ``pose``, counting those
-    nearer than ``u_max`` along the axis (all of them when fewer than 100 are)."""
+    nearer than ``u_max`` along the axis (all of them when fewer than 40 are), and how many
+    returns were counted (every third return)."""
     if cloud.thin is None:  # every third valid return and its tolerance, computed once
         cloud.thin = (
             np.ascontiguousarray(cloud.sensor_v[:, ::3]),
@@ -735,9 +746,10 @@ def _wall_count(
     r = np.sqrt(np.square(pts[1]) + np.square(pts[2]))
     ok = np.abs(r - big_r) <= tol
     near = pts[0] < u_max
-    if np.count_nonzero(near) >= 40:
-        ok &= near
-    return int(np.count_nonzero(ok))
+    n_near = int(np.count_nonzero(near))
+    if n_near >= 40:
+        return int(np.count_nonzero(ok & near)), n_near
+    return int(np.count_nonzero(ok)), int(ok.size)
 
 
 def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
@@ -1281,6 +1293,7 @@ def _branches(
 ) -> Detection:
     """Bends and junctions: one outgoing pipe per lobe (``any_roll``: the lobe's roll is
     unknown and searched too)."""
+    lobes = _nearest_structure_lobes(cloud, lobes, big_r, diag)
     # returns of the outgoing pipes: the lobes, and the inner returns near them (the far wall
     # of a turn seen head-on), not far end walls of a run that goes on
     lobe_mask = np.zeros_like(keep)
@@ -1607,6 +1620,26 @@ def _branches(
     ]
     options.sort(key=option_order)
     return Detection(kind, options, conf, diag)
+
+
+def _nearest_structure_lobes(
+    cloud: PipeCloud, lobes: list[Lobe], big_r: float, diag: dict[str, Any]
+) -> list[Lobe]:
+    """The lobes of the nearest structure: a lobe that starts more than four radii past the
+    far end of the nearest lobe is an opening of another structure farther along the run
+    (seen past this one), not a way on of this one."""
+    if len(lobes) < 2:
+        return lobes
+    spans = []
+    for lb in lobes:
+        u = cloud.points(lb.mask)[:, 0]
+        spans.append((float(_pct(u, 2.0)), float(_pct(u, 98.0))))
+    first = min(range(len(lobes)), key=lambda i: spans[i][0])
+    reach = spans[first][1] + 4.0 * big_r
+    keep = [lb for lb, (u0, _) in zip(lobes, spans) if u0 <= reach]
+    if len(keep) < len(lobes):
+        diag["lobes_farther_on"] = len(lobes) - len(keep)
+    return keep
 
 
 def _hole_prior(
