@@ -10,7 +10,13 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    offset and tilt, with a weak prior towards the known pose when the wall seen is short). This
    removes sensor misalignment (thesis 5.3) without any outside feedback; when the given pose
    already explains the wall before the structure, only the fit over that whole stretch of wall
-   runs (from the given pose), not the first, wider one. When fewer returns
+   runs (from the given pose), not the first, wider one. A refinement is dropped when its
+   cylinder misses its own wall returns by more than their noise explains, and the given pose
+   stands when less than 5 cm of straight wall is in view before the structure and the pose
+   explains it (near the start of a wide bend's arc a cylinder tilted about the nearest wall
+   fits the arc). The pipe's radius is measured from the wall (the wall just beyond the
+   nearest returns, then the wall before the structure), within 3 mm of the clamp reading:
+   the clamp's encoders read the diameter to a millimetre or two. When fewer returns
    than a region needs leave the wall tolerance under the given pose, or else under the refined
    axis, the scan is straight pipe and nothing else runs (the common case in a run).
 2. **Classification.** Each return's radial residual ``r - D/2`` is compared with a per-point
@@ -44,9 +50,11 @@ clamped diameter and (optionally) the sensor pose in the pipe.
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
    circumference; its option has the clamped diameter. Its side branches are no wider than the
-   run, and each cuts a hole in the run's wall (half-length ``R / sin(angle)``, centred
-   ``R cot(angle)`` past the reference point); when the few returns through a far opening lead
-   the fit away from the hole seen, the fit restarts from the hole and stays near it.
+   run, and each cuts a hole in the run's wall (half-length ``rho / sin(angle)``, centred
+   ``R cot(angle)`` past the reference point, ``asin(rho / R)`` wide on either side of its
+   roll, which sizes a narrower branch); when the few returns through a far opening lead
+   the fit away from the hole seen, the fit restarts from the hole and stays near it. Lobes
+   that start well past the nearest one belong to a structure farther along the run.
 5. **Kind and confidence.** One way on -> ``bend``; two or more -> ``junction``. Confidence
    combines the number of supporting returns and the fit residual relative to the tolerance.
    Degenerate inputs (no returns, too few wall returns, fits that fail or leave the physical
@@ -1654,7 +1662,7 @@ def _hole_prior(
     x0: NDArray,
     lower: NDArray,
     upper: NDArray,
-) -> list[tuple[float, float, float]] | None:
+) -> list[tuple[float, float, float, float]] | None:
     """Side branches of a run that goes on, seen far away: the few returns through an opening
     leave the branch's deflection and the reference point ill-determined, but the hole in the
     run's wall is plain. A branch of radius ``rho`` deflected by ``theta`` cuts a hole of
