@@ -459,11 +459,6 @@ def _refine_axis(
     # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
     # gentle taper would pass for a tilted wall), so it is held at the prior
     span = float(_pct(sub[0], 95) - _pct(sub[0], 5))
-    if u_max is not None and span < 0.02:
-        # a thin ring of wall right before the structure: where a wide arc starts, already
-        # curving, it would pull the axis off (the returns before it are out of view)
-        info["axis_span"] = span
-        return cloud.pose, info
     tilt_sigma = cfg.prior_tilt if span >= 0.05 else math.radians(0.05)
     prior = np.array([cfg.prior_offset, cfg.prior_offset, tilt_sigma, tilt_sigma])
     info["axis_span"] = span
@@ -627,9 +622,16 @@ def detect_improved(
                 diag.pop("axis_pass")
                 u_start = _structure_start(cloud, big_r, config)
                 moved = _pose_moved(pose0, pose1, big_r)
-            # second pass: all of the intact wall before the structure
+            # does the given pose explain the wall before the structure (seen under it, within
+            # the tolerance that found the structure's start)?
+            n_ok, n_seen = _wall_count(cloud, big_r, config, pose0, u_start0, tol_scale=2.0)
+            given_fits = n_seen >= 40 and n_ok >= 0.9 * n_seen
+            # second pass: all of the intact wall before the structure (not a thin ring of it
+            # right before the structure when the given pose explains the wall: where a wide
+            # arc starts, already curving, the ring pulls the axis off)
             pose2, info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
-            if info2.get("axis_points", 0) >= 40:
+            thin_ring = info2.get("axis_span", 1.0) < 0.02
+            if info2.get("axis_points", 0) >= 40 and not (thin_ring and given_fits):
                 info2["axis_wall_until"] = u_start
                 candidates.append((pose2, info2))
                 passes.append(2)
@@ -641,19 +643,17 @@ def detect_improved(
             scores = [_wall_count(cloud, big_r, config, p, u_near)[0] for p, _ in candidates]
             # a refinement whose cylinder misses its own wall returns by several times their
             # noise fitted a curved wall (the arc of a wide bend filling the whole view): the
-            # given pose stands
+            # given pose stands when it explains the wall
             rms_cap = _straight_wall_rms(cloud)
             for k, (_, inf) in enumerate(candidates):
-                if k and inf.get("axis_rms", 0.0) > rms_cap:
+                if k and given_fits and inf.get("axis_rms", 0.0) > rms_cap:
                     scores[k] = -1
             best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
-            if best and u_start0 - u_nearest < SHORT_WALL_VIEW:
+            if best and given_fits and u_start0 - u_nearest < SHORT_WALL_VIEW:
                 # hardly any straight wall in view before the structure: a refinement can only
                 # lean on the structure (a cylinder tilted about the nearest wall, pivoting
-                # onto the arc of a turn); the given pose stands when it explains that wall
-                n_ok, n_seen = _wall_count(cloud, big_r, config, pose0, u_start0)
-                if n_seen >= 40 and n_ok >= 0.9 * n_seen:
-                    best = 0
+                # onto the arc of a turn); the given pose stands, as it explains that wall
+                best = 0
             pose, info = candidates[best]
             diag.update(info)
             diag["axis_pass"] = passes[best]
@@ -739,11 +739,16 @@ def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
 
 
 def _wall_count(
-    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, pose: SensorInPipe, u_max: float
+    cloud: PipeCloud,
+    big_r: float,
+    cfg: ImprovedConfig,
+    pose: SensorInPipe,
+    u_max: float,
+    tol_scale: float = 1.0,
 ) -> tuple[int, int]:
-    """Returns within the wall tolerance of the clamped radius under ``pose``, counting those
-    nearer than ``u_max`` along the axis (all of them when fewer than 40 are), and how many
-    returns were counted (every third return)."""
+    """Returns within ``tol_scale`` x the wall tolerance of the radius ``big_r`` under ``pose``,
+    counting those nearer than ``u_max`` along the axis (all of them when fewer than 40 are),
+    and how many returns were counted (every third return)."""
     if cloud.thin is None:  # every third valid return and its tolerance, computed once
         cloud.thin = (
             np.ascontiguousarray(cloud.sensor_v[:, ::3]),
@@ -752,7 +757,7 @@ def _wall_count(
     sp, tol = cloud.thin
     pts = _transform(pose, sp)
     r = np.sqrt(np.square(pts[1]) + np.square(pts[2]))
-    ok = np.abs(r - big_r) <= tol
+    ok = np.abs(r - big_r) <= tol_scale * tol
     near = pts[0] < u_max
     n_near = int(np.count_nonzero(near))
     if n_near >= 40:
