@@ -70,16 +70,21 @@ def random_layout(kind: str, rng: np.random.Generator, start: float):
 
 
 def approach(net, lidar, method, rng, trigger: float, step: float):
-    """Fused detection at the trigger distance and the truth there."""
+    """Fused detection at the trigger distance and the truth there. A long bend whose arc
+    starts farther out than the trigger distance (its reference point, where the centrelines
+    meet, lies ``R tan(angle / 2)`` past the arc's start) is approached to 1 cm before its
+    arc: the straight line of the incoming axis leaves the pipe inside the arc."""
     tracker = StructureTracker()
-    base = net.structures_ahead(net.start_pose, 10.0)[0].distance
+    ahead = net.structures_ahead(net.start_pose, 10.0)[0]
+    base = ahead.distance
+    stop = max(trigger, ahead.bend_radius * math.tan(0.5 * ahead.angle) + 0.01)
     state = None
-    for d in np.arange(0.45, trigger - 1e-9, -step):
+    for d in np.arange(max(0.45, stop + 3 * step), stop - 1e-9, -step):
         pose = net.start_pose.translated(base - d)
         scan = lidar.scan(pose, rng)
         det = detector.detect(scan, net.inner_diameter_at(pose.position), method=method)
         state = tracker.update(det, pose.position, pose.rotation)
-    pose = net.start_pose.translated(base - trigger)
+    pose = net.start_pose.translated(base - stop)
     truth = net.structures_ahead(pose, 10.0)
     fused = state.detection if state is not None and state.confirmed else None
     return fused, truth
