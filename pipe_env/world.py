@@ -278,7 +278,7 @@ class NearContacts:
         self._last: NDArray[np.float64] | None = None
         self._motion = 0.0
         self._pairs: tuple[NDArray[np.int_], NDArray[np.int_]] | None = None
-        self._coarse: tuple[NDArray[np.float64], NDArray[np.int_]] | None = None
+        self._coarse: tuple[NDArray[np.float64], ...] | None = None
         self.n_pairs = 0
         self.selections = 0
         self.fallbacks = 0
@@ -314,24 +314,20 @@ class NearContacts:
         m = self.model
         self.selections += 1
         r = self._radius + self.reach
-        c, b = self._centre, self._bound
         if self._coarse is None or _moved(xp, self._coarse[0]) > _COARSE - self.reach:
             # the pieces whose bounding spheres meet the geoms' box grown by _COARSE: kept until
             # a geom has moved further than that
+            c, b = self._centre, self._bound
             lo = (xp - r[:, None]).min(axis=0) - _COARSE
             hi = (xp + r[:, None]).max(axis=0) + _COARSE
-            inside = ((c + b[:, None] >= lo) & (c - b[:, None] <= hi)).all(axis=1)
-            self._coarse = (xp, np.flatnonzero(inside))
-        near = self._coarse[1]
-        # bounding spheres first, then the pieces' boxes in their own frames
-        dv = xp[:, None, :] - c[None, near, :]  # (G, K, 3)
-        reach2 = (b[None, near] + r[:, None]) ** 2
-        gi, ki = np.nonzero(np.einsum("gkj,gkj->gk", dv, dv) <= reach2)
+            near = np.flatnonzero(((c + b[:, None] >= lo) & (c - b[:, None] <= hi)).all(axis=1))
+            self._coarse = (xp, near, c[near], self._rot[near], self._half[near])
+        _, near, centre, rot, half = self._coarse
+        # each geom's centre in each piece's frame: its distance from the piece's box
+        local = np.matmul(xp[None, :, :] - centre[:, None, :], rot)  # (K, G, 3)
+        out = np.maximum(np.abs(local) - half[:, None, :], 0.0)
+        ki, gi = np.nonzero(np.einsum("kgi,kgi->kg", out, out) <= r * r)
         pieces = near[ki]
-        local = np.einsum("mji,mj->mi", self._rot[pieces], dv[gi, ki])
-        out = np.maximum(np.abs(local) - self._half[pieces], 0.0)
-        hit = np.einsum("mi,mi->m", out, out) <= r[gi] ** 2
-        gi, pieces = gi[hit], pieces[hit]
         n = len(gi)
         if n > len(self._pool):
             self.fallbacks += 1
