@@ -274,6 +274,10 @@ class NearContacts:
         self._pool = np.arange(CONTACT_PAIR_POOL)
         self._park = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in _PARK]
         self._auto_contype = int(CONTACT_BIT)
+        # with pairs only, the geoms' bodies need no broad phase either
+        self._bodies = np.unique(m.geom_bodyid[self.geoms])
+        self._bodies = self._bodies[self._bodies > 0]
+        self._auto_conaffinity = m.body_conaffinity[self._bodies].copy()
         self._anchor: NDArray[np.float64] | None = None
         self._last: NDArray[np.float64] | None = None
         self._motion = 0.0
@@ -290,6 +294,7 @@ class NearContacts:
         m.pair_geom1[self._pool] = self._park[0]
         m.pair_geom2[self._pool] = self._park[1]
         m.body_contype[0] = self._auto_contype
+        m.body_conaffinity[self._bodies] = self._auto_conaffinity
         self._anchor = None
         self._last = None
         self._pairs = None
@@ -304,8 +309,8 @@ class NearContacts:
         self._last = xp
         if self._anchor is not None and not force:
             moved = _moved(xp, self._anchor)
-            if moved > self.reach:
-                self.overruns += 1
+            if moved > self.reach and self.model.body_contype[0] == 0:
+                self.overruns += 1  # on pairs (not fallen back), a contact may have been missed
             if moved + self.guard * self._motion + self.slack <= self.reach:
                 return
         self._select(xp)
@@ -353,6 +358,7 @@ class NearContacts:
             m.pair_geom2[self._pool[n:]] = self._park[1]
             self._pairs = (g1, g2)
         m.body_contype[0] = 0
+        m.body_conaffinity[self._bodies] = 0
         self.n_pairs = n
         self._anchor = xp
 

@@ -25,6 +25,11 @@ sensor positions, front poses, contact forces, joint angles, lag) is kept per co
 can be saved (:meth:`Outcome.save`, npz) and plotted (:meth:`Outcome.plot`).
 
 Scans are stop-and-scan: the robot stands still, the clock advances by the sweep's duration.
+
+Physics: before every control tick the robot's collision pairs are brought up to date with the
+wall pieces near it (:class:`pipe_env.world.NearContacts`; the same contacts as MuJoCo's
+automatic collisions against every piece, at about half the cost of a step);
+:meth:`Executor.use_near_contacts` switches back to the automatic collisions.
 """
 
 from __future__ import annotations

@@ -31,16 +31,20 @@ def _contacts(m: mujoco.MjModel, d: mujoco.MjData) -> dict[tuple[int, int], list
 def _automatic(ex: Executor, d: mujoco.MjData) -> dict[tuple[int, int], list]:
     """Contacts of the state ``d`` with automatic collisions against every piece."""
     m = ex.model
-    saved = (m.pair_geom1.copy(), m.pair_geom2.copy(), int(m.body_contype[0]))
+    bodies = ex.robot.body_ids
+    saved = (m.pair_geom1.copy(), m.pair_geom2.copy(), m.body_contype.copy())
+    saved_affinity = m.body_conaffinity.copy()
     park = (m.geom("park:a").id, m.geom("park:b").id)
     m.pair_geom1[:], m.pair_geom2[:], m.body_contype[0] = park[0], park[1], CONTACT_BIT
+    m.body_conaffinity[bodies] = CONTACT_BIT
     try:
         dc = mujoco.MjData(m)
         mujoco.mj_copyData(dc, m, d)
         mujoco.mj_forward(m, dc)
         return _contacts(m, dc)
     finally:
-        m.pair_geom1[:], m.pair_geom2[:], m.body_contype[0] = saved
+        m.pair_geom1[:], m.pair_geom2[:], m.body_contype[:] = saved
+        m.body_conaffinity[:] = saved_affinity
 
 
 def _near(ex: Executor, d: mujoco.MjData) -> dict[tuple[int, int], list]:
@@ -151,3 +155,18 @@ def test_near_contacts_reject_bad_input() -> None:
     bare = build_world(layouts.straight(0.1), contact_walls=False)
     with pytest.raises(ValueError, match="predefined pairs"):
         NearContacts(bare, np.array([0]))
+
+
+def test_too_many_pairs_for_the_pool_fall_back_to_automatic_collisions() -> None:
+    net = layouts.mitre_bend(0.06, math.pi / 2, math.pi / 2)
+    ex = Executor.for_network(net, lidar=None)
+    near = ex.near
+    assert near is not None and near.n_pairs > 0
+    near.reach = 0.05  # every piece within 5 cm: more pairs than the pool holds
+    near.update(ex.data, force=True)
+    assert near.fallbacks == 1 and near.n_pairs == 0
+    assert ex.model.body_contype[0] == CONTACT_BIT
+    assert np.all(ex.model.body_conaffinity[ex.robot.body_ids] == CONTACT_BIT)
+    assert _same(_near(ex, ex.data), _automatic(ex, ex.data))
+    ex.run(go_straight(0.05))
+    assert near.overruns == 0
