@@ -277,7 +277,11 @@ class NearContacts:
         # with pairs only, the geoms' bodies need no broad phase either
         self._bodies = np.unique(m.geom_bodyid[self.geoms])
         self._bodies = self._bodies[self._bodies > 0]
-        self._auto_conaffinity = m.body_conaffinity[self._bodies].copy()
+        # as compiled: the union of the body's geoms' bits (another instance may have zeroed it)
+        self._auto_conaffinity = np.array(
+            [np.bitwise_or.reduce(m.geom_conaffinity[m.geom_bodyid == b]) for b in self._bodies],
+            dtype=m.body_conaffinity.dtype,
+        )
         self._anchor: NDArray[np.float64] | None = None
         self._last: NDArray[np.float64] | None = None
         self._motion = 0.0
