@@ -46,7 +46,9 @@ whose failures (stall, blocked bend) still come from real contacts.
 
 Contacts: robot geoms have ``contype = 0`` and ``conaffinity = CONTACT_BIT``, so they collide
 only with the contact walls (never with each other, never with the ray meshes), in their own geom
-group ``ROBOT_GROUP``. Gravity is compensated on the robot's bodies (the clamp carries it).
+group ``ROBOT_GROUP``. The executor collides them with the wall pieces near them only
+(:class:`pipe_env.world.NearContacts`: the same contacts, about half the cost of a physics step).
+Gravity is compensated on the robot's bodies (the clamp carries it).
 """
 
 from __future__ import annotations

@@ -8,12 +8,23 @@ Two geom groups line every pipe:
 - ``CONTACT_GROUP``: convex pieces (:mod:`pipe_env.contact_walls`), invisible (alpha 0), which
   collide with geoms whose ``conaffinity`` has bit ``CONTACT_BIT`` set (the robot's).
 
+Collision pairs near a moving body (:class:`NearContacts`): with all ~1,250 pieces colliding
+automatically, MuJoCo's midphase tests every robot geom against every piece of the pipe around it
+(long panels have large bounding spheres) at every physics step, about half of a step's cost. A
+world with contact walls therefore also holds a pool of ``CONTACT_PAIR_POOL`` predefined geom
+pairs (parked on two far-away dummy spheres). :class:`NearContacts` fills the pool with the pairs
+(robot geom, wall piece) whose pieces lie within a reach of the geoms, with MuJoCo's own mixed
+contact parameters, and switches the world body's automatic collisions off; it re-selects the
+pairs before the geoms can have moved by the reach, and falls back to automatic collisions if the
+pool is too small. The contacts are the same as the automatic ones (tests compare them).
+
 Open ends do not exist: every leaf of a network is a closure with an end wall, so rays cannot
 escape. Callers can add bodies (a robot) through the ``customize`` hook before compilation.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -31,6 +42,10 @@ CONTACT_GROUP = 2
 CONTACT_BIT = 1
 WALL_RGBA = (0.62, 0.64, 0.68, 0.45)
 TIMESTEP = 0.002
+#: Predefined geom pairs a world with contact walls holds for :class:`NearContacts`.
+CONTACT_PAIR_POOL = 160
+#: Names of the two far-away dummy spheres unused pairs point at.
+_PARK = ("park:a", "park:b")
 
 
 @dataclass(eq=False)
@@ -168,6 +183,19 @@ def build_world(
                 _contact_style(g)
                 n_contact += 1
             del element
+        for k, name in enumerate(_PARK):
+            g = world.add_geom()
+            g.name = name
+            g.type = mujoco.mjtGeom.mjGEOM_SPHERE
+            g.size = [1e-4, 0.0, 0.0]
+            g.pos = [1e4 + 10.0 * k, 1e4, 1e4]
+            g.group = 5
+            g.contype = 0
+            g.conaffinity = 0
+            g.rgba = [0.0, 0.0, 0.0, 0.0]
+        for _ in range(CONTACT_PAIR_POOL):
+            pair = spec.add_pair()
+            pair.geomname1, pair.geomname2 = _PARK
     if customize is not None:
         customize(spec)
     model = spec.compile()
@@ -189,3 +217,189 @@ def _contact_style(g: mujoco.MjsGeom) -> None:
     g.conaffinity = 0
     g.rgba = [0.3, 0.5, 0.8, 0.0]
     g.friction = [0.6, 0.005, 0.0001]
+
+
+class NearContacts:
+    """Collides ``geoms`` (a moving body's, e.g. the robot's) only with the contact-wall pieces
+    near them, through the world's pool of predefined pairs (see the module docstring).
+
+    Call :meth:`update` before every physics interval (e.g. a control tick) and after moving the
+    geoms by hand. A piece is paired with a geom when the piece's bounding box (in its own frame)
+    lies within ``reach`` of the geom's bounding sphere. Pairs are selected again before any geom
+    can have moved by ``reach`` since the last selection, judged from the largest motion of any
+    geom over the last interval (``guard`` times it, plus ``slack``); if a geom still moved
+    further over an interval, ``overruns`` counts it (a contact could have been missed). More
+    pairs than the pool holds: automatic collisions for that interval (``fallbacks``).
+
+    Args:
+        world: a world built with contact walls.
+        geoms: geom ids of the moving body.
+        reach: selection distance, m.
+    """
+
+    def __init__(
+        self,
+        world: PipeWorld,
+        geoms: NDArray[np.int_],
+        reach: float = 0.006,
+        guard: float = 2.0,
+        slack: float = 0.001,
+    ) -> None:
+        m, d = world.model, world.data
+        if m.npair < CONTACT_PAIR_POOL:
+            raise ValueError(
+                f"the world holds {m.npair} predefined pairs; NearContacts needs "
+                f"{CONTACT_PAIR_POOL} (a world built with contact_walls=True)"
+            )
+        if not (math.isfinite(reach) and 0.001 <= reach <= 0.1):
+            raise ValueError(f"reach = {reach!r} is invalid; allowed [0.001, 0.1] m")
+        self.world = world
+        self.model = m
+        self.geoms = np.asarray(geoms, dtype=int)
+        self.reach = float(reach)
+        self.guard = float(guard)
+        self.slack = float(slack)
+        walls = np.flatnonzero(
+            (m.geom_group == world.contact_group) & ((m.geom_contype & CONTACT_BIT) != 0)
+        )
+        if not np.all(m.geom_bodyid[walls] == 0):
+            raise ValueError("NearContacts needs the contact walls in the world body")
+        self.walls = walls
+        rot = d.geom_xmat[walls].reshape(-1, 3, 3).copy()
+        self._rot = rot
+        self._centre = d.geom_xpos[walls] + np.einsum("kij,kj->ki", rot, m.geom_aabb[walls, :3])
+        self._half = m.geom_aabb[walls, 3:].copy()
+        self._bound = np.linalg.norm(self._half, axis=1)
+        self._radius = m.geom_rbound[self.geoms].copy()
+        self._pool = np.arange(CONTACT_PAIR_POOL)
+        self._park = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in _PARK]
+        self._auto_contype = int(CONTACT_BIT)
+        # with pairs only, the geoms' bodies need no broad phase either
+        self._bodies = np.unique(m.geom_bodyid[self.geoms])
+        self._bodies = self._bodies[self._bodies > 0]
+        # as compiled: the union of the body's geoms' bits (another instance may have zeroed it)
+        self._auto_conaffinity = np.array(
+            [np.bitwise_or.reduce(m.geom_conaffinity[m.geom_bodyid == b]) for b in self._bodies],
+            dtype=m.body_conaffinity.dtype,
+        )
+        self._anchor: NDArray[np.float64] | None = None
+        self._last: NDArray[np.float64] | None = None
+        self._motion = 0.0
+        self._pairs: tuple[NDArray[np.int_], NDArray[np.int_]] | None = None
+        self._coarse: tuple[NDArray[np.float64], ...] | None = None
+        self.n_pairs = 0
+        self.selections = 0
+        self.fallbacks = 0
+        self.overruns = 0
+
+    def disable(self) -> None:
+        """Back to automatic collisions with every piece (the pool parked)."""
+        m = self.model
+        m.pair_geom1[self._pool] = self._park[0]
+        m.pair_geom2[self._pool] = self._park[1]
+        m.body_contype[0] = self._auto_contype
+        m.body_conaffinity[self._bodies] = self._auto_conaffinity
+        self._anchor = None
+        self._last = None
+        self._pairs = None
+        self.n_pairs = 0
+
+    def update(self, data: mujoco.MjData, force: bool = False) -> None:
+        """Select the pairs again if the geoms may come within reach of unpaired pieces before
+        the next call (``data.geom_xpos`` must be current); always with ``force``."""
+        xp = data.geom_xpos[self.geoms]
+        if self._last is not None:
+            self._motion = _moved(xp, self._last)
+        self._last = xp
+        if self._anchor is not None and not force:
+            moved = _moved(xp, self._anchor)
+            if moved > self.reach and self.model.body_contype[0] == 0:
+                self.overruns += 1  # on pairs (not fallen back), a contact may have been missed
+            if moved + self.guard * self._motion + self.slack <= self.reach:
+                return
+        self._select(xp)
+
+    def _select(self, xp: NDArray[np.float64]) -> None:
+        m = self.model
+        self.selections += 1
+        r = self._radius + self.reach
+        if self._coarse is None or _moved(xp, self._coarse[0]) > _COARSE - self.reach:
+            # the pieces whose bounding spheres meet the geoms' box grown by _COARSE: kept until
+            # a geom has moved further than that
+            c, b = self._centre, self._bound
+            lo = (xp - r[:, None]).min(axis=0) - _COARSE
+            hi = (xp + r[:, None]).max(axis=0) + _COARSE
+            near = np.flatnonzero(((c + b[:, None] >= lo) & (c - b[:, None] <= hi)).all(axis=1))
+            self._coarse = (xp, near, c[near], self._rot[near], self._half[near])
+        _, near, centre, rot, half = self._coarse
+        # each geom's centre in each piece's frame: its distance from the piece's box
+        local = np.matmul(xp[None, :, :] - centre[:, None, :], rot)  # (K, G, 3)
+        out = np.maximum(np.abs(local) - half[:, None, :], 0.0)
+        ki, gi = np.nonzero(np.einsum("kgi,kgi->kg", out, out) <= r * r)
+        pieces = near[ki]
+        n = len(gi)
+        if n > len(self._pool):
+            self.fallbacks += 1
+            self.disable()
+            self._anchor = xp
+            self._last = xp
+            return
+        g1 = self.geoms[gi]
+        g2 = self.walls[pieces]
+        # MuJoCo's order of automatic contacts: by body pair, then geom ids
+        order = np.lexsort((g2, g1, m.geom_bodyid[g1]))
+        g1, g2 = g1[order], g2[order]
+        if self._pairs is None or not (
+            len(self._pairs[0]) == n
+            and np.array_equal(self._pairs[0], g1)
+            and np.array_equal(self._pairs[1], g2)
+        ):
+            idx = self._pool[:n]
+            m.pair_geom1[idx] = g1
+            m.pair_geom2[idx] = g2
+            _mix_params(m, idx, g1, g2)
+            m.pair_geom1[self._pool[n:]] = self._park[0]
+            m.pair_geom2[self._pool[n:]] = self._park[1]
+            self._pairs = (g1, g2)
+        m.body_contype[0] = 0
+        m.body_conaffinity[self._bodies] = 0
+        self.n_pairs = n
+        self._anchor = xp
+
+
+#: :class:`NearContacts` narrows the pieces to those within this of the geoms first, m.
+_COARSE = 0.05
+
+
+def _moved(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
+    """Largest distance between corresponding rows of two (n, 3) arrays."""
+    dv = a - b
+    return math.sqrt(float(np.einsum("ij,ij->i", dv, dv).max()))
+
+
+def _mix_params(m: mujoco.MjModel, idx: NDArray, g1: NDArray, g2: NDArray) -> None:
+    """Set pairs ``idx`` to the contact parameters MuJoCo mixes for automatic contacts of geoms
+    ``g1`` and ``g2`` (equal priorities: condim max, solref/solimp mixed by solmix, friction
+    max; margin and gap summed)."""
+    if np.any(m.geom_priority[g1] != m.geom_priority[g2]):
+        raise ValueError("NearContacts supports geoms of equal priority only")
+    s1, s2 = m.geom_solmix[g1], m.geom_solmix[g2]
+    mix = np.where(
+        (s1 >= mujoco.mjMINVAL) & (s2 >= mujoco.mjMINVAL),
+        s1 / np.maximum(s1 + s2, mujoco.mjMINVAL),
+        np.where(
+            (s1 < mujoco.mjMINVAL) & (s2 < mujoco.mjMINVAL),
+            0.5,
+            np.where(s1 < mujoco.mjMINVAL, 0.0, 1.0),
+        ),
+    )[:, None]
+    r1, r2 = m.geom_solref[g1], m.geom_solref[g2]
+    both = (r1[:, :1] > 0) & (r2[:, :1] > 0)
+    m.pair_solref[idx] = np.where(both, mix * r1 + (1 - mix) * r2, np.minimum(r1, r2))
+    m.pair_solimp[idx] = mix * m.geom_solimp[g1] + (1 - mix) * m.geom_solimp[g2]
+    fr = np.maximum(m.geom_friction[g1], m.geom_friction[g2])
+    m.pair_friction[idx] = fr[:, [0, 0, 1, 2, 2]]
+    m.pair_dim[idx] = np.maximum(m.geom_condim[g1], m.geom_condim[g2])
+    m.pair_margin[idx] = m.geom_margin[g1] + m.geom_margin[g2]
+    m.pair_gap[idx] = m.geom_gap[g1] + m.geom_gap[g2]
+    m.pair_solreffriction[idx] = 0.0

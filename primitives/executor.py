@@ -25,6 +25,11 @@ sensor positions, front poses, contact forces, joint angles, lag) is kept per co
 can be saved (:meth:`Outcome.save`, npz) and plotted (:meth:`Outcome.plot`).
 
 Scans are stop-and-scan: the robot stands still, the clock advances by the sweep's duration.
+
+Physics: before every control tick the robot's collision pairs are brought up to date with the
+wall pieces near it (:class:`pipe_env.world.NearContacts`; the same contacts as MuJoCo's
+automatic collisions against every piece, at about half the cost of a step);
+:meth:`Executor.use_near_contacts` switches back to the automatic collisions.
 """
 
 from __future__ import annotations
@@ -44,7 +49,7 @@ from pipe_env.geometry import Pose, rotation_about
 from pipe_env.lidar import LidarSpec, RotatingLidar
 from pipe_env.network import PipeNetwork
 from pipe_env.robot import Robot, RobotConfig, quat_of
-from pipe_env.world import PipeWorld, build_world
+from pipe_env.world import CONTACT_PAIR_POOL, NearContacts, PipeWorld, build_world
 from primitives.sequences import Sequence
 from primitives.steps import (
     Bend,
@@ -236,6 +241,11 @@ class Executor:
         self._hp = np.zeros((0, 3))
         self._hr = np.zeros((0, 3, 3))
         self._n = 0
+        #: the robot collides only with the wall pieces near it (``None``: with all of them,
+        #: MuJoCo's automatic collisions; the same contacts, slower)
+        self.near: NearContacts | None = None
+        if world.contact_geom_count and world.model.npair >= CONTACT_PAIR_POOL:
+            self.near = NearContacts(world, robot.geom_ids)
         start = world.network.start_pose
         if start is not None:
             self.place(start, float(world.network.inner_diameter_at(start.position)))
@@ -299,6 +309,9 @@ class Executor:
         for i, mid in enumerate(self.robot.mocap_ids):
             del i
             d.mocap_pos[mid] = d.mocap_pos[mid]
+        if self.near is not None:
+            mujoco.mj_kinematics(m, d)
+            self.near.update(d, force=True)
         mujoco.mj_forward(m, d)
         self._tele = _Telemetry()
         try:
@@ -398,9 +411,28 @@ class Executor:
             d.mocap_quat[ids[i]] = quat_of(rot)
 
     # ------------------------------------------------------------------ stepping
+    def use_near_contacts(self, on: bool) -> None:
+        """Collide the robot with the wall pieces near it only (True, the default) or with all
+        of them through MuJoCo's automatic collisions (False: the reference, slower)."""
+        if on and self.near is None:
+            if not (self.world.contact_geom_count and self.model.npair >= CONTACT_PAIR_POOL):
+                raise ValueError("this world has no contact pair pool; near contacts need one")
+            self.near = NearContacts(self.world, self.robot.geom_ids)
+            mujoco.mj_kinematics(self.model, self.data)
+            self.near.update(self.data, force=True)
+        elif not on and self.near is not None:
+            self.near.disable()
+            self.near = None
+
+    def _physics(self) -> None:
+        """One control period of physics steps (pairs near the robot selected first)."""
+        if self.near is not None:
+            self.near.update(self.data)
+        mujoco.mj_step(self.model, self.data, nstep=self.substeps)
+
     def _tick(self, lag_axis: NDArray | None = None) -> float:
         """Advance one control period with the current targets; returns the front's lag, m."""
-        mujoco.mj_step(self.model, self.data, nstep=self.substeps)
+        self._physics()
         self.time += self.substeps * self.model.opt.timestep
         d = self.data
         front = d.xpos[self.robot.body_ids[0]]
@@ -763,7 +795,7 @@ class Executor:
         d = self.data
         d.mocap_pos[self.robot.mocap_ids[0]] = p
         d.mocap_quat[self.robot.mocap_ids[0]] = quat_of(r)
-        mujoco.mj_step(self.model, self.data, nstep=self.substeps)
+        self._physics()
         self.time += self.substeps * self.model.opt.timestep
 
     def drive_until(

@@ -1,0 +1,172 @@
+"""Near contacts: the robot colliding only with the wall pieces near it has the contacts that
+MuJoCo's automatic collisions against every piece have, at every physics step."""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from pipe_env import layouts
+from pipe_env.ground_truth import structures_ahead
+from pipe_env.world import CONTACT_BIT, NearContacts, build_world
+from primitives.executor import Executor
+from primitives.sequences import for_option, go_straight
+
+
+def _contacts(m: mujoco.MjModel, d: mujoco.MjData) -> dict[tuple[int, int], list]:
+    out: dict[tuple[int, int], list] = {}
+    for c in d.contact[: d.ncon]:
+        key = (min(c.geom1, c.geom2), max(c.geom1, c.geom2))
+        out.setdefault(key, []).append(
+            np.concatenate(
+                [[c.dist], c.pos, c.solref, c.solimp, c.friction, [c.dim], [c.includemargin]]
+            )
+        )
+    return {k: sorted(v, key=lambda row: tuple(row)) for k, v in out.items()}
+
+
+def _automatic(ex: Executor, d: mujoco.MjData) -> dict[tuple[int, int], list]:
+    """Contacts of the state ``d`` with automatic collisions against every piece."""
+    m = ex.model
+    bodies = ex.robot.body_ids
+    saved = (m.pair_geom1.copy(), m.pair_geom2.copy(), m.body_contype.copy())
+    saved_affinity = m.body_conaffinity.copy()
+    park = (m.geom("park:a").id, m.geom("park:b").id)
+    m.pair_geom1[:], m.pair_geom2[:], m.body_contype[0] = park[0], park[1], CONTACT_BIT
+    m.body_conaffinity[bodies] = CONTACT_BIT
+    try:
+        dc = mujoco.MjData(m)
+        mujoco.mj_copyData(dc, m, d)
+        mujoco.mj_forward(m, dc)
+        return _contacts(m, dc)
+    finally:
+        m.pair_geom1[:], m.pair_geom2[:], m.body_contype[:] = saved
+        m.body_conaffinity[:] = saved_affinity
+
+
+def _near(ex: Executor, d: mujoco.MjData) -> dict[tuple[int, int], list]:
+    dc = mujoco.MjData(ex.model)
+    mujoco.mj_copyData(dc, ex.model, d)
+    mujoco.mj_forward(ex.model, dc)
+    return _contacts(ex.model, dc)
+
+
+def _same(a: dict, b: dict) -> bool:
+    if a.keys() != b.keys():
+        return False
+    return all(
+        len(a[k]) == len(b[k]) and all(np.allclose(x, y, atol=1e-9) for x, y in zip(a[k], b[k]))
+        for k in a
+    )
+
+
+def _checked(ex: Executor, log: list[tuple[int, int, bool]], every_step: bool = False) -> None:
+    """Step the executor's ticks one physics step at a time, comparing near and automatic
+    contacts before the last step of every tick (where the pair selection is oldest), or before
+    every step; ``log`` gets (near contacts, automatic, same)."""
+
+    def physics() -> None:
+        assert ex.near is not None
+        ex.near.update(ex.data)
+        for k in range(ex.substeps):
+            if every_step or k == ex.substeps - 1:
+                a, b = _near(ex, ex.data), _automatic(ex, ex.data)
+                log.append((sum(map(len, a.values())), sum(map(len, b.values())), _same(a, b)))
+            mujoco.mj_step(ex.model, ex.data)
+
+    ex._physics = physics  # type: ignore[method-assign]
+
+
+def _turn(ex: Executor, net) -> str:
+    o = structures_ahead(net, ex.robot.sensor_pose(), 5.0)[0]
+    out = ex.run(for_option(o, incoming_diameter=ex.robot.clamped_diameter()))
+    return out.status
+
+
+def test_near_contacts_equal_the_automatic_ones_through_a_mitre_turn() -> None:
+    net = layouts.mitre_bend(0.06, math.pi / 2, math.pi / 2)
+    ex = Executor.for_network(net, lidar=None)
+    assert ex.near is not None
+    log: list[tuple[int, int, bool]] = []
+    _checked(ex, log)
+    ex.run(go_straight(0.05))
+    assert _turn(ex, net) == "done"
+    assert len(log) > 300
+    assert sum(1 for n, _, _ in log if n > 0) >= 20  # the turn presses wheels on the walls
+    assert all(same for _, _, same in log), [i for i, (_, _, s) in enumerate(log) if not s][:5]
+    assert ex.near.fallbacks == 0 and ex.near.overruns == 0
+    assert ex.model.body_contype[0] == 0 and ex.near.n_pairs > 0
+
+
+@pytest.mark.slow
+def test_near_contacts_equal_the_automatic_ones_at_every_step_of_a_tee_branch() -> None:
+    net = layouts.t_junction(0.09, direction=math.pi / 2)
+    ex = Executor.for_network(net, lidar=None)
+    log: list[tuple[int, int, bool]] = []
+    _checked(ex, log, every_step=True)
+    ex.run(go_straight(0.1))
+    assert _turn(ex, net) == "done"
+    assert sum(1 for n, _, _ in log if n > 0) >= 100
+    assert all(same for _, _, same in log), [i for i, (_, _, s) in enumerate(log) if not s][:5]
+    assert ex.near is not None and ex.near.fallbacks == 0 and ex.near.overruns == 0
+
+
+def test_the_comparison_catches_a_missing_pair() -> None:
+    """The check above can fail: a selection that drops the pairs of one touching geom
+    (here: too small a reach with no margin for motion) is caught."""
+    net = layouts.mitre_bend(0.06, math.pi / 2, math.pi / 2)
+    ex = Executor.for_network(net, lidar=None)
+    assert ex.near is not None
+    d = ex.data
+    touching = {
+        c.geom1 if c.geom1 in set(ex.robot.geom_ids) else c.geom2 for c in d.contact[: d.ncon]
+    }
+    assert touching
+    keep = np.array([g for g in ex.robot.geom_ids if g != min(touching)])
+    broken = NearContacts(ex.world, keep)
+    broken.update(d, force=True)
+    assert not _same(_near(ex, d), _automatic(ex, d))
+    ex.near.update(d, force=True)
+    assert _same(_near(ex, d), _automatic(ex, d))
+
+
+def test_the_robot_drives_the_same_with_near_or_all_contacts() -> None:
+    net = layouts.t_junction(0.09, direction=math.pi / 2)
+    results = []
+    for use in (True, False):
+        ex = Executor.for_network(net, lidar=None)
+        ex.use_near_contacts(use)
+        ex.run(go_straight(0.1))
+        status = _turn(ex, net)
+        results.append((status, ex.robot.sensor_pose().position, ex.robot.joint_angles()))
+    (s0, p0, j0), (s1, p1, j1) = results
+    assert s0 == s1 == "done"
+    assert np.allclose(p0, p1, atol=1e-6)
+    assert np.allclose(j0, j1, atol=1e-5)
+
+
+def test_near_contacts_reject_bad_input() -> None:
+    world = build_world(layouts.straight(0.1))
+    with pytest.raises(ValueError, match="reach"):
+        NearContacts(world, np.array([0]), reach=0.5)
+    bare = build_world(layouts.straight(0.1), contact_walls=False)
+    with pytest.raises(ValueError, match="predefined pairs"):
+        NearContacts(bare, np.array([0]))
+
+
+def test_too_many_pairs_for_the_pool_fall_back_to_automatic_collisions() -> None:
+    net = layouts.mitre_bend(0.06, math.pi / 2, math.pi / 2)
+    ex = Executor.for_network(net, lidar=None)
+    near = ex.near
+    assert near is not None and near.n_pairs > 0
+    near.reach = 0.05  # every piece within 5 cm: more pairs than the pool holds
+    near.update(ex.data, force=True)
+    assert near.fallbacks == 1 and near.n_pairs == 0
+    assert ex.model.body_contype[0] == CONTACT_BIT
+    assert np.all(ex.model.body_conaffinity[ex.robot.body_ids] == CONTACT_BIT)
+    assert _same(_near(ex, ex.data), _automatic(ex, ex.data))
+    ex.run(go_straight(0.05))
+    assert near.overruns == 0
