@@ -1856,6 +1856,8 @@ def _fit_torus(
         sup = int((w > 0.1).sum())
         if best is None or (sup, -rms) > (best[2], -best[1]):
             best = (x, rms, sup)
+        if sup >= 0.98 * sub.shape[0] and rms <= 0.3 * c_fin:
+            break  # (the first start explains nearly every return closely already)
     if best is None:
         return None
     x, rms, sup = best
