@@ -583,17 +583,24 @@ def detect_improved(
     diag: dict[str, Any] = {"method": "improved", "n_points": int(scan.n_valid)}
     try:
         cloud = _prepare(scan, pose0, bias, config)
-        # the clamp's encoders read the diameter to a millimetre or two: the wall right around
-        # the sensor (nearer than any structure in view) measures it first, the wall before
-        # the structure again once the axis is refined
-        u_nearest = _pct(cloud.xyz_v[0], 1.0)
-        big_r = _wall_radius(cloud, big_r, config, u_nearest + NEAR_WALL, diag)
+        # the given pose and the clamp reading explain every return already: straight pipe,
+        # nothing to measure or refine (the common case, kept cheap)
         if refine_axis:
-            # the given pose explains every return already: straight pipe, nothing to refine
             diag["axis_pass"] = 0
             straight = _intact(cloud, big_r, config, diag)
             if straight is not None:
                 return _timed(straight, t0)
+        # the clamp's encoders read the diameter to a millimetre or two: the wall right around
+        # the sensor (nearer than any structure in view) measures it first, the wall before
+        # the structure again once the axis is refined
+        u_nearest = _pct(cloud.xyz_v[0], 1.0)
+        r_clamped = big_r
+        big_r = _wall_radius(cloud, big_r, config, u_nearest + NEAR_WALL, diag)
+        if refine_axis:
+            if big_r != r_clamped:  # (straight pipe after all, at its measured radius?)
+                straight = _intact(cloud, big_r, config, diag)
+                if straight is not None:
+                    return _timed(straight, t0)
             diag.pop("axis_pass")
             candidates = [(pose0, {})]
             passes = [0]  # the pass each candidate pose comes from
