@@ -54,7 +54,10 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    ``R cot(angle)`` past the reference point, ``asin(rho / R)`` wide on either side of its
    roll, which sizes a narrower branch); when the few returns through a far opening lead
    the fit away from the hole seen, the fit restarts from the hole and stays near it. Lobes
-   that start well past the nearest one belong to a structure farther along the run.
+   that start well past the nearest one belong to a structure farther along the run. A side
+   hole that only one ring of beams enters (a small pipe's branch seen far away, between two
+   rings) shows as a bump of returns just beyond the wall on that ring alone; its far side
+   places and sizes the branch (:mod:`detector.grazing`) when nothing nearer was found.
 5. **Kind and confidence.** One way on -> ``bend``; two or more -> ``junction``. Confidence
    combines the number of supporting returns and the fit residual relative to the tolerance.
    Degenerate inputs (no returns, too few wall returns, fits that fail or leave the physical
@@ -81,6 +84,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.detection import Detection
+from detector.grazing import find_ring_holes
 from detector.grid import build_grid, label_regions
 from detector.options import StructureOption, option_order
 from detector.robust import mad_sigma, robust_gauss_newton, tukey_cost, tukey_weights
@@ -589,7 +593,7 @@ def detect_improved(
             diag["axis_pass"] = 0
             straight = _intact(cloud, big_r, config, diag)
             if straight is not None:
-                return _timed(straight, t0)
+                return _timed(_with_ring_holes(cloud, big_r, straight), t0)
         # the clamp's encoders read the diameter to a millimetre or two: the wall right around
         # the sensor (nearer than any structure in view) measures it first, the wall before
         # the structure again once the axis is refined
@@ -600,7 +604,7 @@ def detect_improved(
             if big_r != r_clamped:  # (straight pipe after all, at its measured radius?)
                 straight = _intact(cloud, big_r, config, diag)
                 if straight is not None:
-                    return _timed(straight, t0)
+                    return _timed(_with_ring_holes(cloud, big_r, straight), t0)
             diag.pop("axis_pass")
             candidates = [(pose0, {})]
             passes = [0]  # the pass each candidate pose comes from
@@ -623,7 +627,7 @@ def detect_improved(
                 diag["axis_pass"] = 1
                 straight = _intact(cloud, big_r, config, diag)
                 if straight is not None:  # no return off the wall under the refined axis
-                    return _timed(straight, t0)
+                    return _timed(_with_ring_holes(cloud, big_r, straight), t0)
                 for key in info1:
                     diag.pop(key)
                 diag.pop("axis_pass")
@@ -674,7 +678,9 @@ def detect_improved(
             if rms is not None and float(_pct(cloud.sigma_v, 90.0)) < 0.0005:
                 cloud.floor = min(config.tol_floor, max(0.0008, 6.0 * float(rms)))
                 diag["tolerance_floor"] = cloud.floor
-        det = _detect_in_pipe_frame(cloud, big_r, config, diag)
+        det = _with_ring_holes(
+            cloud, big_r, _detect_in_pipe_frame(cloud, big_r, config, diag), config
+        )
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
@@ -729,6 +735,52 @@ def _wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max:
     e = cloud.r_v - big_r
     n_off = int(np.count_nonzero(near & (np.abs(e) > _tolerance_v(cloud, cfg))))
     return n_off <= 0.01 * n_near
+
+
+def _with_ring_holes(
+    cloud: PipeCloud, big_r: float, det: Detection, cfg: ImprovedConfig = DEFAULT_CONFIG
+) -> Detection:
+    """``det``, or a junction when one ring of beams enters side holes in the run's wall
+    nearer than the structure found (more than a diameter before it and before the first
+    returns off the wall, e.g. where a wide arc starts curving): a branch seen far away
+    in a small pipe, between two rings of beams (:mod:`detector.grazing`). The branches are
+    taken perpendicular to the run (the ring shows where the branch's far side is, not how it
+    is deflected); the run goes on past them (the next ring lies on its wall)."""
+    # (cheap test first: too few returns beyond the wall at all)
+    e = cloud.r_v - big_r
+    if np.count_nonzero(e > np.maximum(0.00035, 4.0 * cloud.sigma_v)) < 6:
+        return det
+    if det.options:
+        start = min(det.distance, _structure_start(cloud, big_r, cfg))
+        before = start - 2.0 * big_r
+        if before <= 0.0:
+            return det
+    else:
+        before = float(np.max(cloud.xyz_v[0]))
+    holes = find_ring_holes(cloud.xyz, cloud.valid, cloud.sigma_r, cloud.wraps, big_r, before)
+    if not holes:
+        return det
+    position = float(np.mean([h.position for h in holes]))
+    conf = min(_confidence(h.n, h.rms, 0.001) for h in holes)
+    options = [StructureOption("junction", position, 2.0 * big_r, 0.0, 0.0, conf)]
+    for h in holes:
+        angle, direction = option_direction(
+            np.array([0.0, math.cos(h.roll), math.sin(h.roll)]), cloud.pose
+        )
+        options.append(
+            StructureOption("junction", h.position, 2.0 * h.radius, direction, angle, conf)
+        )
+    options.sort(key=option_order)
+    diag = dict(det.diagnostics)
+    diag.update(
+        model="ring holes",
+        ring_holes=[
+            {"position": h.position, "radius": h.radius, "roll": h.roll, "n": h.n, "rms": h.rms}
+            for h in holes
+        ],
+        replaced_kind=det.kind,
+    )
+    return Detection("junction", options, conf, diag)
 
 
 def _timed(det: Detection, t0: float) -> Detection:

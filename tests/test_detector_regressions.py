@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from detector_scans import match, scan_layout, wrap
+from detector_scans import match, rot_tilt, scan_layout, wrap
 
 from detector import detect
 from detector.robust import robust_gauss_newton
@@ -268,3 +268,32 @@ def test_wide_bend_seen_from_just_before_its_arc_keeps_the_given_axis():
     # the arc is out of view, the angle is a lower bound, and flagged as one
     assert math.radians(45.0) < o.angle <= t.angle and det.diagnostics["angle_lower_bound"]
     assert o.bend_radius > 0.2
+
+
+def test_small_side_holes_between_two_rings_of_beams_are_found():
+    # 40 cm before a 57 mm tee (or cross) the beams meet the wall 4.9 cm apart along the axis:
+    # one ring of beams enters the 57 mm hole and meets the branch's far side only 1.5 mm
+    # beyond the run's wall; the scan once read as the end wall of the run 65 cm farther on
+    for layout, params in (
+        ("t_junction", {"direction": -2.3262, "entry": "run"}),
+        ("cross_junction", {"direction": 0.0716}),
+    ):
+        scan, truth, d = scan_layout(layout, 0.4, diameter=0.057, branch_diameter=0.057, **params)
+        det = detect(scan, d)
+        assert det.kind == "junction" and len(det.options) == len(truth), det.describe()
+        assert det.diagnostics["model"] == "ring holes"
+        for o, t in match(det.options, truth):
+            assert abs(o.distance - t.distance) < 0.005
+            assert abs(o.diameter - t.diameter) < 0.002
+            assert abs(o.angle - t.angle) < math.radians(1.0)
+            assert abs(wrap(o.direction - t.direction)) < math.radians(2.0)
+
+
+def test_no_ring_holes_in_a_straight_pipe_seen_off_centre():
+    # a sensor 0.8 mm off the axis and tilted 0.1 deg: every ring leaves the wall by up to a
+    # millimetre, smoothly from ring to ring, which is no hole
+    tilt = Pose(np.array([0.0, 0.0008, -0.0003]), rot_tilt(0.0, math.radians(0.1)))
+    for d_pipe in (0.057, 0.1):
+        scan, _, d = scan_layout("straight", 0.0, diameter=d_pipe, misalignment=tilt)
+        det = detect(scan, d)
+        assert det.kind == "straight", det.describe()

@@ -1,0 +1,183 @@
+"""Side openings that only one ring of beams enters: a branch's hole in the run's wall seen far
+away, between two rings of beams.
+
+A beam at elevation ``beta`` from the axis meets the wall of a pipe of radius ``R`` at
+``u = R / tan(beta)``; neighbouring beams (0.5 deg apart) meet it ``u^2 / R x beam step`` apart
+along the axis: 4.9 cm at 40 cm in a 57 mm pipe, about as long as a 57 mm branch's hole. The one
+ring of beams that enters such a hole does not reach far past the wall: it runs on, nearly
+parallel to the axis, until it meets the branch's far side, ``sqrt(rho^2 - (R sin dphi)^2)`` past
+the branch's axis at ``dphi`` from its roll, and returns there a millimetre or two outside the
+run's wall radius (less than the wall tolerance, so the opening detector sees none of it),
+though its range is up to a few centimetres long. Compared with the rings on either side,
+which lie on the wall, the ring shows a bump of returns beyond the wall over a bounded range
+of roll; the far-side positions of those returns give the branch's place along the axis, its
+roll and its radius.
+
+Everything here works on the unrolled scan grid (:mod:`detector.grid`) in the pipe frame.
+Lengths in metres, angles in radians.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from detector.grid import label_regions
+from detector.robust import robust_gauss_newton
+
+#: A return counts as entering an opening when it lies this far (m) beyond the wall line
+#: through the rings on either side, and at least ``NOISE_K`` times its radial noise.
+MIN_STEP = 0.00035
+NOISE_K = 4.0
+#: Fewest returns (and rows of roll) in one ring's bump.
+MIN_RETURNS = 6
+#: A bump around more than this much of the circumference (rad) is no side hole.
+MAX_ROLL_SPAN = math.radians(200.0)
+#: Largest rms (m) of the far-side fit for a hole to be accepted.
+MAX_FIT_RMS = 0.002
+#: The rings on either side of the bump must lie on the wall: within this (m, plus
+#: ``NOISE_K`` times their radial noise) of the run's radius.
+WALL_BAND = 0.002
+
+
+@dataclass(frozen=True)
+class RingHole:
+    """A side branch's hole found through one ring of beams.
+
+    Attributes:
+        position: along the run's axis where the branch's axis crosses it, m (pipe frame).
+        radius: the branch's inner radius, m.
+        roll: roll of the branch, atan2(z, y) in the pipe frame, rad.
+        n: returns in the bump.
+        rms: rms of the far-side fit, m.
+        entry: along the axis where the ring's beams cross the run's wall, m.
+    """
+
+    position: float
+    radius: float
+    roll: float
+    n: int
+    rms: float
+    entry: float
+
+
+def ring_steps(
+    xyz: NDArray[np.float64], valid: NDArray[np.bool_], big_r: float
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Radial residual of each return (``(G, K)`` grid) from the wall line through the returns of
+    the same row in the neighbouring columns (interpolated along the axis, so a pose slightly
+    off, which moves the wall smoothly, cancels), and where that line exists."""
+    u = xyz[0]
+    e = np.hypot(xyz[1], xyz[2]) - big_r
+    step = np.zeros_like(e)
+    ok = np.zeros_like(valid)
+    if e.shape[1] < 3:
+        return step, ok
+    u0, u1, u2 = u[:, :-2], u[:, 1:-1], u[:, 2:]
+    e0, e2 = e[:, :-2], e[:, 2:]
+    both = valid[:, :-2] & valid[:, 1:-1] & valid[:, 2:]
+    span = u2 - u0
+    both &= np.abs(span) > 1e-6
+    t = np.where(both, (u1 - u0) / np.where(both, span, 1.0), 0.5)
+    line = e0 + t * (e2 - e0)
+    step[:, 1:-1] = np.where(both, e[:, 1:-1] - line, 0.0)
+    ok[:, 1:-1] = both
+    return step, ok
+
+
+def find_ring_holes(
+    xyz: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    sigma_r: NDArray[np.float64],
+    wraps: bool,
+    big_r: float,
+    before: float,
+) -> list[RingHole]:
+    """Side holes that one ring of beams enters, nearer than ``before`` along the axis.
+
+    Args:
+        xyz: (3, G, K) pipe-frame returns on the unrolled grid.
+        valid: (G, K) where a return is.
+        sigma_r: (G, K) radial noise of each return, m.
+        wraps: whether the grid's rows wrap around the circumference.
+        big_r: the run's radius, m.
+        before: only holes whose ring meets the wall nearer than this, m.
+    """
+    step, ok = ring_steps(xyz, valid, big_r)
+    thr = np.maximum(MIN_STEP, NOISE_K * sigma_r)
+    bump = ok & (step > thr) & (xyz[0] < before)
+    if np.count_nonzero(bump) < MIN_RETURNS:
+        return []
+    # ... between rings that lie on the wall (the run goes on past the hole)
+    on_wall = np.abs(np.hypot(xyz[1], xyz[2]) - big_r) <= WALL_BAND + NOISE_K * sigma_r
+    bump[:, 1:-1] &= on_wall[:, :-2] & on_wall[:, 2:]
+    if np.count_nonzero(bump) < MIN_RETURNS:
+        return []
+    labels, n_lab = label_regions(bump, wraps)
+    holes = []
+    g = valid.shape[0]
+    for lab in range(1, n_lab + 1):
+        rows, cols = np.nonzero(labels == lab)
+        if rows.size < MIN_RETURNS or np.unique(rows).size < MIN_RETURNS:
+            continue
+        if np.unique(cols).size > 1:
+            continue  # more than one ring: an opening the regular detector sees
+        if np.unique(rows).size * 2.0 * math.pi / g > MAX_ROLL_SPAN:
+            continue  # (almost) all around: a widening, not a side hole
+        hole = _fit_far_side(xyz[:, rows, cols], big_r)
+        if hole is not None and hole.entry < before:
+            holes.append(hole)
+    # two rings entering at the same roll: an opening long enough for the regular detector
+    crowded = {
+        i
+        for i, a in enumerate(holes)
+        for j, b in enumerate(holes)
+        if i != j and abs(_wrap(a.roll - b.roll)) < math.radians(45.0)
+    }
+    return [h for i, h in enumerate(holes) if i not in crowded]
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _fit_far_side(p: NDArray[np.float64], big_r: float) -> RingHole | None:
+    """Fit ``u = position + sqrt(rho^2 - (r sin(phi - roll))^2)`` (a branch perpendicular to the
+    run) to the far-side returns ``p`` (3, n)."""
+    u = p[0]
+    r = np.hypot(p[1], p[2])
+    phi = np.arctan2(p[2], p[1])
+    # roll: the circular mean weighted by how far along each return went
+    w = u - float(u.min()) + 1e-4
+    roll0 = math.atan2(float(np.sum(w * np.sin(phi))), float(np.sum(w * np.cos(phi))))
+    rho0 = 0.8 * big_r
+    x0 = np.array([float(u.max()) - rho0, rho0, roll0])
+
+    def residual(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        s = r * np.sin(phi - x[2])
+        return x[0] + np.sqrt(np.maximum(x[1] * x[1] - s * s, 0.0)) - u
+
+    lower = np.array([float(u.min()) - 2.0 * big_r, 0.2 * big_r, roll0 - 0.6])
+    upper = np.array([float(u.max()), 1.05 * big_r, roll0 + 0.6])
+    x, res, _ = robust_gauss_newton(
+        residual,
+        x0,
+        np.array([1e-4, 1e-4, 1e-3]),
+        c=0.01,
+        c_final=0.003,
+        iterations=30,
+        lower=lower,
+        upper=upper,
+        step_tol=1e-7,
+    )
+    if not np.all(np.isfinite(x)):
+        return None
+    rms = float(np.sqrt(np.mean(np.square(res))))
+    if rms > MAX_FIT_RMS:
+        return None
+    entry = float(np.median(u * big_r / np.maximum(r, 1e-9)))
+    roll = _wrap(float(x[2]))
+    return RingHole(float(x[0]), float(x[1]), roll, int(u.size), rms, entry)
