@@ -746,18 +746,32 @@ def _with_ring_holes(
     in a small pipe, between two rings of beams (:mod:`detector.grazing`). The branches are
     taken perpendicular to the run (the ring shows where the branch's far side is, not how it
     is deflected); the run goes on past them (the next ring lies on its wall)."""
-    # (cheap test first: too few returns beyond the wall at all)
-    e = cloud.r_v - big_r
-    if np.count_nonzero(e > np.maximum(0.00035, 4.0 * cloud.sigma_v)) < 6:
+    # (cheap tests first: too few returns beyond the wall at all, or nearer than the limit)
+    beyond = cloud.r_v - big_r > np.maximum(0.00035, 4.0 * cloud.sigma_v)
+    if np.count_nonzero(beyond) < 6:
         return det
     if det.options:
-        start = min(det.distance, _structure_start(cloud, big_r, cfg))
-        before = start - 2.0 * big_r
-        if before <= 0.0:
+        before = det.distance - 2.0 * big_r
+        beyond &= cloud.xyz_v[0] < before
+        if np.count_nonzero(beyond) < 6:
+            return det
+        before = min(before, _structure_start(cloud, big_r, cfg) - 2.0 * big_r)
+        beyond &= cloud.xyz_v[0] < before
+        if np.count_nonzero(beyond) < 6:
             return det
     else:
         before = float(np.max(cloud.xyz_v[0]))
-    holes = find_ring_holes(cloud.xyz, cloud.valid, cloud.sigma_r, cloud.wraps, big_r, before)
+    # only the rings that hold such returns, and their neighbours
+    cols = cloud.cell[beyond] % cloud.shape[1]
+    c0, c1 = max(int(cols.min()) - 1, 0), min(int(cols.max()) + 2, cloud.shape[1])
+    holes = find_ring_holes(
+        cloud.xyz[:, :, c0:c1],
+        cloud.valid[:, c0:c1],
+        cloud.sigma_r[:, c0:c1],
+        cloud.wraps,
+        big_r,
+        before,
+    )
     if not holes:
         return det
     position = float(np.mean([h.position for h in holes]))
