@@ -1216,17 +1216,18 @@ def _axisymmetric(
         # (when seen) reaches the wall radius is the start of the widening
         # (not an end wall far down the wider pipe)
         cone = (r < r2 - max(2.0 * tol_med, 0.005)) & (u < u_first + 0.3)
-        if np.count_nonzero(cone) >= 20:
+        # (a line along the cone needs more than one ring of beams on it)
+        along = np.count_nonzero(cone) >= 20 and _pct(u[cone], 95) - _pct(u[cone], 5) > 0.005
+        if along:
             a_u, b_u = _robust_line(r[cone], u[cone])
             if math.isfinite(a_u + b_u * big_r):
                 big_l = min(u_first, max(u_first - 0.1, a_u + b_u * big_r))
         else:
             # the edge lies between the last beam on the wall and the first one past it
-            u_wall = cloud.xyz[0][wall]
-            before = u_wall[(u_wall < u_first) & (u_wall > u_first - 0.1)]
-            if before.size:
-                big_l = 0.5 * (float(before.max()) + u_first)
-        diag["widening_start_from_cone"] = bool(np.count_nonzero(cone) >= 20)
+            wide = ~cone & (r >= r2 - max(2.0 * tol_med, 0.005))
+            u_wide = float(_pct(u[wide], 1.0)) if np.any(wide) else u_first * r2 / big_r
+            big_l = _widening_edge(cloud, big_r, wall, u_first, r2, u_wide, big_l, p[cone])
+        diag["widening_start_from_cone"] = bool(along)
     diag.update(reducer_r2=r2, reducer_taper=t_len, reducer_rms=rms, axisymmetric_support=support)
     cov = _azimuth_coverage(p)
     if not (math.isfinite(big_l) and math.isfinite(r2)):
@@ -1243,6 +1244,50 @@ def _axisymmetric(
     conf = _confidence(int((w > 0.1).sum()), rms, c_fin) * cov * min(1.0, support / 0.6)
     opt = StructureOption("reducer", max(big_l, 0.0), 2.0 * r2, 0.0, 0.0, conf)
     return Detection("reducer", [opt], conf, diag)
+
+
+def _widening_edge(
+    cloud: PipeCloud,
+    big_r: float,
+    wall: NDArray[np.bool_],
+    u_first: float,
+    r2: float,
+    u_f: float,
+    default: float,
+    cone: NDArray[np.float64],
+) -> float:
+    """Start of a widening (m along the axis) whose cone the beams hardly see: between the
+    last beams on the wall and the first past it (``u_first``: where the first beams that
+    reach the wider pipe, of radius ``r2``, crossed the wall radius). A gentle cone seen by
+    one ring of beams (``cone``: (n, 3) its returns beyond the wall tolerance, if any; else
+    returns a millimetre or two beyond the wall, within its tolerance) bounds it more
+    tightly: the start lies before that ring's returns ``(u_c, r_c)``, and
+    far enough before that the cone through them reaches ``r2`` before the first returns on
+    the wider pipe (at ``u_f`` along the axis): ``L >= (k u_c - u_f) / (k - 1)`` with
+    ``k = (r2 - R) / (r_c - R)``. The middle of the interval left is the estimate."""
+    pw = cloud.points(wall)
+    near = (pw[:, 0] < u_first) & (pw[:, 0] > u_first - 0.1)
+    if not np.any(near):
+        return default
+    u_w = pw[near, 0]
+    e_w = np.hypot(pw[near, 1], pw[near, 2]) - big_r
+    sig = cloud.values(wall, cloud.sigma_v)[near]
+    off = e_w > np.maximum(0.00035, 4.0 * sig)
+    lo, hi = float(u_w.max()), u_first
+    if cone.shape[0] >= 6 or np.count_nonzero(off) >= 6:
+        u_on = u_w[~off]
+        lo = float(u_on.max()) if u_on.size else u_first - 0.1
+        if np.count_nonzero(off) >= 6:
+            u_c = float(np.median(u_w[off]))
+            r_c = big_r + float(np.median(e_w[off]))
+        else:
+            u_c = float(np.median(cone[:, 0]))
+            r_c = float(np.median(np.hypot(cone[:, 1], cone[:, 2])))
+        k = (r2 - big_r) / max(r_c - big_r, 1e-6)
+        if k > 1.0 and lo < u_c:
+            lo = max(lo, (k * u_c - u_f) / (k - 1.0))
+            hi = u_c
+    return 0.5 * (lo + hi) if lo <= hi else hi
 
 
 def _radius_mode(r: NDArray, n: int) -> float:

@@ -297,3 +297,17 @@ def test_no_ring_holes_in_a_straight_pipe_seen_off_centre():
         scan, _, d = scan_layout("straight", 0.0, diameter=d_pipe, misalignment=tilt)
         det = detect(scan, d)
         assert det.kind == "straight", det.describe()
+
+
+def test_gentle_widening_seen_by_one_ring_starts_before_that_ring():
+    # a 57 mm pipe widening to 78 mm over 19 cm, 40 cm ahead: one ring of beams meets the cone,
+    # 2 mm beyond the wall (within its tolerance), 3.8 cm past the start; the start was once
+    # put after it (5.4 cm late). It lies between the last ring on the wall and that ring, and
+    # early enough for the cone to reach the wide pipe before the next ring does.
+    scan, truth, d = scan_layout(
+        "reducer", 0.4, diameter_in=0.057, diameter_out=0.0784, taper_length=0.192
+    )
+    det = detect(scan, d)
+    assert det.kind == "reducer", det.describe()
+    assert abs(det.options[0].distance - truth[0].distance) < 0.015
+    assert abs(det.options[0].diameter - 0.0784) < 0.002
