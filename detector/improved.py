@@ -58,6 +58,10 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    hole that only one ring of beams enters (a small pipe's branch seen far away, between two
    rings) shows as a bump of returns just beyond the wall on that ring alone; its far side
    places and sizes the branch (:mod:`detector.grazing`) when nothing nearer was found.
+   A junction's branches are held at the standard angle of fittings (90 deg for tees and
+   crosses, 45 or 135 deg for laterals) when fitted within 10 deg of it and the returns do
+   not reject it (likelihood ratio): a small opening far away shows a patch of the branch
+   whose deflection trades against the reference point and the radius.
 5. **Kind and confidence.** One way on -> ``bend``; two or more -> ``junction``. Confidence
    combines the number of supporting returns and the fit residual relative to the tolerance.
    Degenerate inputs (no returns, too few wall returns, fits that fail or leave the physical
@@ -101,6 +105,12 @@ ANNEAL = 3
 COST_TOL = 1e-4
 #: The wall's own radius replaces the clamped one when they differ by more than this, m.
 RADIUS_DEAD_BAND = 0.00025
+#: Deflections of standard branch fittings (tees and crosses, laterals either way), rad; a
+#: junction's branch fitted within ``SNAP_WITHIN`` of one is held at it when the returns allow
+#: (likelihood ratio at most ``SNAP_LR`` per branch).
+STANDARD_BRANCH_ANGLES = np.radians([45.0, 90.0, 135.0])
+SNAP_WITHIN = math.radians(10.0)
+SNAP_LR = 6.0
 #: Less straight wall than this in view along the axis (m) before a structure: the given pose
 #: stands when it explains that wall.
 SHORT_WALL_VIEW = 0.05
@@ -1666,6 +1676,18 @@ def _branches(
         if lr_a <= 0.5 * cfg.radius_lr_per_branch * max(n_extra, 1):
             across = xa
             x, res, w = xa, res_a, w_a
+    if not any_roll and (across is not None or n_l >= 2 or straight_on):
+        # a junction: its branches leave at the standard angles of fittings when the returns
+        # allow it
+        if across is not None:
+            n_b = 1
+            lo_s = np.array([lower[0], math.radians(25.0), -10.0, float(across[3])])
+            up_s = np.array([upper[0], math.radians(155.0), 10.0, float(across[3])])
+        else:
+            n_b, lo_s, up_s = (n_l, lo_eq, up_eq) if x is x_eq else (n_l, lower, upper)
+        x, res, w = _standard_angles(pts_all, x, res, w, n_b, lo_s, up_s, c_fin, sigma2, diag)
+        if across is not None:
+            across = x
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     support = int((w > 0.1).sum())
     diag.update(fit_rms=rms, fit_support=support, fit_points=int(p_all.shape[0]))
@@ -1751,6 +1773,59 @@ def _branches(
     ]
     options.sort(key=option_order)
     return Detection(kind, options, conf, diag)
+
+
+def _standard_angles(
+    pts: NDArray[np.float64],
+    x: NDArray[np.float64],
+    res: NDArray[np.float64],
+    w: NDArray[np.float64],
+    n_b: int,
+    lower: NDArray[np.float64],
+    upper: NDArray[np.float64],
+    c_fin: float,
+    sigma2: float,
+    diag: dict[str, Any],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The branch fit ``x`` (``[L, theta, phi, rho] x n_b``, its residuals and weights) with
+    each deflection within ``SNAP_WITHIN`` of a standard fitting angle (tees and crosses
+    90 deg, laterals 45 deg: :data:`STANDARD_BRANCH_ANGLES`) held at that angle and the rest
+    refitted, when the returns do not reject it (likelihood ratio against the residual noise
+    ``sigma2``, m^2, at most ``SNAP_LR`` per angle held). A small opening far away shows a
+    patch of the branch's wall whose deflection trades against the reference point and the
+    radius by a few degrees; a standard angle the patch fits as well is the better estimate."""
+    idx, angles = [], []
+    for k in range(n_b):
+        th = float(x[1 + 3 * k])
+        j = int(np.argmin(np.abs(STANDARD_BRANCH_ANGLES - th)))
+        if 1e-6 < abs(STANDARD_BRANCH_ANGLES[j] - th) <= SNAP_WITHIN:
+            idx.append(1 + 3 * k)
+            angles.append(float(STANDARD_BRANCH_ANGLES[j]))
+    if not idx:
+        return x, res, w
+    xs, lo, up = x.copy(), lower.copy(), upper.copy()
+    xs[idx] = lo[idx] = up[idx] = angles
+    xs = np.clip(xs, np.minimum(lo, xs), np.maximum(up, xs))
+    x_s, res_s, w_s = robust_gauss_newton(
+        None,
+        xs,
+        np.full(xs.size, 1e-5),
+        c=2.0 * c_fin,
+        iterations=8,
+        lower=lo,
+        upper=up,
+        c_final=c_fin,
+        step_tol=STEP_TOL,
+        anneal=ANNEAL,
+        cost_tol=COST_TOL,
+        resjac=lambda v: _line_resjac(pts, v, n_b, True),
+    )
+    lr = 2.0 * (tukey_cost(res_s, c_fin) - tukey_cost(res, c_fin)) / max(sigma2, 1e-12)
+    diag["standard_angle_lr"] = float(lr)
+    if lr <= SNAP_LR * len(idx):
+        diag["standard_angles"] = len(idx)
+        return x_s, res_s, w_s
+    return x, res, w
 
 
 def _nearest_structure_lobes(

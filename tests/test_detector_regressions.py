@@ -311,3 +311,25 @@ def test_gentle_widening_seen_by_one_ring_starts_before_that_ring():
     assert det.kind == "reducer", det.describe()
     assert abs(det.options[0].distance - truth[0].distance) < 0.015
     assert abs(det.options[0].diameter - 0.0784) < 0.002
+
+
+def test_tee_branch_seen_through_a_small_opening_keeps_its_standard_angle():
+    # a 58 mm branch of a 100 mm run 40 cm ahead: the 47 returns through its opening fitted a
+    # branch deflected by 86.7 deg just as well as by 90 (the deflection trades against the
+    # reference point and the radius); fittings come at standard angles, which the returns
+    # do not reject here
+    scan, truth, d = scan_layout(
+        "t_junction",
+        0.4,
+        diameter=0.1,
+        branch_diameter=0.05832527,
+        direction=1.6318623,
+        entry="run",
+    )
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    assert det.diagnostics.get("standard_angles") == 1
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < 0.002
+        assert abs(o.diameter - t.diameter) < 0.001
+        assert abs(o.angle - t.angle) < math.radians(0.5)
