@@ -105,6 +105,11 @@ ANNEAL = 3
 COST_TOL = 1e-4
 #: The wall's own radius replaces the clamped one when they differ by more than this, m.
 RADIUS_DEAD_BAND = 0.00025
+#: With the structure starting less than ``NO_WALL_VIEW`` (m) past the nearest returns, a
+#: refined pipe axis replaces the given pose only when it explains this fraction (and ten)
+#: more of the wall returns.
+NO_WALL_VIEW = 0.01
+GIVEN_POSE_MARGIN = 0.02
 #: Deflections of standard branch fittings (tees and crosses, laterals either way), rad; a
 #: junction's branch fitted within ``SNAP_WITHIN`` of one is held at it when the returns allow
 #: (likelihood ratio at most ``SNAP_LR`` per branch).
@@ -670,6 +675,15 @@ def detect_improved(
                 if k and given_fits and inf.get("axis_rms", 0.0) > rms_cap:
                     scores[k] = -1
             best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
+            if (
+                best
+                and u_start0 < u_nearest + NO_WALL_VIEW
+                and scores[best] <= scores[0] + max(GIVEN_POSE_MARGIN * scores[0], 10)
+            ):
+                # no wall in view before the structure (the stem of a tee ending before the
+                # nearest returns): a refinement that explains hardly more returns than the
+                # given pose (a few of thousands) rests on the structure
+                best = 0
             if best and given_fits and u_start0 - u_nearest < SHORT_WALL_VIEW:
                 # hardly any straight wall in view before the structure: a refinement can only
                 # lean on the structure (a cylinder tilted about the nearest wall, pivoting

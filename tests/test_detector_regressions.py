@@ -333,3 +333,19 @@ def test_tee_branch_seen_through_a_small_opening_keeps_its_standard_angle():
         assert abs(o.distance - t.distance) < 0.002
         assert abs(o.diameter - t.diameter) < 0.001
         assert abs(o.angle - t.angle) < math.radians(0.5)
+
+
+def test_tee_from_its_stem_with_no_stem_wall_in_view_keeps_the_given_axis():
+    # 10 cm before a 125 mm tee from its stem, the stem ends 6 cm before the nearest returns:
+    # no wall to refine the axis from. A cylinder tilted 4.3 deg about the run's walls
+    # explained 3 more returns of 5,800 than the (right) given pose and turned the run
+    # 4.3 deg; a refinement must explain clearly more than the given pose then.
+    scan, truth, d = scan_layout(
+        "t_junction", 0.1, diameter=0.125, branch_diameter=0.125, direction=-3.03555, entry="stem"
+    )
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    assert det.diagnostics["axis_pass"] == 0
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < 0.005
+        assert abs(o.angle - t.angle) < math.radians(1.0)
