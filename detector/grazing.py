@@ -1,4 +1,4 @@
-"""Side openings that only one ring of beams enters: a branch's hole in the run's wall seen far
+"""Side openings that one ring of beams (or two or three) enters: a branch's hole in the run's wall seen far
 away, between two rings of beams.
 
 A beam at elevation ``beta`` from the axis meets the wall of a pipe of radius ``R`` at
@@ -32,8 +32,10 @@ from detector.robust import robust_gauss_newton
 #: through the rings on either side, and at least ``NOISE_K`` times its radial noise.
 MIN_STEP = 0.00035
 NOISE_K = 4.0
-#: Fewest returns (and rows of roll) in one ring's bump.
+#: Fewest returns (and rows of roll) in one hole's bump.
 MIN_RETURNS = 6
+#: Most rings of beams a hole's bump may span.
+MAX_RINGS = 3
 #: A bump around more than this much of the circumference (rad) is no side hole.
 MAX_ROLL_SPAN = math.radians(200.0)
 #: Largest rms (m) of the far-side fit for a hole to be accepted.
@@ -117,27 +119,57 @@ def find_ring_holes(
     if np.count_nonzero(bump) < MIN_RETURNS:
         return []
     labels, n_lab = label_regions(bump, wraps)
-    holes = []
     g = valid.shape[0]
+    # the bumps at one roll (on one ring, or on two or three neighbouring rings that a longer
+    # hole lets in) are one hole
+    groups: list[tuple[float, list[NDArray[np.intp]], list[NDArray[np.intp]]]] = []
     for lab in range(1, n_lab + 1):
         rows, cols = np.nonzero(labels == lab)
-        if rows.size < MIN_RETURNS or np.unique(rows).size < MIN_RETURNS:
+        phi = np.arctan2(xyz[2, rows, cols], xyz[1, rows, cols])
+        centre = math.atan2(float(np.sin(phi).sum()), float(np.cos(phi).sum()))
+        for c, rs, cs in groups:
+            if abs(_wrap(centre - c)) < math.radians(45.0):
+                rs.append(rows)
+                cs.append(cols)
+                break
+        else:
+            groups.append((centre, [rows], [cols]))
+    # each group's fit places its branch; groups whose branches agree (a bump split where the
+    # ring's step dips below the threshold) are one hole, fitted together
+    fitted: list[tuple[RingHole, NDArray[np.intp], NDArray[np.intp]]] = []
+    for _, rs, cs in groups:
+        rows, cols = np.concatenate(rs), np.concatenate(cs)
+        hole = _accepted(xyz, rows, cols, g, big_r)
+        if hole is None:
             continue
-        if np.unique(cols).size > 1:
-            continue  # more than one ring: an opening the regular detector sees
-        if np.unique(rows).size * 2.0 * math.pi / g > MAX_ROLL_SPAN:
-            continue  # (almost) all around: a widening, not a side hole
-        hole = _fit_far_side(xyz[:, rows, cols], big_r)
-        if hole is not None and hole.entry < before:
-            holes.append(hole)
-    # two rings entering at the same roll: an opening long enough for the regular detector
-    crowded = {
-        i
-        for i, a in enumerate(holes)
-        for j, b in enumerate(holes)
-        if i != j and abs(_wrap(a.roll - b.roll)) < math.radians(45.0)
-    }
-    return [h for i, h in enumerate(holes) if i not in crowded]
+        for k, (other, r_o, c_o) in enumerate(fitted):
+            if (
+                abs(_wrap(hole.roll - other.roll)) < math.radians(45.0)
+                and abs(hole.position - other.position) < big_r
+            ):
+                rows, cols = np.concatenate([r_o, rows]), np.concatenate([c_o, cols])
+                merged = _accepted(xyz, rows, cols, g, big_r)
+                if merged is not None:
+                    fitted[k] = (merged, rows, cols)
+                break
+        else:
+            fitted.append((hole, rows, cols))
+    return [h for h, _, _ in fitted if h.entry < before]
+
+
+def _accepted(
+    xyz: NDArray[np.float64], rows: NDArray[np.intp], cols: NDArray[np.intp], g: int, big_r: float
+) -> RingHole | None:
+    """The hole fitted to the bump returns at ``(rows, cols)`` of a grid of ``g`` rows, if the
+    bump is one: enough returns and rows, on at most ``MAX_RINGS`` rings, not all around."""
+    n_rows = np.unique(rows).size
+    if rows.size < MIN_RETURNS or n_rows < MIN_RETURNS:
+        return None
+    if np.ptp(cols) > MAX_RINGS - 1:
+        return None  # a long opening: the regular detector's
+    if n_rows * 2.0 * math.pi / g > MAX_ROLL_SPAN:
+        return None  # (almost) all around: a widening, not a side hole
+    return _fit_far_side(xyz[:, rows, cols], big_r)
 
 
 def _wrap(a: float) -> float:

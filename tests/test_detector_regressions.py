@@ -274,11 +274,15 @@ def test_small_side_holes_between_two_rings_of_beams_are_found():
     # 40 cm before a 57 mm tee (or cross) the beams meet the wall 4.9 cm apart along the axis:
     # one ring of beams enters the 57 mm hole and meets the branch's far side only 1.5 mm
     # beyond the run's wall; the scan once read as the end wall of the run 65 cm farther on
-    for layout, params in (
-        ("t_junction", {"direction": -2.3262, "entry": "run"}),
-        ("cross_junction", {"direction": 0.0716}),
+    # (at 32.5 cm the ring's bump dips below the threshold in its middle: two bumps, one hole)
+    for layout, distance, params in (
+        ("t_junction", 0.4, {"direction": -2.3262, "entry": "run"}),
+        ("cross_junction", 0.4, {"direction": 0.0716}),
+        ("t_junction", 0.325, {"direction": 1.68203, "entry": "run"}),
     ):
-        scan, truth, d = scan_layout(layout, 0.4, diameter=0.057, branch_diameter=0.057, **params)
+        scan, truth, d = scan_layout(
+            layout, distance, diameter=0.057, branch_diameter=0.057, **params
+        )
         det = detect(scan, d)
         assert det.kind == "junction" and len(det.options) == len(truth), det.describe()
         assert det.diagnostics["model"] == "ring holes"
