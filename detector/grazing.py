@@ -1,5 +1,5 @@
-"""Side openings that one ring of beams (or two or three) enters: a branch's hole in the run's wall seen far
-away, between two rings of beams.
+"""Side openings that one ring of beams (or two or three) enters: a branch's hole in the run's
+wall seen far away, between rings of beams.
 
 A beam at elevation ``beta`` from the axis meets the wall of a pipe of radius ``R`` at
 ``u = R / tan(beta)``; neighbouring beams (0.5 deg apart) meet it ``u^2 / R x beam step`` apart
