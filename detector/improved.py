@@ -766,15 +766,30 @@ def _with_ring_holes(
 ) -> Detection:
     """``det``, or a junction when one ring of beams enters side holes in the run's wall
     nearer than the structure found (more than a diameter before it and before the first
-    returns off the wall, e.g. where a wide arc starts curving): a branch seen far away
-    in a small pipe, between two rings of beams (:mod:`detector.grazing`). The branches are
+    returns off the wall, e.g. where a wide arc starts curving), or at the place of a junction
+    whose branch fit the returns hardly support: a branch seen far away in a small pipe,
+    between rings of beams (:mod:`detector.grazing`). The branches are
     taken perpendicular to the run (the ring shows where the branch's far side is, not how it
     is deflected); the run goes on past them (the next ring lies on its wall)."""
     # (cheap tests first: too few returns beyond the wall at all, or nearer than the limit)
     beyond = cloud.r_v - big_r > np.maximum(0.00035, 4.0 * cloud.sigma_v)
     if np.count_nonzero(beyond) < 6:
         return det
-    if det.options:
+    support = det.diagnostics.get("fit_support")
+    weak = (
+        det.kind == "junction"
+        and support is not None
+        and support < max(30, 0.5 * det.diagnostics.get("fit_points", 0))
+    )
+    if weak:
+        # a junction whose branches the returns through its openings hardly support (most of
+        # them outliers of the fit): the holes at its place, if a ring shows them, place it
+        # (within two diameters of its place; the far sides lie up to a diameter farther on)
+        before = det.distance + 4.0 * big_r
+        beyond &= cloud.xyz_v[0] < before + 2.0 * big_r
+        if np.count_nonzero(beyond) < 6:
+            return det
+    elif det.options:
         before = det.distance - 2.0 * big_r
         beyond &= cloud.xyz_v[0] < before
         if np.count_nonzero(beyond) < 6:

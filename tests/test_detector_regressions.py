@@ -353,3 +353,21 @@ def test_tee_from_its_stem_with_no_stem_wall_in_view_keeps_the_given_axis():
     for o, t in match(det.options, truth):
         assert abs(o.distance - t.distance) < 0.005
         assert abs(o.angle - t.angle) < math.radians(1.0)
+
+
+def test_junction_fit_the_returns_hardly_support_gives_way_to_its_holes():
+    # 35 cm before a 57 mm tee (and a cross): 30 returns beyond the wall through the opening,
+    # none of them on the fitted branch, which came out at 45 deg, 31 mm and 6.8 cm early (the
+    # cross: a pipe across tilted 55 deg); two rings enter the hole and place it exactly
+    for layout, params in (
+        ("t_junction", {"direction": 1.68203, "entry": "run"}),
+        ("cross_junction", {"direction": 2.93626}),
+    ):
+        scan, truth, d = scan_layout(layout, 0.35, diameter=0.057, branch_diameter=0.057, **params)
+        det = detect(scan, d)
+        assert det.kind == "junction" and len(det.options) == len(truth), det.describe()
+        assert det.diagnostics["model"] == "ring holes"
+        for o, t in match(det.options, truth):
+            assert abs(o.distance - t.distance) < 0.005
+            assert abs(o.diameter - t.diameter) < 0.002
+            assert abs(o.angle - t.angle) < math.radians(1.0)
