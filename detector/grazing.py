@@ -38,6 +38,8 @@ MIN_RETURNS = 6
 MAX_RINGS = 3
 #: A bump around more than this much of the circumference (rad) is no side hole.
 MAX_ROLL_SPAN = math.radians(200.0)
+#: Deflections of standard branch fittings tried for the branch behind a hole, rad.
+DEFLECTIONS = (0.5 * math.pi, 0.25 * math.pi, 0.75 * math.pi)
 #: Largest rms (m) of the far-side fit for a hole to be accepted.
 MAX_FIT_RMS = 0.002
 #: The rings on either side of the bump must lie on the wall: within this (m, plus
@@ -56,6 +58,7 @@ class RingHole:
         n: returns in the bump.
         rms: rms of the far-side fit, m.
         entry: along the axis where the ring's beams cross the run's wall, m.
+        angle: the branch's deflection from the run's axis, rad.
     """
 
     position: float
@@ -64,6 +67,7 @@ class RingHole:
     n: int
     rms: float
     entry: float
+    angle: float = 0.5 * math.pi
 
 
 def ring_steps(
@@ -177,39 +181,51 @@ def _wrap(a: float) -> float:
 
 
 def _fit_far_side(p: NDArray[np.float64], big_r: float) -> RingHole | None:
-    """Fit ``u = position + sqrt(rho^2 - (r sin(phi - roll))^2)`` (a branch perpendicular to the
-    run) to the far-side returns ``p`` (3, n)."""
+    """Fit a branch to the far-side returns ``p`` (3, n): a cylinder of radius ``rho`` whose
+    axis leaves the run's axis at ``position``, deflected by a standard fitting angle (90 deg
+    first, then 45 and 135 deg: the patch a ring sees cannot measure the deflection, only tell
+    these apart) towards ``roll``; the deflection with the smallest rms wins."""
     u = p[0]
     r = np.hypot(p[1], p[2])
     phi = np.arctan2(p[2], p[1])
     # roll: the circular mean weighted by how far along each return went
     w = u - float(u.min()) + 1e-4
     roll0 = math.atan2(float(np.sum(w * np.sin(phi))), float(np.sum(w * np.cos(phi))))
-    rho0 = 0.8 * big_r
-    x0 = np.array([float(u.max()) - rho0, rho0, roll0])
+    best: RingHole | None = None
+    for theta in DEFLECTIONS:
+        ct, st = math.cos(theta), math.sin(theta)
+        rho0 = 0.8 * big_r
+        # (the far side lies about rho / sin(theta) past where the axis crosses the wall)
+        x_start = float(np.median(u)) - rho0 / st - big_r * ct / st
+        x0 = np.array([x_start, rho0, roll0])
 
-    def residual(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        s = r * np.sin(phi - x[2])
-        return x[0] + np.sqrt(np.maximum(x[1] * x[1] - s * s, 0.0)) - u
+        def residual(x: NDArray[np.float64], ct: float = ct, st: float = st) -> NDArray[np.float64]:
+            q = u - x[0]
+            lat = r * np.cos(phi - x[2])
+            along = q * ct + lat * st
+            d2 = q * q + r * r - along * along
+            return np.sqrt(np.maximum(d2, 0.0)) - x[1]
 
-    lower = np.array([float(u.min()) - 2.0 * big_r, 0.2 * big_r, roll0 - 0.6])
-    upper = np.array([float(u.max()), 1.05 * big_r, roll0 + 0.6])
-    x, res, _ = robust_gauss_newton(
-        residual,
-        x0,
-        np.array([1e-4, 1e-4, 1e-3]),
-        c=0.01,
-        c_final=0.003,
-        iterations=30,
-        lower=lower,
-        upper=upper,
-        step_tol=1e-7,
-    )
-    if not np.all(np.isfinite(x)):
-        return None
-    rms = float(np.sqrt(np.mean(np.square(res))))
-    if rms > MAX_FIT_RMS:
-        return None
-    entry = float(np.median(u * big_r / np.maximum(r, 1e-9)))
-    roll = _wrap(float(x[2]))
-    return RingHole(float(x[0]), float(x[1]), roll, int(u.size), rms, entry)
+        lower = np.array([x_start - 3.0 * big_r, 0.2 * big_r, roll0 - 0.6])
+        upper = np.array([x_start + 3.0 * big_r, 1.05 * big_r, roll0 + 0.6])
+        x, res, _ = robust_gauss_newton(
+            residual,
+            x0,
+            np.array([1e-4, 1e-4, 1e-3]),
+            c=0.01,
+            c_final=0.003,
+            iterations=30,
+            lower=lower,
+            upper=upper,
+            step_tol=1e-7,
+        )
+        if not np.all(np.isfinite(x)):
+            continue
+        rms = float(np.sqrt(np.mean(np.square(res))))
+        if rms > MAX_FIT_RMS or (best is not None and rms >= best.rms):
+            continue
+        entry = float(np.median(u * big_r / np.maximum(r, 1e-9)))
+        best = RingHole(
+            float(x[0]), float(x[1]), _wrap(float(x[2])), int(u.size), rms, entry, theta
+        )
+    return best

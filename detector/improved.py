@@ -817,9 +817,7 @@ def _with_ring_holes(
     conf = min(_confidence(h.n, h.rms, 0.001) for h in holes)
     options = [StructureOption("junction", position, 2.0 * big_r, 0.0, 0.0, conf)]
     for h in holes:
-        angle, direction = option_direction(
-            np.array([0.0, math.cos(h.roll), math.sin(h.roll)]), cloud.pose
-        )
+        angle, direction = option_direction(_dir(h.angle, h.roll), cloud.pose)
         options.append(
             StructureOption("junction", h.position, 2.0 * h.radius, direction, angle, conf)
         )
@@ -828,7 +826,14 @@ def _with_ring_holes(
     diag.update(
         model="ring holes",
         ring_holes=[
-            {"position": h.position, "radius": h.radius, "roll": h.roll, "n": h.n, "rms": h.rms}
+            {
+                "position": h.position,
+                "radius": h.radius,
+                "roll": h.roll,
+                "angle": h.angle,
+                "n": h.n,
+                "rms": h.rms,
+            }
             for h in holes
         ],
         replaced_kind=det.kind,

@@ -279,6 +279,8 @@ def test_small_side_holes_between_two_rings_of_beams_are_found():
         ("t_junction", 0.4, {"direction": -2.3262, "entry": "run"}),
         ("cross_junction", 0.4, {"direction": 0.0716}),
         ("t_junction", 0.325, {"direction": 1.68203, "entry": "run"}),
+        # (a 45 deg lateral: the far side of its hole tells it from a tee)
+        ("y_junction", 0.375, {"direction": -1.59625, "entry": "run"}),
     ):
         scan, truth, d = scan_layout(
             layout, distance, diameter=0.057, branch_diameter=0.057, **params
