@@ -34,6 +34,9 @@ MIN_STEP = 0.00035
 NOISE_K = 4.0
 #: Fewest returns (and rows of roll) in one hole's bump.
 MIN_RETURNS = 6
+#: Holes are sought only where neighbouring rings meet the wall at least this many radii
+#: apart along the axis (``u^2 / R x beam step``).
+SPARSE_RINGS = 0.25
 #: Most rings of beams a hole's bump may span.
 MAX_RINGS = 3
 #: A bump around more than this much of the circumference (rad) is no side hole.
@@ -101,8 +104,10 @@ def find_ring_holes(
     wraps: bool,
     big_r: float,
     before: float,
+    beam_step: float,
 ) -> list[RingHole]:
-    """Side holes that one ring of beams enters, nearer than ``before`` along the axis.
+    """Side holes that one ring of beams (or two or three) enters, nearer than ``before``
+    along the axis, where the rings meet the wall sparsely (``SPARSE_RINGS``).
 
     Args:
         xyz: (3, G, K) pipe-frame returns on the unrolled grid.
@@ -111,6 +116,7 @@ def find_ring_holes(
         wraps: whether the grid's rows wrap around the circumference.
         big_r: the run's radius, m.
         before: only holes whose ring meets the wall nearer than this, m.
+        beam_step: angle between neighbouring beams of a plane, rad.
     """
     step, ok = ring_steps(xyz, valid, big_r)
     thr = np.maximum(MIN_STEP, NOISE_K * sigma_r)
@@ -158,7 +164,13 @@ def find_ring_holes(
                 break
         else:
             fitted.append((hole, rows, cols))
-    return [h for h, _, _ in fitted if h.entry < before]
+    # (where neighbouring rings meet the wall densely, an opening leaves the wall by more than
+    # its tolerance and the regular detector sees it: a bump there is something else)
+    return [
+        h
+        for h, _, _ in fitted
+        if h.entry < before and h.entry * h.entry / big_r * beam_step >= SPARSE_RINGS * big_r
+    ]
 
 
 def _accepted(

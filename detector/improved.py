@@ -810,9 +810,10 @@ def _with_ring_holes(
         cloud.wraps,
         big_r,
         before,
+        cloud.beam_step,
     )
-    if not holes:
-        return det
+    if not holes or (weak and len(holes) < sum(not o.is_straight_on for o in det.options)):
+        return det  # (nothing, or fewer ways than the openings the fit had to explain)
     position = float(np.mean([h.position for h in holes]))
     conf = min(_confidence(h.n, h.rms, 0.001) for h in holes)
     options = [StructureOption("junction", position, 2.0 * big_r, 0.0, 0.0, conf)]

@@ -14,6 +14,7 @@ from detector.grazing import find_ring_holes
 
 R = 0.0285
 ROWS = 180  # rolls, 2 deg apart
+STEP = math.radians(0.5)
 BETAS = np.radians(np.arange(1.0, 30.0, 0.5))[::-1]  # far rings first
 
 
@@ -49,7 +50,7 @@ def _grid(position: float | None, rho: float, roll: float, all_around: bool = Fa
 )
 def test_one_ring_hole_is_placed_and_sized(position: float, rho: float, roll: float) -> None:
     xyz, valid, sig = _grid(position, rho, roll)
-    holes = find_ring_holes(xyz, valid, sig, True, R, before=2.0)
+    holes = find_ring_holes(xyz, valid, sig, True, R, before=2.0, beam_step=STEP)
     entered = np.unique(np.nonzero(np.abs(np.hypot(xyz[1], xyz[2]) - R) > 0.00035)[1])
     if entered.size != 1:
         return  # no single ring entered far enough (or several: the regular detector's case)
@@ -65,16 +66,16 @@ def test_one_ring_hole_is_placed_and_sized(position: float, rho: float, roll: fl
 
 def test_straight_run_has_no_hole() -> None:
     xyz, valid, sig = _grid(None, R, 0.0)
-    assert find_ring_holes(xyz, valid, sig, True, R, before=2.0) == []
+    assert find_ring_holes(xyz, valid, sig, True, R, before=2.0, beam_step=STEP) == []
 
 
 @pytest.mark.parametrize("all_around", [True])
 def test_bump_all_around_is_no_side_hole(all_around: bool) -> None:
     xyz, valid, sig = _grid(0.4, R, 0.0, all_around=all_around)
-    assert find_ring_holes(xyz, valid, sig, True, R, before=2.0) == []
+    assert find_ring_holes(xyz, valid, sig, True, R, before=2.0, beam_step=STEP) == []
 
 
 def test_holes_past_the_limit_are_left_out() -> None:
     xyz, valid, sig = _grid(0.4, R, 1.0)
-    assert len(find_ring_holes(xyz, valid, sig, True, R, before=2.0)) == 1
-    assert find_ring_holes(xyz, valid, sig, True, R, before=0.35) == []
+    assert len(find_ring_holes(xyz, valid, sig, True, R, before=2.0, beam_step=STEP)) == 1
+    assert find_ring_holes(xyz, valid, sig, True, R, before=0.35, beam_step=STEP) == []
