@@ -814,7 +814,12 @@ def _with_ring_holes(
     )
     if not holes or (weak and len(holes) < sum(not o.is_straight_on for o in det.options)):
         return det  # (nothing, or fewer ways than the openings the fit had to explain)
-    position = float(np.mean([h.position for h in holes]))
+    places = np.array([h.position for h in holes])
+    position = float(np.mean(places))
+    if float(np.ptp(places)) > big_r or (weak and abs(position - det.distance) > 3.0 * big_r):
+        # the branches of one junction leave the run at one place, and the openings the fit
+        # explained poorly are still the openings of that junction
+        return det
     conf = min(_confidence(h.n, h.rms, 0.001) for h in holes)
     options = [StructureOption("junction", position, 2.0 * big_r, 0.0, 0.0, conf)]
     for h in holes:
