@@ -800,6 +800,12 @@ def _with_ring_holes(
             return det
     else:
         before = float(np.max(cloud.xyz_v[0]))
+    # the bumps are a fraction of a millimetre: only under a pose that fits the wall before
+    # them that closely (a sensor millimetres off the axis, not refined away, bends every ring)
+    near = cloud.xyz_v[0] < before
+    e_near = (cloud.r_v - big_r)[near]
+    if e_near.size < 50 or mad_sigma(e_near) > max(0.0003, 3.0 * _pct(cloud.sigma_v[near], 50.0)):
+        return det
     # only the rings that hold such returns, and their neighbours
     cols = cloud.cell[beyond] % cloud.shape[1]
     c0, c1 = max(int(cols.min()) - 1, 0), min(int(cols.max()) + 2, cloud.shape[1])
