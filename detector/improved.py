@@ -116,6 +116,7 @@ GIVEN_POSE_MARGIN = 0.02
 STANDARD_BRANCH_ANGLES = np.radians([45.0, 90.0, 135.0])
 SNAP_WITHIN = math.radians(10.0)
 SNAP_LR = 6.0
+SNAP_MAX_TURN = math.radians(3.0)
 #: Less straight wall than this in view along the axis (m) before a structure: the given pose
 #: stands when it explains that wall.
 SHORT_WALL_VIEW = 0.05
@@ -1868,7 +1869,10 @@ def _standard_angles(
     )
     lr = 2.0 * (tukey_cost(res_s, c_fin) - tukey_cost(res, c_fin)) / max(sigma2, 1e-12)
     diag["standard_angle_lr"] = float(lr)
-    if lr <= SNAP_LR * len(idx):
+    # (held at the standard angle, the branch must stay where it was: a fit that turns it
+    # about the run's axis to make up for the deflection rests on too few returns)
+    turned = max(abs(_wrap(float(x_s[2 + 3 * k] - x[2 + 3 * k]))) for k in range(n_b))
+    if lr <= SNAP_LR * len(idx) and turned <= SNAP_MAX_TURN:
         diag["standard_angles"] = len(idx)
         return x_s, res_s, w_s
     return x, res, w
