@@ -184,7 +184,7 @@ def take_turn(
         Bend(1, bend),
         Drive(radius * theta, speed),
         Bend(1, 0.0),
-        Drive(through, speed),
+        Drive(through, speed, comply=follow_arc),
         Roll(-option.direction),
         Centre(),
         Clamp(option.diameter),
