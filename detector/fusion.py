@@ -112,6 +112,13 @@ class _Track:
     evidence: float = 0.0
     hits: int = 0
     confirmed: bool = False
+    #: sensor positions (odometry frame) the detections came from, one per place
+    places: list[NDArray[np.float64]] = field(default_factory=list)
+
+    def seen_from(self, pos: NDArray[np.float64], spacing: float) -> None:
+        """Count ``pos`` as a new place unless it is within ``spacing`` of a known one."""
+        if all(float(np.linalg.norm(pos - p)) > spacing for p in self.places):
+            self.places.append(pos.copy())
 
     @property
     def reference(self) -> NDArray[np.float64]:
@@ -175,6 +182,8 @@ class StructureTracker:
         near_distance: float = 0.1,
         handover_distance: float = 0.12,
         pass_margin: float = 0.05,
+        confirm_places: int = 2,
+        place_spacing: float = 0.01,
     ) -> None:
         for name, value in (
             ("confirm_evidence", confirm_evidence),
@@ -184,12 +193,19 @@ class StructureTracker:
             ("near_distance", near_distance),
             ("handover_distance", handover_distance),
             ("pass_margin", pass_margin),
+            ("place_spacing", place_spacing),
         ):
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"StructureTracker.{name} must be positive, got {value!r}")
         if int(confirm_count) < 1:
             raise ValueError(f"StructureTracker.confirm_count must be >= 1, got {confirm_count}")
+        if int(confirm_places) < 1:
+            raise ValueError(
+                f"StructureTracker.confirm_places must be >= 1, got {confirm_places}"
+            )
         self.confirm_count = int(confirm_count)
+        self.confirm_places = int(confirm_places)
+        self.place_spacing = float(place_spacing)
         self.confirm_evidence = float(confirm_evidence)
         self.miss_penalty = float(miss_penalty)
         self.gate = float(gate)
@@ -256,7 +272,11 @@ class StructureTracker:
                     self._challenger = None
         tr = self._track
         if tr is not None and not tr.confirmed:
-            tr.confirmed = tr.hits >= self.confirm_count and tr.evidence >= self.confirm_evidence
+            tr.confirmed = (
+                tr.hits >= self.confirm_count
+                and tr.evidence >= self.confirm_evidence
+                and len(tr.places) >= min(self.confirm_places, self.confirm_count)
+            )
         return self._state(handed_over)
 
     # ---------------------------------------------------------------- internals
@@ -297,6 +317,7 @@ class StructureTracker:
             "weight": w,
             "confidence": det.confidence,
             "distance": dist,
+            "pos": pos,
         }
 
     def _new_track(self, obs: dict[str, Any]) -> _Track:
@@ -310,6 +331,7 @@ class StructureTracker:
             kind_weight={obs["kind"]: w},
             evidence=obs["confidence"],
             hits=1,
+            places=[obs["pos"].copy()],
         )
 
     def _consistent(self, tr: _Track, obs: dict[str, Any]) -> bool:
@@ -326,6 +348,7 @@ class StructureTracker:
         tr.kind_weight[obs["kind"]] = tr.kind_weight.get(obs["kind"], 0.0) + w
         tr.evidence += obs["confidence"]
         tr.hits += 1
+        tr.seen_from(obs["pos"], self.place_spacing)
         for v, d, rb in obs["ways"]:
             best, best_ang = None, math.inf
             for way in tr.ways:
