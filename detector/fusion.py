@@ -297,14 +297,16 @@ class StructureTracker:
         dist = float(np.mean([o.distance for o in det.options]))
         axis_w = rot @ axis_s
         ref = pos + dist * axis_w
+        # an option's angle is its deflection from the incoming pipe's axis, not from the
+        # sensor's x axis (a sensor tilted in the pipe would add its tilt to every turn); its
+        # direction is the roll about that axis, zero towards the sensor's y
+        e_y = np.array([0.0, 1.0, 0.0]) - axis_s[1] * axis_s
+        e_y /= np.linalg.norm(e_y)
+        e_z = np.cross(axis_s, e_y)
         ways = []
         for o in det.options:
-            v = np.array(
-                [
-                    math.cos(o.angle),
-                    math.sin(o.angle) * math.cos(o.direction),
-                    math.sin(o.angle) * math.sin(o.direction),
-                ]
+            v = math.cos(o.angle) * axis_s + math.sin(o.angle) * (
+                math.cos(o.direction) * e_y + math.sin(o.direction) * e_z
             )
             ways.append((rot @ v, o.diameter, o.bend_radius))
         w = max(det.confidence, 1e-3) / max(abs(dist), self.near_distance) ** 4
