@@ -7,9 +7,11 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
 - **Anchors estimates in the odometry frame.** Each detection arrives with the robot's believed
   sensor pose (``sensor_position`` (3,), ``sensor_rotation`` (3, 3) world-from-sensor). Its
   reference point becomes a world point (sensor origin + distance along the pipe axis) and each
-  way on a world direction. Estimates from different scans can then be compared and averaged,
-  and the fused structure is re-expressed relative to the latest pose (distance along the axis
-  from the current sensor origin, direction as atan2(z, y) in the current sensor frame).
+  way on a world direction (its angle is the deflection from the fitted pipe axis, its
+  direction the roll about that axis, as :mod:`detector.options` defines them). Estimates
+  from different scans can then be compared and averaged, and the fused structure is
+  re-expressed relative to the latest pose (distance along the axis from the current sensor
+  origin, direction as atan2(z, y) in the current sensor frame).
 - **Weights nearer scans more** (thesis 5.3's trust factor): a scan's weight is its confidence
   divided by ``max(distance, near_distance)^4``, an inverse-variance weight: the beams of a
   sweep meet the wall ``distance^2 / R`` x the beam step apart along the axis, so the error of
@@ -24,7 +26,9 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
   removes ``miss_penalty``. A track is *confirmed* once its evidence reaches ``confirm_evidence``
   from at least ``confirm_count`` consistent detections; it is dropped only when its evidence
   falls to zero (a confirmed track first has to lose it all, a tentative one is replaced by a
-  better-supported newcomer).
+  better-supported newcomer). The detections must come from at least ``confirm_places`` places
+  ``place_spacing`` apart: sweeps repeated where the robot stands (rescans before a near
+  structure) repeat a detector's systematic error, so alone they confirm nothing.
 - **Lets nearer scans overrule.** Disagreeing detections are fused into a *challenger* track; once
   the challenger has ``confirm_count - 1`` consistent detections and more trust weight than the
   track (nearer scans weigh more), it replaces the track: a tee seen from its stem that looked
@@ -170,6 +174,9 @@ class StructureTracker:
         near_distance: distances below this weigh like this one, metres.
         handover_distance: closer than this, disagreeing detections are ignored, metres.
         pass_margin: the track ends once the sensor is this far past the reference point, m.
+        confirm_places: distinct places the consistent detections must come from to confirm
+            (at most ``confirm_count``).
+        place_spacing: sensor positions closer than this count as one place, m.
     """
 
     def __init__(
@@ -200,9 +207,7 @@ class StructureTracker:
         if int(confirm_count) < 1:
             raise ValueError(f"StructureTracker.confirm_count must be >= 1, got {confirm_count}")
         if int(confirm_places) < 1:
-            raise ValueError(
-                f"StructureTracker.confirm_places must be >= 1, got {confirm_places}"
-            )
+            raise ValueError(f"StructureTracker.confirm_places must be >= 1, got {confirm_places}")
         self.confirm_count = int(confirm_count)
         self.confirm_places = int(confirm_places)
         self.place_spacing = float(place_spacing)
