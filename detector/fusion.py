@@ -26,9 +26,14 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
   removes ``miss_penalty``. A track is *confirmed* once its evidence reaches ``confirm_evidence``
   from at least ``confirm_count`` consistent detections; it is dropped only when its evidence
   falls to zero (a confirmed track first has to lose it all, a tentative one is replaced by a
-  better-supported newcomer). The detections must come from at least ``confirm_places`` places
-  ``place_spacing`` apart: sweeps repeated where the robot stands (rescans before a near
-  structure) repeat a detector's systematic error, so alone they confirm nothing.
+  better-supported newcomer).
+- **Doubts a structure that appears short of where earlier scans saw one.** A new track whose
+  reference point lies nearer (beyond the gate) than the structure a scan from another place
+  saw within ``contest_range`` is *contested*: its detections must come from at least
+  ``contested_places`` places ``place_spacing`` apart to confirm it. Sweeps repeated where the
+  robot stands (rescans before a near structure) repeat a detector's systematic error (a long
+  bend's straight approach read as a junction 10 cm ahead), so alone they do not overrule
+  what the robot saw on its way there.
 - **Lets nearer scans overrule.** Disagreeing detections are fused into a *challenger* track; once
   the challenger has ``confirm_count - 1`` consistent detections and more trust weight than the
   track (nearer scans weigh more), it replaces the track: a tee seen from its stem that looked
@@ -118,6 +123,8 @@ class _Track:
     confirmed: bool = False
     #: sensor positions (odometry frame) the detections came from, one per place
     places: list[NDArray[np.float64]] = field(default_factory=list)
+    #: places needed to confirm (more for a contested track)
+    min_places: int = 1
 
     def seen_from(self, pos: NDArray[np.float64], spacing: float) -> None:
         """Count ``pos`` as a new place unless it is within ``spacing`` of a known one."""
@@ -174,9 +181,11 @@ class StructureTracker:
         near_distance: distances below this weigh like this one, metres.
         handover_distance: closer than this, disagreeing detections are ignored, metres.
         pass_margin: the track ends once the sensor is this far past the reference point, m.
-        confirm_places: distinct places the consistent detections must come from to confirm
-            (at most ``confirm_count``).
+        contested_places: distinct places a contested track's consistent detections must come
+            from to confirm it (at most ``confirm_count``).
         place_spacing: sensor positions closer than this count as one place, m.
+        contest_range: earlier scans contest a new track with structures they saw at most this
+            far ahead, m.
     """
 
     def __init__(
@@ -189,8 +198,9 @@ class StructureTracker:
         near_distance: float = 0.1,
         handover_distance: float = 0.12,
         pass_margin: float = 0.05,
-        confirm_places: int = 2,
+        contested_places: int = 2,
         place_spacing: float = 0.01,
+        contest_range: float = 0.5,
     ) -> None:
         for name, value in (
             ("confirm_evidence", confirm_evidence),
@@ -201,16 +211,22 @@ class StructureTracker:
             ("handover_distance", handover_distance),
             ("pass_margin", pass_margin),
             ("place_spacing", place_spacing),
+            ("contest_range", contest_range),
         ):
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"StructureTracker.{name} must be positive, got {value!r}")
         if int(confirm_count) < 1:
             raise ValueError(f"StructureTracker.confirm_count must be >= 1, got {confirm_count}")
-        if int(confirm_places) < 1:
-            raise ValueError(f"StructureTracker.confirm_places must be >= 1, got {confirm_places}")
+        if int(contested_places) < 1:
+            raise ValueError(
+                f"StructureTracker.contested_places must be >= 1, got {contested_places}"
+            )
         self.confirm_count = int(confirm_count)
-        self.confirm_places = int(confirm_places)
+        self.contested_places = int(contested_places)
         self.place_spacing = float(place_spacing)
+        self.contest_range = float(contest_range)
+        #: (sensor position, reference point) of the scans that saw a structure since reset
+        self._seen: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
         self.confirm_evidence = float(confirm_evidence)
         self.miss_penalty = float(miss_penalty)
         self.gate = float(gate)
@@ -227,6 +243,7 @@ class StructureTracker:
         self._track = None
         self._challenger = None
         self._last_pose = None
+        self._seen = []
 
     # ---------------------------------------------------------------- update
     def update(
@@ -258,6 +275,16 @@ class StructureTracker:
                         self._track = tr = None
             return self._state(handed_over)
         obs = self._observation(detection, pos, rot)
+        handed_over = self._update_with(obs, pos)
+        if float((obs["near_ref"] - pos) @ obs["axis"]) <= self.contest_range:
+            self._seen.append((pos.copy(), obs["near_ref"].copy()))
+        return self._state(handed_over)
+
+    def _update_with(self, obs: dict[str, Any], pos: NDArray[np.float64]) -> bool:
+        """Associate a structure detection with the track, the challenger or a new track;
+        True if the track was handed over (the detection ignored near the structure)."""
+        tr = self._track
+        handed_over = False
         if tr is None:
             self._track = self._new_track(obs)
         elif self._consistent(tr, obs):
@@ -280,9 +307,9 @@ class StructureTracker:
             tr.confirmed = (
                 tr.hits >= self.confirm_count
                 and tr.evidence >= self.confirm_evidence
-                and len(tr.places) >= min(self.confirm_places, self.confirm_count)
+                and len(tr.places) >= min(tr.min_places, self.confirm_count)
             )
-        return self._state(handed_over)
+        return handed_over
 
     # ---------------------------------------------------------------- internals
     def _challenge(self, obs: dict[str, Any]) -> _Track:
@@ -325,7 +352,18 @@ class StructureTracker:
             "confidence": det.confidence,
             "distance": dist,
             "pos": pos,
+            # the nearest way's reference point (a thesis detection may place ways apart)
+            "near_ref": pos + min(o.distance for o in det.options) * axis_w,
         }
+
+    def _contested(self, obs: dict[str, Any]) -> bool:
+        """True if a scan from another place saw a structure beyond this one's reference."""
+        gate = self.gate + 0.1 * abs(obs["distance"])
+        return any(
+            float(np.linalg.norm(p - obs["pos"])) > self.place_spacing
+            and float((ref - obs["near_ref"]) @ obs["axis"]) > gate
+            for p, ref in self._seen
+        )
 
     def _new_track(self, obs: dict[str, Any]) -> _Track:
         w = obs["weight"]
@@ -339,6 +377,7 @@ class StructureTracker:
             evidence=obs["confidence"],
             hits=1,
             places=[obs["pos"].copy()],
+            min_places=self.contested_places if self._contested(obs) else 1,
         )
 
     def _consistent(self, tr: _Track, obs: dict[str, Any]) -> bool:
