@@ -7,7 +7,10 @@
   short of one seen from elsewhere: a detector's systematic error repeats in every sweep from
   the same pose;
 - a way's angle is its deflection from the pipe axis the detector fitted, not from the
-  sensor's x axis (a sensor tilted in the pipe added its tilt to the turn).
+  sensor's x axis (a sensor tilted in the pipe added its tilt to the turn);
+- a tee's branch in the robot's smallest pipe (57 mm) is passed with ground-truth options: the
+  turn starts early enough there too;
+- a way sensed just below the smallest pipe, which the options table offers, is attempted.
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ from pipe_env import layouts
 from pipe_env.ground_truth import fitting_ahead, option_angles
 from pipe_env.routing import locate
 from primitives.executor import Executor
-from primitives.sequences import take_turn
+from primitives.sequences import for_option, take_turn
 
 EYE = np.eye(3)
 
@@ -120,3 +123,33 @@ def test_a_drive_with_comply_round_trips_and_default_drives_print_as_before() ->
     with pytest.raises(ValueError, match="Drive.comply"):
         Drive(0.1, comply=1)  # type: ignore[arg-type]
     assert replace(d, comply=False) == Drive(0.1)
+
+
+@pytest.mark.parametrize("direction_deg", [-49.4, 180.0])
+def test_tee_branch_in_the_smallest_pipe_passes(direction_deg: float) -> None:
+    # held-out network 13: a tee of 57.1 mm (the robot's smallest pipe) whose branch the
+    # ground-truth option jammed in 2 of 3 attempts; it passed only starting 1-3 mm earlier
+    net = layouts.t_junction(0.0571, direction=math.radians(direction_deg))
+    ex = Executor.for_network(net, lidar=None)
+    pose = ex.robot.sensor_pose()
+    node, entry = fitting_ahead(net, pose)
+    g = net.geometry[node]
+    travel = -g.port(entry).axis
+    distance = float((g.reference_point(entry) - pose.position) @ travel)
+    branch = max(
+        (p for p in g.ports if p.run_id != entry),
+        key=lambda p: option_angles(travel, p.axis, pose)[0],
+    )
+    angle, direction = option_angles(travel, branch.axis, pose)
+    option = StructureOption("junction", distance, branch.diameter, direction, angle)
+    out = ex.run(for_option(option, ex.robot.clamped_diameter()))
+    assert out.status == "done", out.reason
+    assert locate(net, ex.robot.sensor_pose())[0].run_id == branch.run_id
+
+
+def test_a_way_sensed_just_below_the_smallest_pipe_is_attempted() -> None:
+    # the options table offers a 56.9 mm way (sensing margin); refusing it left the robot
+    # offered the same decision again and again
+    near = StructureOption("junction", 0.2, 0.0569, 0.0, math.pi / 2)
+    assert for_option(near, 0.06).name == "pass_junction"
+    assert for_option(replace(near, diameter=0.0555), 0.06).name == "refuse"
