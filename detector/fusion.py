@@ -27,13 +27,14 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
   from at least ``confirm_count`` consistent detections; it is dropped only when its evidence
   falls to zero (a confirmed track first has to lose it all, a tentative one is replaced by a
   better-supported newcomer).
-- **Doubts a structure that appears short of where earlier scans saw one.** A new track whose
-  reference point lies nearer (beyond the gate) than the structure a scan from another place
-  saw within ``contest_range`` is *contested*: its detections must come from at least
-  ``contested_places`` places ``place_spacing`` apart to confirm it. Sweeps repeated where the
-  robot stands (rescans before a near structure) repeat a detector's systematic error (a long
-  bend's straight approach read as a junction 10 cm ahead), so alone they do not overrule
-  what the robot saw on its way there.
+- **Confirms from one place only what was seen there from elsewhere.** A new track is
+  *contested* unless scans from other places saw a structure at its reference point (within
+  the gate) and none saw one beyond it (a structure appearing short of where the robot saw one
+  on its way); only scans that saw their structure within ``contest_range`` count. A contested
+  track's detections must come from at least ``contested_places`` places ``place_spacing``
+  apart to confirm it. Sweeps repeated where the robot stands (rescans before a near
+  structure) repeat a detector's systematic error (a long bend's exit or straight approach read
+  as a junction 10 cm ahead), so alone they confirm only what the robot saw on its way there.
 - **Lets nearer scans overrule.** Disagreeing detections are fused into a *challenger* track; once
   the challenger has ``confirm_count - 1`` consistent detections and more trust weight than the
   track (nearer scans weigh more), it replaces the track: a tee seen from its stem that looked
@@ -182,7 +183,7 @@ class StructureTracker:
         handover_distance: closer than this, disagreeing detections are ignored, metres.
         pass_margin: the track ends once the sensor is this far past the reference point, m.
         contested_places: distinct places a contested track's consistent detections must come
-            from to confirm it (at most ``confirm_count``).
+            from to confirm it (at most ``confirm_count``); see the module docstring.
         place_spacing: sensor positions closer than this count as one place, m.
         contest_range: earlier scans contest a new track with structures they saw at most this
             far ahead, m.
@@ -357,13 +358,15 @@ class StructureTracker:
         }
 
     def _contested(self, obs: dict[str, Any]) -> bool:
-        """True if a scan from another place saw a structure beyond this one's reference."""
+        """True unless scans from another place saw a structure where this one is and none
+        saw one beyond it."""
         gate = self.gate + 0.1 * abs(obs["distance"])
-        return any(
-            float(np.linalg.norm(p - obs["pos"])) > self.place_spacing
-            and float((ref - obs["near_ref"]) @ obs["axis"]) > gate
+        elsewhere = [
+            float((ref - obs["near_ref"]) @ obs["axis"])
             for p, ref in self._seen
-        )
+            if float(np.linalg.norm(p - obs["pos"])) > self.place_spacing
+        ]
+        return not any(abs(d) <= gate for d in elsewhere) or any(d > gate for d in elsewhere)
 
     def _new_track(self, obs: dict[str, Any]) -> _Track:
         w = obs["weight"]
