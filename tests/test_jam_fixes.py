@@ -9,7 +9,8 @@
   sensor's x axis (a sensor tilted in the pipe added its tilt to the turn);
 - a tee's branch in the robot's smallest pipe (57 mm) is passed with ground-truth options: the
   turn starts early enough there too;
-- a way sensed just below the smallest pipe, which the options table offers, is attempted.
+- a way sensed just below the smallest pipe, which the options table offers, is attempted;
+- after a jam the robot decides on fresh sweeps, not on the fused estimate that jammed.
 """
 
 from __future__ import annotations
@@ -161,3 +162,34 @@ def test_a_way_sensed_just_below_the_smallest_pipe_is_attempted() -> None:
     near = StructureOption("junction", 0.2, 0.0569, 0.0, math.pi / 2)
     assert for_option(near, 0.06).name == "pass_junction"
     assert for_option(replace(near, diameter=0.0555), 0.06).name == "refuse"
+
+
+def test_after_a_jam_the_robot_decides_on_fresh_sweeps() -> None:
+    # held-out network 12: a phantom bend confirmed from two places jammed three times while
+    # the sweeps after each jam showed the true tee; the tracker is emptied before resensing
+    import gymnasium as gym
+
+    import pipe_env  # noqa: F401
+    from pipe_env.plant import Outcome
+
+    env = gym.make("pipenav/PipeNav-v0", network_config={"n_fittings": 4}, fidelity="fast")
+    env.reset(seed=0)
+    base = env.unwrapped
+    plant = base.plant
+    plant.tracker = StructureTracker(confirm_count=1, confirm_evidence=0.5)
+    plant.tracker.update(_bend(0.1), np.zeros(3), EYE)
+    fresh = []
+
+    def jam(choice, goal=None) -> Outcome:
+        return Outcome(status="jammed", note="stub")
+
+    def resense():
+        state = plant.tracker.update(Detection.straight(), np.zeros(3), EYE)
+        fresh.append(state.n_updates == 0)
+        return base.decision, Outcome()
+
+    plant.execute, plant.resense = jam, resense
+    action = int(np.flatnonzero(base.action_masks())[0])
+    _, _, _, _, info = env.step(action)
+    assert info["jammed"]
+    assert fresh == [True]
