@@ -7,9 +7,11 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
 - **Anchors estimates in the odometry frame.** Each detection arrives with the robot's believed
   sensor pose (``sensor_position`` (3,), ``sensor_rotation`` (3, 3) world-from-sensor). Its
   reference point becomes a world point (sensor origin + distance along the pipe axis) and each
-  way on a world direction. Estimates from different scans can then be compared and averaged,
-  and the fused structure is re-expressed relative to the latest pose (distance along the axis
-  from the current sensor origin, direction as atan2(z, y) in the current sensor frame).
+  way on a world direction (its angle is the deflection from the fitted pipe axis, its
+  direction the roll about that axis, as :mod:`detector.options` defines them). Estimates
+  from different scans can then be compared and averaged, and the fused structure is
+  re-expressed relative to the latest pose (distance along the axis from the current sensor
+  origin, direction as atan2(z, y) in the current sensor frame).
 - **Weights nearer scans more** (thesis 5.3's trust factor): a scan's weight is its confidence
   divided by ``max(distance, near_distance)^4``, an inverse-variance weight: the beams of a
   sweep meet the wall ``distance^2 / R`` x the beam step apart along the axis, so the error of
@@ -25,6 +27,14 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
   from at least ``confirm_count`` consistent detections; it is dropped only when its evidence
   falls to zero (a confirmed track first has to lose it all, a tentative one is replaced by a
   better-supported newcomer).
+- **Confirms from one place only what was seen there from elsewhere.** A new track is
+  *contested* unless scans from other places saw a structure at its reference point (within
+  the gate) and none saw one beyond it (a structure appearing short of where the robot saw one
+  on its way); only scans that saw their structure within ``contest_range`` count. A contested
+  track's detections must come from at least ``contested_places`` places ``place_spacing``
+  apart to confirm it. Sweeps repeated where the robot stands (rescans before a near
+  structure) repeat a detector's systematic error (a long bend's exit or straight approach read
+  as a junction 10 cm ahead), so alone they confirm only what the robot saw on its way there.
 - **Lets nearer scans overrule.** Disagreeing detections are fused into a *challenger* track; once
   the challenger has ``confirm_count - 1`` consistent detections and more trust weight than the
   track (nearer scans weigh more), it replaces the track: a tee seen from its stem that looked
@@ -112,6 +122,15 @@ class _Track:
     evidence: float = 0.0
     hits: int = 0
     confirmed: bool = False
+    #: sensor positions (odometry frame) the detections came from, one per place
+    places: list[NDArray[np.float64]] = field(default_factory=list)
+    #: places needed to confirm (more for a contested track)
+    min_places: int = 1
+
+    def seen_from(self, pos: NDArray[np.float64], spacing: float) -> None:
+        """Count ``pos`` as a new place unless it is within ``spacing`` of a known one."""
+        if all(float(np.linalg.norm(pos - p)) > spacing for p in self.places):
+            self.places.append(pos.copy())
 
     @property
     def reference(self) -> NDArray[np.float64]:
@@ -163,6 +182,11 @@ class StructureTracker:
         near_distance: distances below this weigh like this one, metres.
         handover_distance: closer than this, disagreeing detections are ignored, metres.
         pass_margin: the track ends once the sensor is this far past the reference point, m.
+        contested_places: distinct places a contested track's consistent detections must come
+            from to confirm it (at most ``confirm_count``); see the module docstring.
+        place_spacing: sensor positions closer than this count as one place, m.
+        contest_range: earlier scans contest a new track with structures they saw at most this
+            far ahead, m.
     """
 
     def __init__(
@@ -175,6 +199,9 @@ class StructureTracker:
         near_distance: float = 0.1,
         handover_distance: float = 0.12,
         pass_margin: float = 0.05,
+        contested_places: int = 2,
+        place_spacing: float = 0.01,
+        contest_range: float = 0.5,
     ) -> None:
         for name, value in (
             ("confirm_evidence", confirm_evidence),
@@ -184,12 +211,23 @@ class StructureTracker:
             ("near_distance", near_distance),
             ("handover_distance", handover_distance),
             ("pass_margin", pass_margin),
+            ("place_spacing", place_spacing),
+            ("contest_range", contest_range),
         ):
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"StructureTracker.{name} must be positive, got {value!r}")
         if int(confirm_count) < 1:
             raise ValueError(f"StructureTracker.confirm_count must be >= 1, got {confirm_count}")
+        if int(contested_places) < 1:
+            raise ValueError(
+                f"StructureTracker.contested_places must be >= 1, got {contested_places}"
+            )
         self.confirm_count = int(confirm_count)
+        self.contested_places = int(contested_places)
+        self.place_spacing = float(place_spacing)
+        self.contest_range = float(contest_range)
+        #: (sensor position, reference point) of the scans that saw a structure since reset
+        self._seen: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
         self.confirm_evidence = float(confirm_evidence)
         self.miss_penalty = float(miss_penalty)
         self.gate = float(gate)
@@ -206,6 +244,7 @@ class StructureTracker:
         self._track = None
         self._challenger = None
         self._last_pose = None
+        self._seen = []
 
     # ---------------------------------------------------------------- update
     def update(
@@ -237,6 +276,16 @@ class StructureTracker:
                         self._track = tr = None
             return self._state(handed_over)
         obs = self._observation(detection, pos, rot)
+        handed_over = self._update_with(obs, pos)
+        if float((obs["near_ref"] - pos) @ obs["axis"]) <= self.contest_range:
+            self._seen.append((pos.copy(), obs["near_ref"].copy()))
+        return self._state(handed_over)
+
+    def _update_with(self, obs: dict[str, Any], pos: NDArray[np.float64]) -> bool:
+        """Associate a structure detection with the track, the challenger or a new track;
+        True if the track was handed over (the detection ignored near the structure)."""
+        tr = self._track
+        handed_over = False
         if tr is None:
             self._track = self._new_track(obs)
         elif self._consistent(tr, obs):
@@ -256,8 +305,12 @@ class StructureTracker:
                     self._challenger = None
         tr = self._track
         if tr is not None and not tr.confirmed:
-            tr.confirmed = tr.hits >= self.confirm_count and tr.evidence >= self.confirm_evidence
-        return self._state(handed_over)
+            tr.confirmed = (
+                tr.hits >= self.confirm_count
+                and tr.evidence >= self.confirm_evidence
+                and len(tr.places) >= min(tr.min_places, self.confirm_count)
+            )
+        return handed_over
 
     # ---------------------------------------------------------------- internals
     def _challenge(self, obs: dict[str, Any]) -> _Track:
@@ -277,14 +330,16 @@ class StructureTracker:
         dist = float(np.mean([o.distance for o in det.options]))
         axis_w = rot @ axis_s
         ref = pos + dist * axis_w
+        # an option's angle is its deflection from the incoming pipe's axis, not from the
+        # sensor's x axis (a sensor tilted in the pipe would add its tilt to every turn); its
+        # direction is the roll about that axis, zero towards the sensor's y
+        e_y = np.array([0.0, 1.0, 0.0]) - axis_s[1] * axis_s
+        e_y /= np.linalg.norm(e_y)
+        e_z = np.cross(axis_s, e_y)
         ways = []
         for o in det.options:
-            v = np.array(
-                [
-                    math.cos(o.angle),
-                    math.sin(o.angle) * math.cos(o.direction),
-                    math.sin(o.angle) * math.sin(o.direction),
-                ]
+            v = math.cos(o.angle) * axis_s + math.sin(o.angle) * (
+                math.cos(o.direction) * e_y + math.sin(o.direction) * e_z
             )
             ways.append((rot @ v, o.diameter, o.bend_radius))
         w = max(det.confidence, 1e-3) / max(abs(dist), self.near_distance) ** 4
@@ -297,7 +352,21 @@ class StructureTracker:
             "weight": w,
             "confidence": det.confidence,
             "distance": dist,
+            "pos": pos,
+            # the nearest way's reference point (a thesis detection may place ways apart)
+            "near_ref": pos + min(o.distance for o in det.options) * axis_w,
         }
+
+    def _contested(self, obs: dict[str, Any]) -> bool:
+        """True unless scans from another place saw a structure where this one is and none
+        saw one beyond it."""
+        gate = self.gate + 0.1 * abs(obs["distance"])
+        elsewhere = [
+            float((ref - obs["near_ref"]) @ obs["axis"])
+            for p, ref in self._seen
+            if float(np.linalg.norm(p - obs["pos"])) > self.place_spacing
+        ]
+        return not any(abs(d) <= gate for d in elsewhere) or any(d > gate for d in elsewhere)
 
     def _new_track(self, obs: dict[str, Any]) -> _Track:
         w = obs["weight"]
@@ -310,6 +379,8 @@ class StructureTracker:
             kind_weight={obs["kind"]: w},
             evidence=obs["confidence"],
             hits=1,
+            places=[obs["pos"].copy()],
+            min_places=self.contested_places if self._contested(obs) else 1,
         )
 
     def _consistent(self, tr: _Track, obs: dict[str, Any]) -> bool:
@@ -326,6 +397,7 @@ class StructureTracker:
         tr.kind_weight[obs["kind"]] = tr.kind_weight.get(obs["kind"], 0.0) + w
         tr.evidence += obs["confidence"]
         tr.hits += 1
+        tr.seen_from(obs["pos"], self.place_spacing)
         for v, d, rb in obs["ways"]:
             best, best_ang = None, math.inf
             for way in tr.ways:

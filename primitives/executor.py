@@ -485,6 +485,7 @@ class Executor:
         self._F_pos, self._F_rot = p.copy(), _orthonormal(self._F_rot)
         remaining = step.distance
         ds_tick = step.speed * CONTROL_DT
+        complying = False
         while remaining > 1e-9:
             ds = min(ds_tick, remaining)
             remaining -= ds
@@ -501,6 +502,11 @@ class Executor:
             self._set_targets()
             try:
                 self._tick(self._F_rot[:, 0])
+                if step.comply and self._kappa == 0.0 and (complying or self._hold_heading):
+                    complying = complying or self._steer_error() > self.config.jam_hold
+                    if complying:  # the bend goes on: the walls set the heading
+                        self._hold_heading = False
+                        self._H_rot = self._front_pose()[1]
                 if self._kappa != 0.0 or self._hold_heading:
                     self._check_steer()
             except _Jam:
@@ -667,11 +673,14 @@ class Executor:
             self._tick(None)
         self._settle(5)
 
+    def _steer_error(self) -> float:
+        """Angle between the front's heading and the commanded heading, rad."""
+        _, r = self._front_pose()
+        return math.acos(float(np.clip(r[:, 0] @ self._H_rot[:, 0], -1.0, 1.0)))
+
     def _check_steer(self) -> None:
         """Steering: jam if the walls force the front too far off its commanded heading."""
-        _, r = self._front_pose()
-        cosang = float(np.clip(r[:, 0] @ self._H_rot[:, 0], -1.0, 1.0))
-        err = math.acos(cosang)
+        err = self._steer_error()
         limit = self.config.jam_steer if self._kappa != 0.0 else self.config.jam_hold
         if err > limit:
             raise _Jam(

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from detector.options import StructureOption
+from pipe_env.plant import SENSED_DIAMETER_MARGIN
 from pipe_env.robot import RobotConfig
 from primitives.steps import (
     DEFAULT_SPEED,
@@ -43,10 +44,10 @@ from primitives.steps import (
 
 #: Turn arc radius as a fraction of the incoming diameter (fits inside a mitre's corner).
 TURN_RADIUS_FACTOR = 0.65
-#: The turn starts this fraction of the radial clearance early (towards the inner corner).
-TURN_INSIDE = 0.9
-#: ... but at most this early, m.
-TURN_INSIDE_MAX = 0.0065
+#: A tight turn starts this early (towards the inner corner), m. Measured passing windows of a
+#: tee's branch: 5.5-7.5 mm early at 57 mm (the robot's smallest pipe), 3-15 mm at 60-75 mm; a
+#: 90 deg mitre at 57 mm passes from 3.5 mm early on.
+TURN_INSIDE = 0.0065
 #: The robot attempts sensed turns up to this angle (90 deg fittings plus sensing noise), rad.
 MAX_TURN_ATTEMPT = math.radians(100.0)
 #: Distance kept before a structure's reference point by :func:`stop_before`, m.
@@ -121,7 +122,10 @@ def stop_before(option: StructureOption, margin: float = STOP_MARGIN) -> Sequenc
 
 
 def _refuse(option: StructureOption, config: RobotConfig) -> Sequence | None:
+    # a sensed diameter is noisy: a way sensed just outside the range is attempted, as the
+    # options table's mask offers it (the clamp is force-controlled: it finds the real wall)
     lo, hi = config.diameter_range
+    lo, hi = lo - SENSED_DIAMETER_MARGIN, hi + SENSED_DIAMETER_MARGIN
     if option.kind == "closure" or option.diameter <= 0.0:
         return Sequence("dead_end", (Stop(), Halt("dead_end", "closure ahead: no way on")))
     if not lo <= option.diameter <= hi:
@@ -132,7 +136,8 @@ def _refuse(option: StructureOption, config: RobotConfig) -> Sequence | None:
                 Halt(
                     "blocked",
                     f"way on is {option.diameter * 1000:.0f} mm, outside the robot's "
-                    f"{lo * 1000:.0f}-{hi * 1000:.0f} mm",
+                    f"{config.diameter_range[0] * 1000:.0f}-"
+                    f"{config.diameter_range[1] * 1000:.0f} mm",
                 ),
             ),
         )
@@ -173,8 +178,8 @@ def take_turn(
     if not follow_arc:
         # start a little early so the arc hugs the inner corner: the front module's outer
         # front wheel then clears the far corner of a branch's mouth (a tee in a 60 mm pipe)
-        clearance = 0.5 * (min(d_in, option.diameter) - c.width)
-        pre -= TURN_INSIDE * min(max(clearance, 0.0), TURN_INSIDE_MAX)
+        if min(d_in, option.diameter) > c.width:
+            pre -= TURN_INSIDE
     through = c.length + 0.5 * option.diameter + 0.03
     steps: list[Step] = [Unclamp()]
     if pre > 0 or (follow_arc and pre < -0.001):
@@ -184,7 +189,7 @@ def take_turn(
         Bend(1, bend),
         Drive(radius * theta, speed),
         Bend(1, 0.0),
-        Drive(through, speed),
+        Drive(through, speed, comply=follow_arc),
         Roll(-option.direction),
         Centre(),
         Clamp(option.diameter),

@@ -5,7 +5,8 @@ Each primitive is plain data (SI units: metres, radians, m/s) that prints, seria
 meaning on the robot:
 
 - :class:`Drive`: move the front ``distance`` metres along its heading (negative: reverse along
-  the driven path) at ``speed``; while a bend is set, the heading turns as it drives;
+  the driven path) at ``speed``; while a bend is set, the heading turns as it drives; with
+  ``comply`` the walls may take over the heading held after a turn (a long bend going on);
 - :class:`Stop`: stand still (brakes) for ``duration`` seconds;
 - :class:`Roll`: turn the front half about its axis by ``angle`` (the middle roll joint);
 - :class:`Bend`: set bending joint ``joint`` (1 = behind the front module, the steering joint)
@@ -51,15 +52,29 @@ class Step:
 
 @dataclass(frozen=True)
 class Drive(Step):
-    """Drive ``distance`` m (negative: back along the driven path) at ``speed`` m/s."""
+    """Drive ``distance`` m (negative: back along the driven path) at ``speed`` m/s.
+
+    ``comply``: coming out of a long bend's arc, where the arc may go on beyond what the sensor
+    saw, the turn's heading is held only while the walls agree; once they force the front off
+    it (the bend goes on), the walls set the heading and the commanded heading follows them
+    instead of the drive reporting a stalled steering."""
 
     op: ClassVar[str] = "drive"
     distance: float
     speed: float = DEFAULT_SPEED
+    comply: bool = False
 
     def __post_init__(self) -> None:
         _num(self, "distance", -50.0, 50.0, "m")
         _num(self, "speed", 0.001, 0.5, "m/s")
+        if not isinstance(self.comply, bool):
+            raise ValueError(f"Drive.comply = {self.comply!r} is invalid; allowed: True, False")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = super().to_dict()
+        if not self.comply:
+            d.pop("comply")
+        return d
 
 
 @dataclass(frozen=True)
