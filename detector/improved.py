@@ -1468,6 +1468,35 @@ def _line_resjac(
     return best, jac
 
 
+def _fit_axes(
+    pts: NDArray[np.float64],
+    x0: NDArray[np.float64],
+    n: int,
+    lower: NDArray[np.float64],
+    upper: NDArray[np.float64],
+    c: float,
+    c_final: float,
+    iterations: int = 8,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Robust fit of ``n`` outgoing pipes (``[L, theta, phi, rho] x n``, the reference point
+    shared) to the returns ``pts`` from ``x0`` within the bounds: Tukey cut-off shrinking from
+    ``c`` to ``c_final`` (m). Returns ``(x, residuals, weights)``."""
+    return robust_gauss_newton(
+        None,
+        x0,
+        np.full(x0.size, 1e-5),
+        c=c,
+        iterations=iterations,
+        lower=lower,
+        upper=upper,
+        c_final=c_final,
+        step_tol=STEP_TOL,
+        anneal=ANNEAL,
+        cost_tol=COST_TOL,
+        resjac=lambda v: _line_resjac(pts, v, n, True),
+    )
+
+
 def _branches(
     cloud: PipeCloud,
     big_r: float,
@@ -1585,19 +1614,14 @@ def _branches(
     c_fin = max(3.0 * tol_med, 0.003)
 
     def free_fit(xs: NDArray, lo: NDArray, up: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-        return robust_gauss_newton(
-            None,
+        return _fit_axes(
+            pts_all,
             xs,
-            np.full(xs.size, 1e-5),
+            n_l,
+            lo,
+            up,
             c=2.0 * c0,
-            iterations=8,
-            lower=lo,
-            upper=up,
             c_final=c_fin,
-            step_tol=STEP_TOL,
-            anneal=ANNEAL,
-            cost_tol=COST_TOL,
-            resjac=lambda v: _line_resjac(pts_all, v, n_l, True),
         )
 
     x, res, w = free_fit(x0a, lower, upper)
@@ -1626,19 +1650,15 @@ def _branches(
         res_eq = _line_resjac(pts_all, x_eq, n_l, False)[0]
         w_eq = tukey_weights(res_eq, c_fin)
     else:
-        x_eq, res_eq, w_eq = robust_gauss_newton(
-            None,
+        x_eq, res_eq, w_eq = _fit_axes(
+            pts_all,
             x_eq,
-            np.full(x_eq.size, 1e-5),
+            n_l,
+            lo_eq,
+            up_eq,
             c=2.0 * c0 if any_roll else 2.0 * c_fin,
-            iterations=12 if any_roll else 8,
-            lower=lo_eq,
-            upper=up_eq,
             c_final=c_fin,
-            step_tol=STEP_TOL,
-            anneal=ANNEAL,
-            cost_tol=COST_TOL,
-            resjac=lambda v: _line_resjac(pts_all, v, n_l, True),
+            iterations=12 if any_roll else 8,
         )
     if any_roll:
         # (a far wall seen head-on fits a pipe deflected by theta and its mirror image deflected
@@ -1646,19 +1666,14 @@ def _branches(
         x_m = x_eq.copy()
         x_m[1], x_m[2] = math.pi - x_eq[1], x_eq[2] + math.pi
         x_m[1] = min(max(x_m[1], lo_eq[1]), up_eq[1])
-        x_m, res_m, w_m = robust_gauss_newton(
-            None,
+        x_m, res_m, w_m = _fit_axes(
+            pts_all,
             x_m,
-            np.full(x_m.size, 1e-5),
+            n_l,
+            lo_eq,
+            up_eq,
             c=2.0 * c_fin,
-            iterations=8,
-            lower=lo_eq,
-            upper=up_eq,
             c_final=c_fin,
-            step_tol=STEP_TOL,
-            anneal=ANNEAL,
-            cost_tol=COST_TOL,
-            resjac=lambda v: _line_resjac(pts_all, v, n_l, True),
         )
         if tukey_cost(res_m, c_fin) < tukey_cost(res_eq, c_fin):
             x_eq, res_eq, w_eq = x_m, res_m, w_m
@@ -1698,19 +1713,14 @@ def _branches(
         ]
         best_a = None
         for xa0 in starts:
-            xa, res_a, w_a = robust_gauss_newton(
-                None,
+            xa, res_a, w_a = _fit_axes(
+                pts_all,
                 xa0,
-                np.full(4, 1e-5),
+                1,
+                np.array([lower[0], math.radians(25.0), -10.0, r_a]),
+                np.array([upper[0], math.radians(155.0), 10.0, r_a]),
                 c=2.0 * c0,
-                iterations=8,
-                lower=np.array([lower[0], math.radians(25.0), -10.0, r_a]),
-                upper=np.array([upper[0], math.radians(155.0), 10.0, r_a]),
                 c_final=c_fin,
-                step_tol=STEP_TOL,
-                anneal=ANNEAL,
-                cost_tol=COST_TOL,
-                resjac=lambda v: _line_resjac(pts_all, v, 1, True),
             )
             cost_a = tukey_cost(res_a, c_fin)
             if best_a is None or cost_a < best_a[0]:
@@ -1853,19 +1863,14 @@ def _standard_angles(
     xs, lo, up = x.copy(), lower.copy(), upper.copy()
     xs[idx] = lo[idx] = up[idx] = angles
     xs = np.clip(xs, np.minimum(lo, xs), np.maximum(up, xs))
-    x_s, res_s, w_s = robust_gauss_newton(
-        None,
+    x_s, res_s, w_s = _fit_axes(
+        pts,
         xs,
-        np.full(xs.size, 1e-5),
+        n_b,
+        lo,
+        up,
         c=2.0 * c_fin,
-        iterations=8,
-        lower=lo,
-        upper=up,
         c_final=c_fin,
-        step_tol=STEP_TOL,
-        anneal=ANNEAL,
-        cost_tol=COST_TOL,
-        resjac=lambda v: _line_resjac(pts, v, n_b, True),
     )
     lr = 2.0 * (tukey_cost(res_s, c_fin) - tukey_cost(res, c_fin)) / max(sigma2, 1e-12)
     diag["standard_angle_lr"] = float(lr)

@@ -270,29 +270,30 @@ def test_wide_bend_seen_from_just_before_its_arc_keeps_the_given_axis():
     assert o.bend_radius > 0.2
 
 
+def _assert_ring_hole_junction(layout: str, distance: float, **params) -> None:
+    """A 57 mm junction ``distance`` ahead is found through the holes rings of beams enter,
+    and every way is placed to 5 mm, sized to 2 mm, deflected to 1 deg and rolled to 2 deg."""
+    scan, truth, d = scan_layout(layout, distance, diameter=0.057, branch_diameter=0.057, **params)
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == len(truth), det.describe()
+    assert det.diagnostics["model"] == "ring holes"
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < 0.005
+        assert abs(o.diameter - t.diameter) < 0.002
+        assert abs(o.angle - t.angle) < math.radians(1.0)
+        assert abs(wrap(o.direction - t.direction)) < math.radians(2.0)
+
+
 def test_small_side_holes_between_two_rings_of_beams_are_found():
     # 40 cm before a 57 mm tee (or cross) the beams meet the wall 4.9 cm apart along the axis:
     # one ring of beams enters the 57 mm hole and meets the branch's far side only 1.5 mm
     # beyond the run's wall; the scan once read as the end wall of the run 65 cm farther on
     # (at 32.5 cm the ring's bump dips below the threshold in its middle: two bumps, one hole)
-    for layout, distance, params in (
-        ("t_junction", 0.4, {"direction": -2.3262, "entry": "run"}),
-        ("cross_junction", 0.4, {"direction": 0.0716}),
-        ("t_junction", 0.325, {"direction": 1.68203, "entry": "run"}),
-        # (a 45 deg lateral: the far side of its hole tells it from a tee)
-        ("y_junction", 0.375, {"direction": -1.59625, "entry": "run"}),
-    ):
-        scan, truth, d = scan_layout(
-            layout, distance, diameter=0.057, branch_diameter=0.057, **params
-        )
-        det = detect(scan, d)
-        assert det.kind == "junction" and len(det.options) == len(truth), det.describe()
-        assert det.diagnostics["model"] == "ring holes"
-        for o, t in match(det.options, truth):
-            assert abs(o.distance - t.distance) < 0.005
-            assert abs(o.diameter - t.diameter) < 0.002
-            assert abs(o.angle - t.angle) < math.radians(1.0)
-            assert abs(wrap(o.direction - t.direction)) < math.radians(2.0)
+    _assert_ring_hole_junction("t_junction", 0.4, direction=-2.3262, entry="run")
+    _assert_ring_hole_junction("cross_junction", 0.4, direction=0.0716)
+    _assert_ring_hole_junction("t_junction", 0.325, direction=1.68203, entry="run")
+    # (a 45 deg lateral: the far side of its hole tells it from a tee)
+    _assert_ring_hole_junction("y_junction", 0.375, direction=-1.59625, entry="run")
 
 
 def test_no_ring_holes_in_a_straight_pipe_seen_off_centre():
@@ -361,18 +362,8 @@ def test_junction_fit_the_returns_hardly_support_gives_way_to_its_holes():
     # 35 cm before a 57 mm tee (and a cross): 30 returns beyond the wall through the opening,
     # none of them on the fitted branch, which came out at 45 deg, 31 mm and 6.8 cm early (the
     # cross: a pipe across tilted 55 deg); two rings enter the hole and place it exactly
-    for layout, params in (
-        ("t_junction", {"direction": 1.68203, "entry": "run"}),
-        ("cross_junction", {"direction": 2.93626}),
-    ):
-        scan, truth, d = scan_layout(layout, 0.35, diameter=0.057, branch_diameter=0.057, **params)
-        det = detect(scan, d)
-        assert det.kind == "junction" and len(det.options) == len(truth), det.describe()
-        assert det.diagnostics["model"] == "ring holes"
-        for o, t in match(det.options, truth):
-            assert abs(o.distance - t.distance) < 0.005
-            assert abs(o.diameter - t.diameter) < 0.002
-            assert abs(o.angle - t.angle) < math.radians(1.0)
+    _assert_ring_hole_junction("t_junction", 0.35, direction=1.68203, entry="run")
+    _assert_ring_hole_junction("cross_junction", 0.35, direction=2.93626)
 
 
 def test_ring_bumps_of_a_sensor_off_the_axis_do_not_replace_a_junction():
