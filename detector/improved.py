@@ -55,9 +55,11 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    roll, which sizes a narrower branch); when the few returns through a far opening lead
    the fit away from the hole seen, the fit restarts from the hole and stays near it. Lobes
    that start well past the nearest one belong to a structure farther along the run. A side
-   hole that only one ring of beams enters (a small pipe's branch seen far away, between two
-   rings) shows as a bump of returns just beyond the wall on that ring alone; its far side
-   places and sizes the branch (:mod:`detector.grazing`) when nothing nearer was found.
+   hole that only one ring of beams (or two or three) enters (a small pipe's branch seen far
+   away, between rings) shows as a bump of returns a millimetre or two beyond the wall on
+   those rings alone; its far side places and sizes the branch (:mod:`detector.grazing`)
+   when nothing nearer was found, or when a junction's branch fit rests on a handful of
+   returns.
    A junction's branches are held at the standard angle of fittings (90 deg for tees and
    crosses, 45 or 135 deg for laterals) when fitted within 10 deg of it and the returns do
    not reject it (likelihood ratio): a small opening far away shows a patch of the branch
@@ -769,9 +771,9 @@ def _with_ring_holes(
     nearer than the structure found (more than a diameter before it and before the first
     returns off the wall, e.g. where a wide arc starts curving), or at the place of a junction
     whose branch fit the returns hardly support: a branch seen far away in a small pipe,
-    between rings of beams (:mod:`detector.grazing`). The branches are
-    taken perpendicular to the run (the ring shows where the branch's far side is, not how it
-    is deflected); the run goes on past them (the next ring lies on its wall)."""
+    between rings of beams (:mod:`detector.grazing`). Each branch leaves at the standard
+    fitting angle (90, 45 or 135 deg) whose far side fits the bump best; the run goes on past
+    them (the rings beyond lie on its wall)."""
     # (cheap tests first: too few returns beyond the wall at all, or nearer than the limit)
     beyond = cloud.r_v - big_r > np.maximum(0.00035, 4.0 * cloud.sigma_v)
     if np.count_nonzero(beyond) < 6:
