@@ -11,7 +11,7 @@ run's wall radius (less than the wall tolerance, so the opening detector sees no
 though its range is up to a few centimetres long. Compared with the rings on either side,
 which lie on the wall, the ring shows a bump of returns beyond the wall over a bounded range
 of roll; the far-side positions of those returns give the branch's place along the axis, its
-roll and its radius.
+roll, its radius and which standard deflection (90, 45 or 135 deg) it leaves at.
 
 Everything here works on the unrolled scan grid (:mod:`detector.grid`) in the pipe frame.
 Lengths in metres, angles in radians.
@@ -52,7 +52,7 @@ WALL_BAND = 0.002
 
 @dataclass(frozen=True)
 class RingHole:
-    """A side branch's hole found through one ring of beams.
+    """A side branch's hole found through one to three rings of beams.
 
     Attributes:
         position: along the run's axis where the branch's axis crosses it, m (pipe frame).
