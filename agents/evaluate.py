@@ -87,6 +87,21 @@ class PolicyAgent:
         return int(action)
 
 
+def random_valid_episode(env: gym.Env, rng: np.random.Generator, seed: int) -> tuple[int, float]:
+    """Run one episode of ``env`` (reset with ``seed``) choosing uniformly among the valid
+    actions (``info["action_mask"]``) with ``rng``; returns (decisions, simulated seconds).
+    The throughput benchmarks' workload."""
+    _, info = env.reset(seed=seed)
+    decisions = 0
+    done = False
+    while not done:
+        action = int(rng.choice(np.flatnonzero(info["action_mask"])))
+        _, _, term, trunc, info = env.step(action)
+        decisions += 1
+        done = term or trunc
+    return decisions, float(info["sim_time"])
+
+
 def held_out_networks(
     config: NetworkConfig, n: int, pool_seed: int = EVAL_POOL_SEED
 ) -> list[PipeNetwork]:

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 
 import pipe_env  # noqa: F401
-from agents.evaluate import EVAL_POOL_SEED, evaluate
+from agents.evaluate import EVAL_POOL_SEED, evaluate, random_valid_episode
 from agents.train import DEFAULT_CONFIG, TrainConfig, train
 from pipe_env.envs import pool_network
 
@@ -53,14 +53,9 @@ def throughput(fidelity: str, episodes: int, env_kwargs: dict, seed: int = 0) ->
     sim = 0.0
     t0 = time.perf_counter()
     for ep in range(episodes):
-        obs, info = env.reset(seed=seed + ep)
-        done = False
-        while not done:
-            action = int(rng.choice(np.flatnonzero(info["action_mask"])))
-            obs, _, term, trunc, info = env.step(action)
-            steps += 1
-            done = term or trunc
-        sim += info["sim_time"]
+        n, t = random_valid_episode(env, rng, seed + ep)
+        steps += n
+        sim += t
     wall = time.perf_counter() - t0
     env.close()
     return {

@@ -41,6 +41,7 @@ import pipe_env  # noqa: F401
 import pipe_env.plant_full as plant_full
 import pipe_env.world as world_mod
 import primitives.executor as executor_mod
+from agents.evaluate import random_valid_episode
 from agents.train import DEFAULT_CONFIG, TrainConfig
 from detector.fusion import StructureTracker
 from pipe_env.lidar import RotatingLidar
@@ -136,14 +137,9 @@ def run(contacts: str, episodes: int, seed: int) -> dict[str, Any]:
     t0 = time.perf_counter()
     try:
         for ep in range(episodes):
-            _, info = env.reset(seed=seed + ep)
-            done = False
-            while not done:
-                action = int(rng.choice(np.flatnonzero(info["action_mask"])))
-                _, _, term, trunc, info = env.step(action)
-                decisions += 1
-                done = term or trunc
-            sim += info["sim_time"]
+            n, t = random_valid_episode(env, rng, seed + ep)
+            decisions += n
+            sim += t
             for ex in made:
                 if ex.near is not None:
                     for key in ("selections", "fallbacks", "overruns"):
