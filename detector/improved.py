@@ -114,17 +114,35 @@ NO_WALL_VIEW = 0.01
 GIVEN_POSE_MARGIN = 0.02
 #: Deflections of standard branch fittings (tees and crosses, laterals either way), rad; a
 #: junction's branch fitted within ``SNAP_WITHIN`` of one is held at it when the returns allow
-#: (likelihood ratio at most ``SNAP_LR`` per branch).
+#: (likelihood ratio at most ``SNAP_LR`` per branch) and it turns by at most
+#: ``SNAP_MAX_TURN`` about the run; a radius held with it may move by ``SNAP_RADIUS`` of itself.
 STANDARD_BRANCH_ANGLES = np.radians([45.0, 90.0, 135.0])
 SNAP_WITHIN = math.radians(10.0)
 SNAP_LR = 6.0
 SNAP_MAX_TURN = math.radians(3.0)
+SNAP_RADIUS = 0.03
 #: Less straight wall than this in view along the axis (m) before a structure: the given pose
 #: stands when it explains that wall.
 SHORT_WALL_VIEW = 0.05
 #: The wall this far along the axis beyond the nearest returns (m) gives the first estimate of
 #: the pipe radius.
 NEAR_WALL = 0.03
+#: Returns of a widening this much (m; or three times their noise) short of the wider pipe's
+#: radius lie on its cone, not on the wider pipe.
+CONE_PLATEAU_MARGIN = 0.0015
+#: A line along a widening's cone needs returns rising this much (m; or six times their noise)
+#: from the wall to the wider pipe: two rings of beams, not the spread of one.
+CONE_MIN_RISE = 0.002
+#: The returns of a cone seen by several rings lie on its line to within this much (m, robust
+#: standard deviation across it; or three times their noise).
+CONE_LINE_SCATTER = 0.00015
+#: Returns of a cone are binned this long (m along the axis) to find its first ring of beams
+#: (or the first few, close together near the sensor).
+CONE_FIRST_RING = 0.01
+#: Fewer returns than this off the wall are stray, not a ring of beams on a cone, whose
+#: returns cover this fraction of the azimuth at least.
+CONE_MIN_RETURNS = 6
+CONE_RING_COVERAGE = 0.75
 
 
 @dataclass(frozen=True)
@@ -653,7 +671,7 @@ def detect_improved(
                 moved = _pose_moved(pose0, pose1, big_r)
             # does the given pose explain the wall before the structure (seen under it, within
             # the tolerance that found the structure's start)?
-            n_ok, n_seen = _wall_count(cloud, big_r, config, pose0, u_start0, tol_scale=2.0)
+            n_ok, n_seen, _, _ = _wall_count(cloud, big_r, config, pose0, u_start0, tol_scale=2.0)
             given_fits = n_seen >= 40 and n_ok >= 0.9 * n_seen
             # second pass: all of the intact wall before the structure (not a thin ring of it
             # right before the structure when the given pose explains the wall: where a wide
@@ -669,7 +687,8 @@ def detect_improved(
             # explains fewer of them)
             cloud.restore(pose0, xyz_of[0])
             u_near = min(u_start, u_start0) if moved else u_start
-            scores = [_wall_count(cloud, big_r, config, p, u_near)[0] for p, _ in candidates]
+            counts = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
+            scores = [c[0] for c in counts]
             # a refinement whose cylinder misses its own wall returns by several times their
             # noise fitted a curved wall (the arc of a wide bend filling the whole view): the
             # given pose stands when it explains the wall
@@ -677,7 +696,11 @@ def detect_improved(
             for k, (_, inf) in enumerate(candidates):
                 if k and given_fits and inf.get("axis_rms", 0.0) > rms_cap:
                     scores[k] = -1
-            best = int(np.argmax(np.array(scores) + 1e-3 * np.arange(len(scores))))
+            # (of the poses explaining as many returns, the one that fits them most closely:
+            # a cylinder tilted onto the start of a gentle taper explains no more of them, within
+            # the tolerance, but fits them more loosely)
+            tied = [k for k, sc in enumerate(scores) if sc == max(scores)]
+            best = min(tied, key=lambda k: (counts[k][2], -k))
             if (
                 best
                 and u_start0 < u_nearest + NO_WALL_VIEW
@@ -701,7 +724,8 @@ def detect_improved(
                 cloud.set_pose(pose)
             big_r = _wall_radius(cloud, big_r, config, u_near, diag)
             # a noiseless wall fitted closely: the tolerance floor shrinks towards its scatter
-            rms = diag.get("wall_radius_rms", info.get("axis_rms"))
+            # (under the given pose, the wall returns' own scatter about it)
+            rms = diag.get("wall_radius_rms", info.get("axis_rms", counts[best][3]))
             if rms is not None and float(_pct(cloud.sigma_v, 90.0)) < 0.0005:
                 cloud.floor = min(config.tol_floor, max(0.0008, 6.0 * float(rms)))
                 diag["tolerance_floor"] = cloud.floor
@@ -877,10 +901,13 @@ def _wall_count(
     pose: SensorInPipe,
     u_max: float,
     tol_scale: float = 1.0,
-) -> tuple[int, int]:
+) -> tuple[int, int, float, float]:
     """Returns within ``tol_scale`` x the wall tolerance of the radius ``big_r`` under ``pose``,
     counting those nearer than ``u_max`` along the axis (all of them when fewer than 40 are),
-    and how many returns were counted (every third return)."""
+    how many returns were counted (every third return), their truncated quadratic cost (the
+    sum of ``min((e / tol)^2, 1)`` over them, ``e`` the distance from the wall, ``tol`` the
+    tolerance: a return off the wall costs 1, one on it costs how far in the tolerance it
+    lies), and the rms distance from the wall of those within the tolerance (m)."""
     if cloud.thin is None:  # every third valid return and its tolerance, computed once
         cloud.thin = (
             np.ascontiguousarray(cloud.sensor_v[:, ::3]),
@@ -888,13 +915,19 @@ def _wall_count(
         )
     sp, tol = cloud.thin
     pts = _transform(pose, sp)
-    r = np.sqrt(np.square(pts[1]) + np.square(pts[2]))
-    ok = np.abs(r - big_r) <= tol_scale * tol
+    e = np.sqrt(np.square(pts[1]) + np.square(pts[2])) - big_r
+    q = np.square(e / (tol_scale * tol))
+    ok = q <= 1.0
     near = pts[0] < u_max
     n_near = int(np.count_nonzero(near))
     if n_near >= 40:
-        return int(np.count_nonzero(ok & near)), n_near
-    return int(np.count_nonzero(ok)), int(ok.size)
+        ok &= near
+        q = q[near]
+    else:
+        n_near = int(ok.size)
+    n_ok = int(np.count_nonzero(ok))
+    rms = math.sqrt(float(np.mean(np.square(e[ok])))) if n_ok else math.inf
+    return n_ok, n_near, float(np.minimum(q, 1.0).sum()), rms
 
 
 def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
@@ -1032,7 +1065,8 @@ def _detect_in_pipe_frame(
         # a wall that looks flat within the range noise but curves: the far wall of a turn
         # when the fit finds one way on; a pipe across (or a 90 deg turn: the same far wall)
         # is too ambiguous to overrule the end wall
-        if alt.diagnostics.get("reason") == "far wall: way on undetermined":
+        undetermined = alt.diagnostics.get("reason") == "far wall: way on undetermined"
+        if undetermined or alt.kind == "junction":
             det.diagnostics["far_wall_way_undetermined"] = True
         return alt if alt.kind == "bend" else det
     if alt.kind != "straight" and alt.confidence > det.confidence:
@@ -1234,10 +1268,10 @@ def _axisymmetric(
     )
     if contraction:
         # an end wall far down the narrower pipe, seen through it, is no part of the taper:
-        # when grazing beams lose the narrower pipe's own wall, the plateau of the fit sits on
-        # that end wall instead (too narrow, the taper too long). Without it, the taper ends
-        # where its returns end; the end wall, filling the narrower pipe's cross-section,
-        # still bounds its radius from below.
+        # its returns pull the plateau of the fit down (too narrow, the taper too long), all
+        # the way onto the end wall when grazing beams lose the narrower pipe's own wall.
+        # Without them, the taper ends where its returns end; the end wall, filling the
+        # narrower pipe's cross-section, still bounds its radius from below.
         u_far = _pct(u, 97.0)
         far = np.abs(u - u_far) <= 0.003 + 2.0 * tol_med
         n_far = int(np.count_nonzero(far))
@@ -1250,11 +1284,11 @@ def _axisymmetric(
             and diag.get("closure_plane_fraction", 0.0) < 0.8
         ):
             r_end = float(_pct(r[far], 90.0))
-            if x[2] < r_end < big_r - tol_med:
+            if r_end < big_r - tol_med:
                 us, rs = us[~far_s], rs[~far_s]
                 x, res, w = robust_gauss_newton(
                     None,
-                    np.array([x[0], x[1], r_end]),
+                    np.array([x[0], x[1], max(x[2], r_end)]),
                     np.array([1e-4, 1e-4, 1e-5]),
                     c=max(4.0 * c_fin, 0.01),
                     iterations=10,
@@ -1271,21 +1305,7 @@ def _axisymmetric(
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     big_l, t_len, r2 = (float(v) for v in x)
     if not contraction:
-        # the first returns off the wall lie a tolerance out on the cone: where the cone
-        # (when seen) reaches the wall radius is the start of the widening
-        # (not an end wall far down the wider pipe)
-        cone = (r < r2 - max(2.0 * tol_med, 0.005)) & (u < u_first + 0.3)
-        # (a line along the cone needs more than one ring of beams on it)
-        along = np.count_nonzero(cone) >= 20 and _pct(u[cone], 95) - _pct(u[cone], 5) > 0.005
-        if along:
-            a_u, b_u = _robust_line(r[cone], u[cone])
-            if math.isfinite(a_u + b_u * big_r):
-                big_l = min(u_first, max(u_first - 0.1, a_u + b_u * big_r))
-        else:
-            # the edge lies between the last beam on the wall and the first one past it
-            wide = ~cone & (r >= r2 - max(2.0 * tol_med, 0.005))
-            u_wide = float(_pct(u[wide], 1.0)) if np.any(wide) else u_first * r2 / big_r
-            big_l = _widening_edge(cloud, big_r, wall, u_first, r2, u_wide, big_l, p[cone])
+        big_l, along = _widening_start(cloud, big_r, r2, u_first, big_l)
         diag["widening_start_from_cone"] = bool(along)
     diag.update(reducer_r2=r2, reducer_taper=t_len, reducer_rms=rms, axisymmetric_support=support)
     cov = _azimuth_coverage(p)
@@ -1305,48 +1325,79 @@ def _axisymmetric(
     return Detection("reducer", [opt], conf, diag)
 
 
-def _widening_edge(
-    cloud: PipeCloud,
-    big_r: float,
-    wall: NDArray[np.bool_],
-    u_first: float,
-    r2: float,
-    u_f: float,
-    default: float,
-    cone: NDArray[np.float64],
-) -> float:
-    """Start of a widening (m along the axis) whose cone the beams hardly see: between the
-    last beams on the wall and the first past it (``u_first``: where the first beams that
-    reach the wider pipe, of radius ``r2``, crossed the wall radius). A gentle cone seen by
-    one ring of beams (``cone``: (n, 3) its returns beyond the wall tolerance, if any; else
-    returns a millimetre or two beyond the wall, within its tolerance) bounds it more
-    tightly: the start lies before that ring's returns ``(u_c, r_c)``, and
-    far enough before that the cone through them reaches ``r2`` before the first returns on
-    the wider pipe (at ``u_f`` along the axis): ``L >= (k u_c - u_f) / (k - 1)`` with
-    ``k = (r2 - R) / (r_c - R)``. The middle of the interval left is the estimate."""
-    pw = cloud.points(wall)
-    near = (pw[:, 0] < u_first) & (pw[:, 0] > u_first - 0.1)
-    if not np.any(near):
-        return default
-    u_w = pw[near, 0]
-    e_w = np.hypot(pw[near, 1], pw[near, 2]) - big_r
-    sig = cloud.values(wall, cloud.sigma_v)[near]
-    off = e_w > np.maximum(0.00035, 4.0 * sig)
-    lo, hi = float(u_w.max()), u_first
-    if cone.shape[0] >= 6 or np.count_nonzero(off) >= 6:
-        u_on = u_w[~off]
-        lo = float(u_on.max()) if u_on.size else u_first - 0.1
-        if np.count_nonzero(off) >= 6:
-            u_c = float(np.median(u_w[off]))
-            r_c = big_r + float(np.median(e_w[off]))
-        else:
-            u_c = float(np.median(cone[:, 0]))
-            r_c = float(np.median(np.hypot(cone[:, 1], cone[:, 2])))
-        k = (r2 - big_r) / max(r_c - big_r, 1e-6)
-        if k > 1.0 and lo < u_c:
+def _widening_start(
+    cloud: PipeCloud, big_r: float, r2: float, u_first: float, default: float
+) -> tuple[float, bool]:
+    """Start of a widening (m along the axis) to radius ``r2`` and whether its cone was seen
+    by two or more rings of beams.
+
+    ``u_first``: where the first beams that reach the wider pipe crossed the wall radius
+    ``big_r``. The start lies between the last beams on the wall and the first past it. The
+    cone's returns (off the wall by more than their noise, short of ``r2``):
+
+    - rising over two or more rings of beams, their line reaches the wall radius at the start;
+    - from one ring ``(u_c, r_c)``, its slope is unknown, but the cone through it must reach
+      the wider pipe (``r2`` less a margin for the returns counted on it) before the first
+      returns on the wider pipe (at ``u_f``): ``L >= (k u_c - u_f) / (k - 1)`` with
+      ``k = (r2 - margin - R) / (r_c - R)``.
+
+    Without a line, the middle of the interval left is the estimate. ``default`` when no wall
+    is in view before it.
+    """
+    xyz, sig = cloud.xyz_v, cloud.sigma_v
+    u = xyz[0]
+    e = np.sqrt(np.square(xyz[1]) + np.square(xyz[2])) - big_r
+    noise = float(_pct(sig, 50.0))
+    rise = r2 - big_r
+    margin = max(3.0 * noise, CONE_PLATEAU_MARGIN)
+    plateau = e >= rise - margin
+    u_f = float(_pct(u[plateau], 1.0)) if np.any(plateau) else u_first * r2 / big_r
+    off_wall = np.maximum(0.00035, 4.0 * sig)
+    on = (np.abs(e) <= off_wall) & (u < u_f)
+    cone = (e > off_wall) & ~plateau & (u > min(u_first, u_f) - 0.1) & (u < u_f)
+    # (rings all round: part rings off the wall on one side are a slightly tilted axis)
+    cone[cone] = _full_rings(xyz[:, cone])
+    n_cone = int(np.count_nonzero(cone))
+    uc, ec = u[cone], e[cone]
+    if n_cone >= 20 and float(_pct(ec, 95) - _pct(ec, 5)) > max(6.0 * noise, CONE_MIN_RISE):
+        # (near its start the cone lies within the noise of the wall: the line alone places
+        # the start, bounded by the beams' crossings)
+        a_u, b_u = _robust_line(ec, uc)  # u = a + b e: the start at e = 0
+        # (a cone: returns on one line to within their noise)
+        if math.isfinite(a_u) and b_u > 0.0:
+            scatter = mad_sigma(ec - (uc - a_u) / b_u)
+            if scatter <= max(3.0 * noise, CONE_LINE_SCATTER):
+                return min(u_first, max(u_first - 0.1, a_u)), True
+    hi = min(u_first, u_f)
+    if n_cone:
+        first = uc <= uc.min() + CONE_FIRST_RING
+        hi = min(hi, float(uc.min()))
+    before = on & (u < hi)
+    if not np.any(before):
+        return default, False
+    lo = float(u[before].max())
+    if n_cone:
+        u_c, e_c = float(np.median(uc[first])), float(np.median(ec[first]))
+        k = (rise - margin) / max(e_c, 1e-6)
+        if k > 1.0:
             lo = max(lo, (k * u_c - u_f) / (k - 1.0))
-            hi = u_c
-    return 0.5 * (lo + hi) if lo <= hi else hi
+    return (0.5 * (lo + hi) if lo <= hi else hi), False
+
+
+def _full_rings(p: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which of the ``(3, n)`` returns lie in a ``CONE_FIRST_RING`` long stretch of the axis
+    whose returns cover at least ``CONE_RING_COVERAGE`` of the azimuth: rings of beams all
+    round, not a stray return or part of a ring."""
+    keep = np.zeros(p.shape[1], dtype=bool)
+    if p.shape[1] < CONE_MIN_RETURNS:
+        return keep
+    bins = np.floor((p[0] - p[0].min()) / CONE_FIRST_RING).astype(np.int64)
+    counts = np.bincount(bins)
+    for k in np.flatnonzero(counts >= CONE_MIN_RETURNS):
+        sel = bins == k
+        if _azimuth_coverage(p[:, sel].T) >= CONE_RING_COVERAGE:
+            keep |= sel
+    return keep
 
 
 def _radius_mode(r: NDArray, n: int) -> float:
@@ -1744,7 +1795,19 @@ def _branches(
             up_s = np.array([upper[0], math.radians(155.0), 10.0, float(across[3])])
         else:
             n_b, lo_s, up_s = (n_l, lo_eq, up_eq) if x is x_eq else (n_l, lower, upper)
-        x, res, w = _standard_angles(pts_all, x, res, w, n_b, lo_s, up_s, c_fin, sigma2, diag)
+        x, res, w = _standard_angles(
+            pts_all,
+            x,
+            res,
+            w,
+            n_b,
+            lo_s,
+            up_s,
+            c_fin,
+            sigma2,
+            diag,
+            radius_bounds=(lower[3::3], upper[3::3]) if across is None else None,
+        )
         if across is not None:
             across = x
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
@@ -1845,6 +1908,7 @@ def _standard_angles(
     c_fin: float,
     sigma2: float,
     diag: dict[str, Any],
+    radius_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The branch fit ``x`` (``[L, theta, phi, rho] x n_b``, its residuals and weights) with
     each deflection within ``SNAP_WITHIN`` of a standard fitting angle (tees and crosses
@@ -1852,7 +1916,12 @@ def _standard_angles(
     refitted, when the returns do not reject it (likelihood ratio against the residual noise
     ``sigma2``, m^2, at most ``SNAP_LR`` per angle held). A small opening far away shows a
     patch of the branch's wall whose deflection trades against the reference point and the
-    radius by a few degrees; a standard angle the patch fits as well is the better estimate."""
+    radius by a few degrees; a standard angle the patch fits as well is the better estimate.
+
+    When the radii are held (``lower == upper``) and the held angle is rejected, it is tried
+    once more with the radii free within ``radius_bounds`` (lower, upper per branch, m) but
+    within ``SNAP_RADIUS`` of the held ones: a branch a millimetre narrower than the run, fitted
+    at the run's radius, leans by a degree or two instead."""
     idx, angles = [], []
     for k in range(n_b):
         th = float(x[1 + 3 * k])
@@ -1874,14 +1943,29 @@ def _standard_angles(
         c=2.0 * c_fin,
         c_final=c_fin,
     )
-    lr = 2.0 * (tukey_cost(res_s, c_fin) - tukey_cost(res, c_fin)) / max(sigma2, 1e-12)
-    diag["standard_angle_lr"] = float(lr)
-    # (held at the standard angle, the branch must stay where it was: a fit that turns it
-    # about the run's axis to make up for the deflection rests on too few returns)
-    turned = max(abs(_wrap(float(x_s[2 + 3 * k] - x[2 + 3 * k]))) for k in range(n_b))
-    if lr <= SNAP_LR * len(idx) and turned <= SNAP_MAX_TURN:
+    cost = tukey_cost(res, c_fin)
+
+    def accepted(x_s: NDArray[np.float64], res_s: NDArray[np.float64]) -> bool:
+        lr = 2.0 * (tukey_cost(res_s, c_fin) - cost) / max(sigma2, 1e-12)
+        diag["standard_angle_lr"] = float(lr)
+        # (held at the standard angle, the branch must stay where it was: a fit that turns it
+        # about the run's axis to make up for the deflection rests on too few returns)
+        turned = max(abs(_wrap(float(x_s[2 + 3 * k] - x[2 + 3 * k]))) for k in range(n_b))
+        return lr <= SNAP_LR * len(idx) and turned <= SNAP_MAX_TURN
+
+    if accepted(x_s, res_s):
         diag["standard_angles"] = len(idx)
         return x_s, res_s, w_s
+    rho = slice(3, None, 3)
+    if radius_bounds is not None and bool(np.all(lo[rho] >= up[rho])):
+        held = x[rho]
+        lo[rho] = np.maximum(radius_bounds[0], held * (1.0 - SNAP_RADIUS))
+        up[rho] = np.minimum(radius_bounds[1], held * (1.0 + SNAP_RADIUS))
+        x_r, res_r, w_r = _fit_axes(pts, x_s, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin)
+        if accepted(x_r, res_r):
+            diag["standard_angles"] = len(idx)
+            diag["standard_angles_radius_free"] = True
+            return x_r, res_r, w_r
     return x, res, w
 
 

@@ -383,3 +383,81 @@ def test_ring_bumps_of_a_sensor_off_the_axis_do_not_replace_a_junction():
         )
         det = detect(scan, d)
         assert det.diagnostics.get("model") != "ring holes", det.describe()
+
+
+def test_gentle_widening_seen_by_two_rings_starts_where_their_line_meets_the_wall():
+    # a 57 mm pipe widening to 75.5 mm over 15.4 cm, 25 cm ahead: two rings of beams meet the
+    # cone, 2.9 and 7.3 mm beyond the wall; the ring nearer the wider pipe was once taken for
+    # it and the start put between rings (3.1 cm late). The line through both rings reaches
+    # the wall radius at the start.
+    scan, truth, d = scan_layout(
+        "reducer", 0.25, diameter_in=0.057, diameter_out=0.0755, taper_length=0.154
+    )
+    det = detect(scan, d)
+    assert det.kind == "reducer", det.describe()
+    assert det.diagnostics["widening_start_from_cone"]
+    assert abs(det.options[0].distance - truth[0].distance) < 0.003
+    assert abs(det.options[0].diameter - 0.0755) < 0.001
+
+
+def test_axis_tilted_onto_a_gentle_taper_does_not_replace_the_given_pose():
+    # the same widening 12.5 cm ahead: its first centimetres lie within the wall tolerance, and
+    # a cylinder tilted 0.8 deg onto them explained as many wall returns as the given pose
+    # (only more loosely) and won the tie: the start came out 2.8 cm late and the wider pipe
+    # 81 mm. Of poses explaining as many returns, the closest fit is kept.
+    scan, truth, d = scan_layout(
+        "reducer", 0.125, diameter_in=0.057, diameter_out=0.0755, taper_length=0.154
+    )
+    det = detect(scan, d)
+    assert det.kind == "reducer", det.describe()
+    assert det.diagnostics.get("axis_tilt_deg", 0.0) < 0.1
+    assert abs(det.options[0].distance - truth[0].distance) < 0.003
+    assert abs(det.options[0].diameter - 0.0755) < 0.001
+
+
+def test_narrower_pipe_of_a_taper_is_sized_without_the_end_wall_down_it():
+    # the thesis reducer (100 to 55 mm over 20 cm) 12.5 cm ahead: returns from the end wall far
+    # down the 55 mm pipe pulled the fitted plateau to 52 mm
+    scan, truth, d = scan_layout(
+        "reducer", 0.125, diameter_in=0.1, diameter_out=0.055, taper_length=0.2
+    )
+    det = detect(scan, d)
+    assert det.kind == "reducer", det.describe()
+    assert abs(det.options[0].diameter - 0.055) < 0.0005
+    assert abs(det.options[0].distance - truth[0].distance) < 0.002
+
+
+def test_tee_branch_a_millimetre_narrower_than_its_run_keeps_its_standard_angle():
+    # a 74.1 mm branch of a 75 mm run 35 cm ahead: held at the run's radius, the branch leaned
+    # to 88.5 deg, and 90 deg at that radius was rejected; with its radius free by a few per
+    # cent, 90 deg fits as well
+    scan, truth, d = scan_layout(
+        "t_junction",
+        0.35,
+        diameter=0.075,
+        branch_diameter=0.0741315,
+        direction=-1.2386797,
+        entry="run",
+    )
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    assert det.diagnostics.get("standard_angles") == 1
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < 0.003
+        assert abs(o.diameter - t.diameter) < 0.001
+        assert abs(o.angle - t.angle) < math.radians(0.3)
+
+
+def test_given_pose_kept_in_a_tie_narrows_the_tolerance_to_the_wall_scatter():
+    # a 57 mm wye from its branch, 35 cm ahead: the given pose and a refined one explain the
+    # same wall returns and the given one is kept; the tolerance must still shrink to the
+    # wall's scatter under it (a 2 mm tolerance hides the second way: read as a bend)
+    scan, truth, d = scan_layout(
+        "y_junction", 0.35, diameter=0.057, direction=-1.4488051, entry="branch"
+    )
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    assert det.diagnostics.get("tolerance_floor", 1.0) < 0.002
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < 0.002
+        assert abs(o.angle - t.angle) < math.radians(0.5)
