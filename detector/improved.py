@@ -143,6 +143,8 @@ CONE_FIRST_RING = 0.01
 #: returns cover this fraction of the azimuth at least.
 CONE_MIN_RETURNS = 6
 CONE_RING_COVERAGE = 0.75
+#: A region of returns beyond the wall covering this fraction of the azimuth goes all round.
+ALL_ROUND = 0.75
 
 
 @dataclass(frozen=True)
@@ -1096,9 +1098,9 @@ def _find_lobes(
     lobes: list[Lobe] = []
     counts, row_span = _region_stats(labels, n_lab)
     cand = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
-    for k in cand[cand > 0].tolist():
-        m = labels == k
-        n = int(counts[k])
+    regions = [(labels == k, int(counts[k])) for k in cand[cand > 0].tolist()]
+    regions = [part for m, n in regions for part in _split_all_round(cloud, m, n, big_r, cfg)]
+    for m, n in regions:
         p = cloud.points(m)
         depth = float(_pct(np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2])), 90)) - big_r
         floor = cfg.tol_floor if cloud.floor is None else cloud.floor
@@ -1124,6 +1126,30 @@ def _find_lobes(
         biggest = max(m.n for m in merged)
         merged = [m for m in merged if m.n >= max(cfg.min_lobe_points, 0.05 * biggest)]
     return merged
+
+
+def _split_all_round(
+    cloud: PipeCloud, mask: NDArray[np.bool_], n: int, big_r: float, cfg: ImprovedConfig
+) -> list[tuple[NDArray[np.bool_], int]]:
+    """A region of returns beyond the wall that goes all round the axis, split into its deep
+    parts when there are two or more: entering a wider run from a tee's stem, the run's wall
+    lies a step beyond the stem's all round and joins the two ways on into one region; only
+    along the run do the returns reach deep (beyond half the region's 90th-percentile depth).
+    Otherwise the region as it is (``(mask, n)``)."""
+    p = cloud.points(mask)
+    if _azimuth_coverage(p) < ALL_ROUND:
+        return [(mask, n)]
+    depth = np.sqrt(np.square(cloud.xyz[1]) + np.square(cloud.xyz[2])) - big_r
+    deep = mask & (depth > 0.5 * float(_pct(depth[mask], 90.0)))
+    labels, n_lab = label_regions(deep, cloud.wraps)
+    if n_lab < 2:
+        return [(mask, n)]
+    counts, row_span = _region_stats(labels, n_lab)
+    parts = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
+    parts = parts[parts > 0]
+    if parts.size < 2:
+        return [(mask, n)]
+    return [(labels == k, int(counts[k])) for k in parts.tolist()]
 
 
 def _region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:

@@ -455,3 +455,26 @@ def test_given_pose_kept_in_a_tie_narrows_the_tolerance_to_the_wall_scatter():
     for o, t in match(det.options, truth):
         assert abs(o.distance - t.distance) < 0.002
         assert abs(o.angle - t.angle) < math.radians(0.5)
+
+
+@pytest.mark.parametrize("distance", [0.2, 0.15])
+def test_tee_entered_from_a_narrower_stem_keeps_both_ways(distance: float) -> None:
+    # from a 57.3 mm stem into a 60.6 mm run, 15-20 cm ahead (where the robot decides): the
+    # run's wall lies 1.7 mm beyond the stem's all round and joined both ways on into one
+    # region of returns, fitted as one way (a bend, sometimes the wrong way round). Only along
+    # the run do the returns reach deep: the region is split there.
+    scan, truth, d = scan_layout(
+        "t_junction",
+        distance,
+        diameter=0.0606,
+        branch_diameter=0.0573,
+        direction=-2.83,
+        entry="stem",
+    )
+    det = detect(scan, d)
+    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < 0.003
+        assert abs(o.diameter - t.diameter) < 0.001
+        assert abs(o.angle - t.angle) < math.radians(0.5)
+        assert abs(wrap(o.direction - t.direction)) < math.radians(1.0)
