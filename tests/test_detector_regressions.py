@@ -14,6 +14,28 @@ from detector.robust import robust_gauss_newton
 from pipe_env.geometry import Pose
 
 
+def _assert_ways_within(
+    det: Detection,
+    truth: list,
+    n_ways: int,
+    distance: float,
+    diameter: float | None,
+    angle_deg: float,
+    direction_deg: float | None = None,
+) -> None:
+    """``det`` is a junction with ``n_ways`` ways on, each (matched to the truth) within
+    ``distance`` and ``diameter`` (m, ``None``: not checked) and ``angle_deg`` and
+    ``direction_deg`` (deg, ``None``: not checked) of its true way."""
+    assert det.kind == "junction" and len(det.options) == n_ways, det.describe()
+    for o, t in match(det.options, truth):
+        assert abs(o.distance - t.distance) < distance, det.describe()
+        if diameter is not None:
+            assert abs(o.diameter - t.diameter) < diameter, det.describe()
+        assert abs(o.angle - t.angle) < math.radians(angle_deg), det.describe()
+        if direction_deg is not None:
+            assert abs(wrap(o.direction - t.direction)) < math.radians(direction_deg)
+
+
 def test_widening_with_an_end_wall_far_down_is_a_reducer():
     # the end wall of the wider pipe once counted as "inside" returns and turned the widening
     # into a junction; the start of the widening is the edge where the beams leave the
@@ -238,12 +260,7 @@ def test_narrow_side_branch_is_sized_by_its_hole():
         scan, truth, d = scan_layout(
             layout, distance, diameter=0.1, branch_diameter=0.068, direction=direction, entry="run"
         )
-        det = detect(scan, d)
-        assert det.kind == "junction" and len(det.options) == 2, det.describe()
-        for o, t in match(det.options, truth):
-            assert abs(o.distance - t.distance) < 0.01
-            assert abs(o.diameter - t.diameter) < 0.002
-            assert abs(o.angle - t.angle) < math.radians(1.0)
+        _assert_ways_within(detect(scan, d), truth, 2, 0.01, 0.002, 1.0)
 
 
 def test_wide_bend_seen_from_just_before_its_arc_keeps_the_given_axis():
@@ -352,12 +369,8 @@ def test_tee_branch_keeps_its_standard_angle(
         entry="run",
     )
     det = detect(scan, d)
-    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    _assert_ways_within(det, truth, 2, max_dist, 0.001, max_angle_deg)
     assert det.diagnostics.get("standard_angles") == 1
-    for o, t in match(det.options, truth):
-        assert abs(o.distance - t.distance) < max_dist
-        assert abs(o.diameter - t.diameter) < 0.001
-        assert abs(o.angle - t.angle) < math.radians(max_angle_deg)
 
 
 def test_tee_from_its_stem_with_no_stem_wall_in_view_keeps_the_given_axis():
@@ -450,11 +463,8 @@ def test_given_pose_kept_in_a_tie_narrows_the_tolerance_to_the_wall_scatter():
         "y_junction", 0.35, diameter=0.057, direction=-1.4488051, entry="branch"
     )
     det = detect(scan, d)
-    assert det.kind == "junction" and len(det.options) == 2, det.describe()
+    _assert_ways_within(det, truth, 2, 0.002, None, 0.5)
     assert det.diagnostics.get("tolerance_floor", 1.0) < 0.002
-    for o, t in match(det.options, truth):
-        assert abs(o.distance - t.distance) < 0.002
-        assert abs(o.angle - t.angle) < math.radians(0.5)
 
 
 @pytest.mark.parametrize("distance", [0.2, 0.15])
@@ -471,10 +481,4 @@ def test_tee_entered_from_a_narrower_stem_keeps_both_ways(distance: float) -> No
         direction=-2.83,
         entry="stem",
     )
-    det = detect(scan, d)
-    assert det.kind == "junction" and len(det.options) == 2, det.describe()
-    for o, t in match(det.options, truth):
-        assert abs(o.distance - t.distance) < 0.003
-        assert abs(o.diameter - t.diameter) < 0.001
-        assert abs(o.angle - t.angle) < math.radians(0.5)
-        assert abs(wrap(o.direction - t.direction)) < math.radians(1.0)
+    _assert_ways_within(detect(scan, d), truth, 2, 0.003, 0.001, 0.5, direction_deg=1.0)
