@@ -14,30 +14,37 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    cylinder misses its own wall returns by more than their noise explains, and the given pose
    stands when less than 5 cm of straight wall is in view before the structure and the pose
    explains it (near the start of a wide bend's arc a cylinder tilted about the nearest wall
-   fits the arc). The pipe's radius is measured from the wall (the wall just beyond the
-   nearest returns, then the wall before the structure), within 3 mm of the clamp reading:
-   the clamp's encoders read the diameter to a millimetre or two. When fewer returns
-   than a region needs leave the wall tolerance under the given pose, or else under the refined
-   axis, the scan is straight pipe and nothing else runs (the common case in a run).
+   fits the arc). Of candidate poses explaining as many wall returns, the one that fits them
+   most closely is kept (a cylinder tilted onto the first centimetres of a gentle taper or arc
+   explains no more of them, only more loosely). The pipe's radius is measured from the wall
+   (the wall just beyond the nearest returns, then the wall before the structure), within 3 mm
+   of the clamp reading: the clamp's encoders read the diameter to a millimetre or two. When
+   fewer returns than a region needs leave the wall tolerance under the given pose, or else
+   under the refined axis, the scan is straight pipe and nothing else runs (the common case in
+   a run).
 2. **Classification.** Each return's radial residual ``r - D/2`` is compared with a per-point
    tolerance from the sensor model in ``scan.spec`` (range noise projected on the radius, plus a
    floor; for a noiseless sensor whose wall the refined axis fits to a fraction of a millimetre,
-   the floor for returns beyond the wall shrinks towards that scatter, down to 0.8 mm, so the
-   openings of small pipes far ahead show). Non-wall returns are grouped into connected regions
-   of the unrolled scan grid (:mod:`detector.grid`); regions too small or one azimuth wide are
-   rejected as clutter.
+   the floor for returns beyond the wall shrinks towards that scatter (under the given pose
+   too, when it is kept), down to 0.8 mm, so the openings of small pipes far ahead show).
+   Non-wall returns are grouped into connected regions of the unrolled scan grid
+   (:mod:`detector.grid`); regions too small or one azimuth wide are rejected as clutter. A
+   region beyond the wall that goes all round is split into its deep parts when there are two
+   or more (from a tee's narrower stem, the run's wall lies a step beyond the stem's all round
+   and joins both ways on).
 3. **Hypotheses.** Returns beyond the wall (``r > D/2``) are *lobes*: openings towards an
    outgoing pipe. Without lobes the structure is axisymmetric: an end wall (a plane
    perpendicular to the axis, kind ``closure``; flat to within the range noise and no better
    explained by a quadratic surface with a sag of millimetres, which tells it from the curved
    far wall of a pipe seen head-on) or a reducer (a cone from the wall radius to a new radius
-   fitted as ``r(u)`` together with the wall just before it; a widening starts at the edge where
-   the beams leave the incoming pipe, its cone mostly hidden behind that edge; an end wall seen
-   through a narrowing is left out of its fit and bounds the narrow radius from below). A far
-   wall seen head-on is fitted as an outgoing pipe of the clamped radius with unknown roll, seen
-   from inside; when it runs on evenly to both sides it is a pipe across (both ways open); when
-   it looks flat within the range noise and only its curvature tells it from an end wall, it
-   overrules the end wall only as a single turn. With lobes, each lobe is an outgoing
+   fitted as ``r(u)`` together with the wall just before it; a widening starts where the line
+   through its cone's rings of beams meets the wall radius, or, its cone seen by one ring or
+   none, in the middle of the interval the rings allow; an end wall seen through a narrowing is
+   left out of its fit and bounds the narrow radius from below). A far wall seen head-on is
+   fitted as an outgoing pipe of the clamped radius with unknown roll, seen from inside; when
+   it runs on evenly to both sides it is a pipe across (both ways open); when it looks flat
+   within the range noise and only its curvature tells it from an end wall, it overrules the
+   end wall only as a single turn. With lobes, each lobe is an outgoing
    pipe: a cylinder whose axis meets the incoming axis at the reference point ``(L, 0, 0)`` with
    deflection ``angle``, roll ``direction`` and radius ``rho``. Initial values come from a coarse
    grid over ``(L, angle)`` with the lobe's mean roll; all lobes are then refined jointly by
