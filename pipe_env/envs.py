@@ -319,11 +319,6 @@ class _DecisionEnv(gym.Env):
             if self.jams >= self.max_jams:
                 self.terminated = True
             else:  # the robot backed off the structure and senses it again
-                # a jam says the fused estimate may be wrong (a phantom confirmed from a
-                # few places): decide on fresh sweeps, not on the estimate that jammed
-                tracker = getattr(self.plant, "tracker", None)
-                if tracker is not None:
-                    tracker.reset()
                 self.decision, _ = self.plant.resense()
                 self._after_sensing(self.decision)
         elif outcome.status == "blocked":

@@ -373,7 +373,11 @@ class PhysicalPlant:
         return Decision(options, kind, truth, node, entry, pose)
 
     def resense(self) -> tuple[Decision, Outcome]:
-        """Sweep once more where the robot stands and decide on the fused result."""
+        """After a jam: sweep once more where the robot stands and decide on fresh sweeps. The
+        fused estimate that jammed is forgotten (a phantom confirmed from a few places would
+        otherwise be offered again however the new sweeps disagree)."""
+        self.tracker.reset()
+        self._track_state = None
         out = Outcome()
         on_scan, verdict = self._on_scan_factory(None)
         if self.executor.lidar is not None:

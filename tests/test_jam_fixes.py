@@ -25,6 +25,7 @@ from detector import Detection, StructureOption
 from detector.fusion import StructureTracker
 from pipe_env import layouts
 from pipe_env.ground_truth import fitting_ahead, option_angles
+from pipe_env.plant_full import PhysicalPlant
 from pipe_env.routing import locate
 from primitives.executor import Executor
 from primitives.sequences import for_option, take_turn
@@ -167,29 +168,16 @@ def test_a_way_sensed_just_below_the_smallest_pipe_is_attempted() -> None:
 def test_after_a_jam_the_robot_decides_on_fresh_sweeps() -> None:
     # held-out network 12: a phantom bend confirmed from two places jammed three times while
     # the sweeps after each jam showed the true tee; the tracker is emptied before resensing
-    import gymnasium as gym
-
-    import pipe_env  # noqa: F401
-    from pipe_env.plant import Outcome
-
-    env = gym.make("pipenav/PipeNav-v0", network_config={"n_fittings": 4}, fidelity="fast")
-    env.reset(seed=0)
-    base = env.unwrapped
-    plant = base.plant
-    plant.tracker = StructureTracker(confirm_count=1, confirm_evidence=0.5)
-    plant.tracker.update(_bend(0.1), np.zeros(3), EYE)
-    fresh = []
-
-    def jam(choice, goal=None) -> Outcome:
-        return Outcome(status="jammed", note="stub")
-
-    def resense():
-        state = plant.tracker.update(Detection.straight(), np.zeros(3), EYE)
-        fresh.append(state.n_updates == 0)
-        return base.decision, Outcome()
-
-    plant.execute, plant.resense = jam, resense
-    action = int(np.flatnonzero(base.action_masks())[0])
-    _, _, _, _, info = env.step(action)
-    assert info["jammed"]
-    assert fresh == [True]
+    net = layouts.t_junction(0.09, direction=0.0, distance=0.3)
+    plant = PhysicalPlant(net, detector="improved")
+    # a phantom bend where the tee is, confirmed from two places just behind the robot
+    sensor = plant.robot.sensor_pose()
+    axis = sensor.rotation[:, 0]
+    for back in (0.02, 0.01, 0.0):
+        phantom = plant.tracker.update(
+            _bend(0.3 + back), sensor.position - back * axis, sensor.rotation
+        )
+    assert phantom.confirmed and phantom.detection.kind == "bend"
+    decision, _ = plant.resense()
+    assert decision.kind == "junction", decision
+    assert not any(o.kind == "bend" for o in decision.options)
