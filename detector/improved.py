@@ -1146,8 +1146,9 @@ def _split_all_round(
     p = cloud.points(mask)
     if _azimuth_coverage(p) < ALL_ROUND:
         return [(mask, n)]
-    depth = np.sqrt(np.square(cloud.xyz[1]) + np.square(cloud.xyz[2])) - big_r
-    deep = mask & (depth > 0.5 * float(_pct(depth[mask], 90.0)))
+    depth = np.hypot(cloud.xyz[1][mask], cloud.xyz[2][mask]) - big_r
+    deep = np.zeros_like(mask)
+    deep[mask] = depth > 0.5 * float(_pct(depth, 90.0))
     labels, n_lab = label_regions(deep, cloud.wraps)
     if n_lab < 2:
         return [(mask, n)]
@@ -1379,7 +1380,7 @@ def _widening_start(
     """
     xyz, sig = cloud.xyz_v, cloud.sigma_v
     u = xyz[0]
-    e = np.sqrt(np.square(xyz[1]) + np.square(xyz[2])) - big_r
+    e = cloud.r_v - big_r
     noise = float(_pct(sig, 50.0))
     rise = r2 - big_r
     margin = max(3.0 * noise, CONE_PLATEAU_MARGIN)
