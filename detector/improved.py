@@ -134,6 +134,12 @@ SHORT_WALL_VIEW = 0.05
 #: The wall this far along the axis beyond the nearest returns (m) gives the first estimate of
 #: the pipe radius.
 NEAR_WALL = 0.03
+#: The pose of a long-radius bend is chosen again on the wall ending this far (m) before the
+#: fitted arc starts, when it was chosen on wall returns past that.
+ARC_START_MARGIN = 0.01
+#: A single way on whose straight-axes fit leaves out more than this fraction of its returns
+#: is also tried as a long-radius bend (as one that fits them loosely is).
+TORUS_TRY_SUPPORT = 0.95
 #: Returns of a widening this much (m; or three times their noise) short of the wider pipe's
 #: radius lie on its cone, not on the wider pipe.
 CONE_PLATEAU_MARGIN = 0.0015
@@ -630,6 +636,8 @@ def detect_improved(
     if not math.isfinite(bias):
         bias = 0.0
     diag: dict[str, Any] = {"method": "improved", "n_points": int(scan.n_valid)}
+    # (the given pose, its points, the radius and the wall's extent the pose was chosen on)
+    recheck: tuple[SensorInPipe, NDArray[np.float64], float, float] | None = None
     try:
         cloud = _prepare(scan, pose0, bias, config)
         # the given pose and the clamp reading explain every return already: straight pipe,
@@ -731,6 +739,7 @@ def detect_improved(
                 cloud.restore(pose, xyz_of[best])
             else:
                 cloud.set_pose(pose)
+            recheck = (pose0, xyz_of[0], big_r, u_near)
             big_r = _wall_radius(cloud, big_r, config, u_near, diag)
             # a noiseless wall fitted closely: the tolerance floor shrinks towards its scatter
             # (under the given pose, the wall returns' own scatter about it)
@@ -738,9 +747,13 @@ def detect_improved(
             if rms is not None and float(_pct(cloud.sigma_v, 90.0)) < 0.0005:
                 cloud.floor = min(config.tol_floor, max(0.0008, 6.0 * float(rms)))
                 diag["tolerance_floor"] = cloud.floor
-        det = _with_ring_holes(
-            cloud, big_r, _detect_in_pipe_frame(cloud, big_r, config, diag), config
-        )
+        diag_pose = dict(diag)  # (what the pose and radius left in the diagnostics)
+        det = _detect_in_pipe_frame(cloud, big_r, config, diag)
+        if recheck is not None:
+            redone = _arc_start_recheck(cloud, det, config, diag_pose, *recheck)
+            if redone is not None:
+                big_r, det = redone
+        det = _with_ring_holes(cloud, big_r, det, config)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
@@ -903,6 +916,19 @@ def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
     return lateral > 0.02 * big_r or tilt > math.radians(0.2)
 
 
+def _thinned(
+    cloud: PipeCloud, cfg: ImprovedConfig
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Every third valid return (sensor frame, ``(3, n)``) and its wall tolerance (m),
+    computed once per cloud: enough to compare poses by."""
+    if cloud.thin is None:
+        cloud.thin = (
+            np.ascontiguousarray(cloud.sensor_v[:, ::3]),
+            cfg.tol_floor + cfg.noise_k * cloud.sigma_v[::3],
+        )
+    return cloud.thin
+
+
 def _wall_count(
     cloud: PipeCloud,
     big_r: float,
@@ -917,12 +943,7 @@ def _wall_count(
     sum of ``min((e / tol)^2, 1)`` over them, ``e`` the distance from the wall, ``tol`` the
     tolerance: a return off the wall costs 1, one on it costs how far in the tolerance it
     lies), and the rms distance from the wall of those within the tolerance (m)."""
-    if cloud.thin is None:  # every third valid return and its tolerance, computed once
-        cloud.thin = (
-            np.ascontiguousarray(cloud.sensor_v[:, ::3]),
-            cfg.tol_floor + cfg.noise_k * cloud.sigma_v[::3],
-        )
-    sp, tol = cloud.thin
+    sp, tol = _thinned(cloud, cfg)
     pts = _transform(pose, sp)
     e = np.sqrt(np.square(pts[1]) + np.square(pts[2])) - big_r
     q = np.square(e / (tol_scale * tol))
@@ -937,6 +958,89 @@ def _wall_count(
     n_ok = int(np.count_nonzero(ok))
     rms = math.sqrt(float(np.mean(np.square(e[ok])))) if n_ok else math.inf
     return n_ok, n_near, float(np.minimum(q, 1.0).sum()), rms
+
+
+def _common_wall_fit(
+    cloud: PipeCloud,
+    big_r: float,
+    cfg: ImprovedConfig,
+    poses: list[SensorInPipe],
+    u_max: float,
+) -> list[tuple[int, float, float]]:
+    """For each pose, ``(n_ok, cost, rms)`` as :func:`_wall_count` gives them, over one set
+    of returns for all: those nearer than ``u_max`` along the axis under every pose (a tilted
+    pose would otherwise count returns the others leave out). Empty when fewer than 40
+    returns are in that set."""
+    sp, tol = _thinned(cloud, cfg)
+    pts = [_transform(p, sp) for p in poses]
+    near = np.logical_and.reduce([q[0] < u_max for q in pts])
+    out: list[tuple[int, float, float]] = []
+    if np.count_nonzero(near) < 40:
+        return out
+    for q in pts:
+        e = np.sqrt(np.square(q[1][near]) + np.square(q[2][near])) - big_r
+        c = np.square(e / tol[near])
+        ok = c <= 1.0
+        n_ok = int(np.count_nonzero(ok))
+        rms = math.sqrt(float(np.mean(np.square(e[ok])))) if n_ok else math.inf
+        out.append((n_ok, float(np.minimum(c, 1.0).sum()), rms))
+    return out
+
+
+def _arc_start_recheck(
+    cloud: PipeCloud,
+    det: Detection,
+    cfg: ImprovedConfig,
+    diag_pose: dict[str, Any],
+    pose0: SensorInPipe,
+    xyz0: NDArray[np.float64],
+    big_r: float,
+    wall_until: float,
+) -> tuple[float, Detection] | None:
+    """A long-radius bend's arc curves away from the straight wall so gently that its first
+    centimetres lie within the wall tolerance: the pose was chosen on wall returns up to
+    ``wall_until`` (m along the axis), past where the fitted arc starts, and an axis refined
+    on them leans onto the arc (1-2 deg). Choose again on the wall before the arc (the given
+    pose, the chosen one, or the axis refined there): the most returns within the tolerance,
+    then the closest fit. ``(radius, detection)`` under the new pose when it moved, else
+    ``None`` (the cloud keeps its pose)."""
+    if det.kind != "bend" or len(det.options) != 1 or det.options[0].bend_radius <= 0.0:
+        return None
+    opt = det.options[0]
+    u_cap = opt.distance - opt.bend_radius * math.tan(0.5 * opt.angle) - ARC_START_MARGIN
+    if u_cap >= wall_until:
+        return None
+    chosen, xyz_chosen = cloud.pose, cloud.xyz_v
+    floor = cloud.floor
+    refined, info = _refine_axis(cloud, big_r, cfg, u_max=u_cap)
+    poses = [chosen, pose0] + ([refined] if info.get("axis_points", 0) >= 40 else [])
+    fits = _common_wall_fit(cloud, big_r, cfg, poses, u_cap)
+    if not fits:  # (too little wall before the arc to choose on)
+        return None
+    best = max(range(len(poses)), key=lambda k: (fits[k][0], -fits[k][1]))
+    if best == 0 or not _pose_moved(chosen, poses[best], big_r):
+        return None
+    if best == 1:
+        cloud.restore(pose0, xyz0)
+        axis_info: dict[str, Any] = {"axis_pass": 0}
+    else:
+        cloud.set_pose(refined)
+        axis_info = {**info, "axis_pass": 3, "axis_wall_until": u_cap}
+    skip = ("axis_", "wall_radius", "tolerance_floor")
+    sub = {k: v for k, v in diag_pose.items() if not k.startswith(skip)}
+    sub.update(axis_info)
+    radius = _wall_radius(cloud, big_r, cfg, u_cap, sub)
+    if floor is not None:
+        rms = sub.get("wall_radius_rms", fits[best][2])
+        cloud.floor = min(cfg.tol_floor, max(0.0008, 6.0 * float(rms)))
+        sub["tolerance_floor"] = cloud.floor
+    redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
+    if redone.kind != "bend":  # (the bend stands; so does the pose it was found under)
+        cloud.restore(chosen, xyz_chosen)
+        cloud.floor = floor
+        return None
+    redone.diagnostics["arc_start_recheck"] = True
+    return radius, redone
 
 
 def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
@@ -1883,8 +1987,11 @@ def _branches(
     big_l = float(x[0])
     # --- a single way on that the straight model explains poorly: a long-radius bend (torus)
     lower_bound = False
-    if n_l == 1 and not straight_on and rms > 2.0 * noise_med:
-        tor = _fit_torus(p_all, big_r, big_l, fits[0], c0, c_fin)
+    # (or that leaves out more than a few of the returns: the first centimetres of a gentle
+    # arc lie within the noise of a mitre's straight axes, its far part does not)
+    loose = rms > 2.0 * noise_med or support < TORUS_TRY_SUPPORT * p_all.shape[0]
+    if n_l == 1 and not straight_on and loose:
+        tor = _fit_torus(p_all, big_r, big_l, fits[0], c0, c_fin, noise_med)
         if tor is not None:
             xt, rms_t, sup_t, vis = tor
             diag.update(torus_rms=rms_t, torus_support=sup_t, torus_rb=float(xt[4]))
@@ -2169,9 +2276,16 @@ def _straight_on(
 
 
 def _fit_torus(
-    p: NDArray, big_r: float, big_l: float, f: BranchFit, c0: float, c_fin: float
+    p: NDArray,
+    big_r: float,
+    big_l: float,
+    f: BranchFit,
+    c0: float,
+    c_fin: float,
+    noise: float,
 ) -> tuple[NDArray, float, int, float] | None:
-    """Long-radius bend fit from two bend-radius starts; returns (x, rms, support,
+    """Long-radius bend fit from two bend-radius starts (the second is skipped when the first
+    explains nearly every return within twice their ``noise``, m); returns (x, rms, support,
     largest arc angle seen)."""
     sub = p[_subsample(np.arange(p.shape[0]), 300)]
     steps = np.vstack([np.zeros(4), np.diag(np.full(4, 1e-6))])  # (5, 4)
@@ -2212,7 +2326,7 @@ def _fit_torus(
             np.full(5, 1e-6),
             resjac=resjac,
             c=c0 * 2,
-            iterations=10,
+            iterations=20,  # (a narrow valley: length, angle and arc radius trade off)
             lower=lower,
             upper=upper,
             c_final=c_fin,
@@ -2224,7 +2338,7 @@ def _fit_torus(
         sup = int((w > 0.1).sum())
         if best is None or (sup, -rms) > (best[2], -best[1]):
             best = (x, rms, sup)
-        if sup >= 0.98 * sub.shape[0] and rms <= 0.3 * c_fin:
+        if sup >= 0.98 * sub.shape[0] and rms <= min(0.3 * c_fin, 2.0 * noise):
             break  # (the first start explains nearly every return closely already)
     if best is None:
         return None
