@@ -134,9 +134,9 @@ SHORT_WALL_VIEW = 0.05
 #: The wall this far along the axis beyond the nearest returns (m) gives the first estimate of
 #: the pipe radius.
 NEAR_WALL = 0.03
-#: The pose of a long-radius bend is chosen again on the wall ending this far (m) before the
-#: fitted arc starts, when it was chosen on wall returns past that.
-ARC_START_MARGIN = 0.01
+#: The pose of a long-radius bend or a reducer is chosen again on the wall ending this far
+#: (m) before the fitted arc or taper starts, when it was chosen on wall returns past that.
+GENTLE_START_MARGIN = 0.01
 #: A single way on whose straight-axes fit leaves out more than this fraction of its returns
 #: is also tried as a long-radius bend (as one that fits them loosely is).
 TORUS_TRY_SUPPORT = 0.95
@@ -750,7 +750,7 @@ def detect_improved(
         diag_pose = dict(diag)  # (what the pose and radius left in the diagnostics)
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
         if recheck is not None:
-            redone = _arc_start_recheck(cloud, det, config, diag_pose, *recheck)
+            redone = _start_recheck(cloud, det, config, diag_pose, *recheck)
             if redone is not None:
                 big_r, det = redone
         det = _with_ring_holes(cloud, big_r, det, config)
@@ -987,7 +987,19 @@ def _common_wall_fit(
     return out
 
 
-def _arc_start_recheck(
+def _gentle_start(det: Detection) -> float | None:
+    """Where a structure that leaves the wall gradually starts, m along the axis: a long
+    bend's arc (``bend_radius x tan(angle / 2)`` before its reference point), a reducer's
+    taper; ``None`` for the others (their walls break off)."""
+    if det.kind == "reducer" and det.options:
+        return det.options[0].distance
+    if det.kind == "bend" and len(det.options) == 1 and det.options[0].bend_radius > 0.0:
+        opt = det.options[0]
+        return opt.distance - opt.bend_radius * math.tan(0.5 * opt.angle)
+    return None
+
+
+def _start_recheck(
     cloud: PipeCloud,
     det: Detection,
     cfg: ImprovedConfig,
@@ -997,17 +1009,19 @@ def _arc_start_recheck(
     big_r: float,
     wall_until: float,
 ) -> tuple[float, Detection] | None:
-    """A long-radius bend's arc curves away from the straight wall so gently that its first
-    centimetres lie within the wall tolerance: the pose was chosen on wall returns up to
-    ``wall_until`` (m along the axis), past where the fitted arc starts, and an axis refined
-    on them leans onto the arc (1-2 deg). Choose again on the wall before the arc (the given
-    pose, the chosen one, or the axis refined there): the most returns within the tolerance,
-    then the closest fit. ``(radius, detection)`` under the new pose when it moved, else
-    ``None`` (the cloud keeps its pose)."""
-    if det.kind != "bend" or len(det.options) != 1 or det.options[0].bend_radius <= 0.0:
+    """A long-radius bend's arc, or a gentle taper, leaves the straight wall so slowly that its
+    first centimetres lie within the wall tolerance: the pose was chosen on wall returns up to
+    ``wall_until`` (m along the axis), past where the fitted arc or taper starts, and an axis
+    refined on them leans onto it (1-2 deg). Choose again on the wall before that start (the
+    given pose, the chosen one, or the axis refined there): the most returns within the
+    tolerance, then the closest fit. ``(radius, detection)`` under the new pose when it moved
+    and the structure kept its kind, else ``None`` (the cloud keeps its pose)."""
+    start = _gentle_start(det)
+    if start is None or (det.kind == "reducer" and cloud.floor is None):
+        # (a reducer under range noise: its tolerance is the noise's, and a pose chosen again
+        # on less wall sizes the wider pipe no better)
         return None
-    opt = det.options[0]
-    u_cap = opt.distance - opt.bend_radius * math.tan(0.5 * opt.angle) - ARC_START_MARGIN
+    u_cap = start - GENTLE_START_MARGIN
     if u_cap >= wall_until:
         return None
     chosen, xyz_chosen = cloud.pose, cloud.xyz_v
@@ -1035,11 +1049,11 @@ def _arc_start_recheck(
         cloud.floor = min(cfg.tol_floor, max(0.0008, 6.0 * float(rms)))
         sub["tolerance_floor"] = cloud.floor
     redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
-    if redone.kind != "bend":  # (the bend stands; so does the pose it was found under)
+    if redone.kind != det.kind:  # (the structure stands; so does the pose it was found under)
         cloud.restore(chosen, xyz_chosen)
         cloud.floor = floor
         return None
-    redone.diagnostics["arc_start_recheck"] = True
+    redone.diagnostics["start_recheck"] = True
     return radius, redone
 
 

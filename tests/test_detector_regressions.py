@@ -526,3 +526,16 @@ def test_long_bend_fit_runs_down_its_narrow_valley():
     assert abs(o.angle - t.angle) < math.radians(0.5), det.describe()
     assert abs(o.distance - t.distance) < 0.005, det.describe()
     assert det.diagnostics["torus_rms"] < 0.0005
+
+
+def test_axis_chosen_past_a_gentle_taper_start_is_chosen_again_before_it():
+    # the wall the pose was chosen on ran 5 cm into a 3.4 deg taper: the axis leaned onto it,
+    # and the taper's own returns passed for wall, placing its start 1.3 cm early
+    scan, truth, d = scan_layout(
+        "reducer", 0.35, diameter_in=0.057, diameter_out=0.0755, taper_length=0.154
+    )
+    det = detect(scan, d)
+    assert det.kind == "reducer", det.describe()
+    assert abs(det.options[0].distance - truth[0].distance) < 0.008, det.describe()
+    assert abs(det.options[0].diameter - 0.0755) < 0.001, det.describe()
+    assert det.diagnostics.get("start_recheck") and det.diagnostics["axis_pass"] == 0
