@@ -1425,22 +1425,34 @@ def _axisymmetric(
         # Without them, the taper ends where its returns end; the end wall, filling the
         # narrower pipe's cross-section, still bounds its radius from below.
         u_far = _pct(u, 97.0)
-        far = np.abs(u - u_far) <= 0.003 + 2.0 * tol_med
+        # (under range noise the end wall's returns spread along the axis by their range
+        # noise: a metre away, a centimetre and more either side)
+        sig_range = cloud.values(anomaly, cloud.sigma_range_v)
+        near_far = np.abs(u - u_far) <= 0.003 + 2.0 * tol_med
+        spread_u = 3.0 * float(_pct(sig_range[near_far], 50.0)) if near_far.any() else 0.0
+        window = 0.003 + 2.0 * tol_med + spread_u
+        far = np.abs(u - u_far) <= window
         n_far = int(np.count_nonzero(far))
         far_s = np.concatenate([far[sub], np.zeros(n_lead, dtype=bool)])
         if (
-            30 <= n_far <= 0.6 * u.size
+            30 <= n_far <= 0.9 * u.size
             and float(_pct(r[far], 5)) < 0.3 * big_r
             and np.count_nonzero(~far_s) >= 50
             # (returns spread along a taper, not mostly on one wall: the far wall of a turn)
             and diag.get("closure_plane_fraction", 0.0) < 0.8
         ):
-            r_end = float(_pct(r[far], 90.0))
-            if r_end < big_r - tol_med:
+            # (the end wall lies inside the incoming pipe; the outermost of its returns,
+            # beams along the narrower pipe's wall, bound that pipe's radius from below)
+            r_end = float(_pct(r[far], 98.0))
+            if float(_pct(r[far], 90.0)) < big_r - tol_med:
                 us, rs = us[~far_s], rs[~far_s]
+                # (started from the farthest returns left, on the narrower pipe: the first fit,
+                # pulled onto the end wall, can hold the plateau at the end wall's bound)
+                u_rest, r_rest = u[~far], r[~far]
+                r2_far = float(_pct(r_rest[u_rest >= _pct(u_rest, 90.0)], 50.0))
                 x, res, w = robust_gauss_newton(
                     None,
-                    np.array([x[0], x[1], max(x[2], r_end)]),
+                    np.array([x[0], x[1], min(max(r2_far, r_end), big_r)]),
                     np.array([1e-4, 1e-4, 1e-5]),
                     c=max(4.0 * c_fin, 0.01),
                     iterations=10,
