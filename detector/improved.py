@@ -16,7 +16,11 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    explains it (near the start of a wide bend's arc a cylinder tilted about the nearest wall
    fits the arc). Of candidate poses explaining as many wall returns, the one that fits them
    most closely is kept (a cylinder tilted onto the first centimetres of a gentle taper or arc
-   explains no more of them, only more loosely). The pipe's radius is measured from the wall
+   explains no more of them, only more loosely). A long bend's arc and a taper leave the wall
+   so gently that the wall a pose was chosen on can reach a few centimetres into them: once
+   one is fitted, the pose is chosen again on the wall ending 1 cm before its start (over one
+   set of returns for every candidate pose) and the structure fitted again under it. The
+   pipe's radius is measured from the wall
    (the wall just beyond the nearest returns, then the wall before the structure), within 3 mm
    of the clamp reading: the clamp's encoders read the diameter to a millimetre or two. When
    fewer returns than a region needs leave the wall tolerance under the given pose, or else
@@ -39,8 +43,9 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    far wall of a pipe seen head-on) or a reducer (a cone from the wall radius to a new radius
    fitted as ``r(u)`` together with the wall just before it; a widening starts where the line
    through its cone's rings of beams meets the wall radius, or, its cone seen by one ring or
-   none, in the middle of the interval the rings allow; an end wall seen through a narrowing is
-   left out of its fit and bounds the narrow radius from below). A far wall seen head-on is
+   none, in the middle of the interval the rings allow; an end wall seen through a narrowing,
+   spread along the axis by the range noise, is left out of its fit and bounds the narrow
+   radius from below). A far wall seen head-on is
    fitted as an outgoing pipe of the clamped radius with unknown roll, seen from inside; when
    it runs on evenly to both sides it is a pipe across (both ways open); when it looks flat
    within the range noise and only its curvature tells it from an end wall, it overrules the
@@ -53,7 +58,8 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    cylinder of the clamped radius, both its ways open), kept unless the free branches fit
    significantly better. A single lobe is also fitted as a long-radius bend (a torus of bend
    radius ``R_b`` between the two straight pipes, the reference point still where the straight
-   axes meet) and the better fit is kept.
+   axes meet) when the straight axes fit it loosely or leave more than 5 % of its returns out,
+   and the better fit is kept.
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
    circumference; its option has the clamped diameter. Its side branches are no wider than the
