@@ -20,12 +20,11 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    so gently that the wall a pose was chosen on can reach a few centimetres into them: once
    one is fitted, the pose is chosen again on the wall ending 1 cm before its start (over one
    set of returns for every candidate pose) and the structure fitted again under it. The
-   pipe's radius is measured from the wall
-   (the wall just beyond the nearest returns, then the wall before the structure), within 3 mm
-   of the clamp reading: the clamp's encoders read the diameter to a millimetre or two. When
-   fewer returns than a region needs leave the wall tolerance under the given pose, or else
-   under the refined axis, the scan is straight pipe and nothing else runs (the common case in
-   a run).
+   pipe's radius is measured from the wall (the wall just beyond the nearest returns, then the
+   wall before the structure), within 3 mm of the clamp reading: the clamp's encoders read the
+   diameter to a millimetre or two. When fewer returns than a region needs leave the wall
+   tolerance under the given pose, or else under the refined axis, the scan is straight pipe
+   and nothing else runs (the common case in a run).
 2. **Classification.** Each return's radial residual ``r - D/2`` is compared with a per-point
    tolerance from the sensor model in ``scan.spec`` (range noise projected on the radius, plus a
    floor; for a noiseless sensor whose wall the refined axis fits to a fraction of a millimetre,
@@ -45,21 +44,20 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    through its cone's rings of beams meets the wall radius, or, its cone seen by one ring or
    none, in the middle of the interval the rings allow; an end wall seen through a narrowing,
    spread along the axis by the range noise, is left out of its fit and bounds the narrow
-   radius from below). A far wall seen head-on is
-   fitted as an outgoing pipe of the clamped radius with unknown roll, seen from inside; when
-   it runs on evenly to both sides it is a pipe across (both ways open); when it looks flat
-   within the range noise and only its curvature tells it from an end wall, it overrules the
-   end wall only as a single turn. With lobes, each lobe is an outgoing
-   pipe: a cylinder whose axis meets the incoming axis at the reference point ``(L, 0, 0)`` with
-   deflection ``angle``, roll ``direction`` and radius ``rho``. Initial values come from a coarse
-   grid over ``(L, angle)`` with the lobe's mean roll; all lobes are then refined jointly by
-   Tukey-weighted Gauss-Newton on the returns of every lobe (each return assigned to the surface
-   it fits best). Two lobes on opposite sides are also fitted as one pipe across (a single
-   cylinder of the clamped radius, both its ways open), kept unless the free branches fit
-   significantly better. A single lobe is also fitted as a long-radius bend (a torus of bend
-   radius ``R_b`` between the two straight pipes, the reference point still where the straight
-   axes meet) when the straight axes fit it loosely or leave more than 5 % of its returns out,
-   and the better fit is kept.
+   radius from below). A far wall seen head-on is fitted as an outgoing pipe of the clamped
+   radius with unknown roll, seen from inside; when it runs on evenly to both sides it is a
+   pipe across (both ways open); when it looks flat within the range noise and only its
+   curvature tells it from an end wall, it overrules the end wall only as a single turn. With
+   lobes, each lobe is an outgoing pipe: a cylinder whose axis meets the incoming axis at the
+   reference point ``(L, 0, 0)`` with deflection ``angle``, roll ``direction`` and radius
+   ``rho``. Initial values come from a coarse grid over ``(L, angle)`` with the lobe's mean
+   roll; all lobes are then refined jointly by Tukey-weighted Gauss-Newton on the returns of
+   every lobe (each return assigned to the surface it fits best). Two lobes on opposite sides
+   are also fitted as one pipe across (a single cylinder of the clamped radius, both its ways
+   open), kept unless the free branches fit significantly better. A single lobe is also fitted
+   as a long-radius bend (a torus of bend radius ``R_b`` between the two straight pipes, the
+   reference point still where the straight axes meet) when the straight axes fit it loosely or
+   leave more than 5 % of its returns out, and the better fit is kept.
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
    circumference; its option has the clamped diameter. Its side branches are no wider than the
@@ -751,9 +749,10 @@ def detect_improved(
             # (under the given pose, the wall returns' own scatter about it)
             rms = diag.get("wall_radius_rms", info.get("axis_rms", counts[best][3]))
             if rms is not None and float(_pct(cloud.sigma_v, 90.0)) < 0.0005:
-                cloud.floor = min(config.tol_floor, max(0.0008, 6.0 * float(rms)))
+                cloud.floor = _scatter_floor(config, rms)
                 diag["tolerance_floor"] = cloud.floor
-        diag_pose = dict(diag)  # (what the pose and radius left in the diagnostics)
+        # (what the pose and radius left in the diagnostics, for a fit again under a new pose)
+        diag_pose = dict(diag) if recheck is not None else diag
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
         if recheck is not None:
             redone = _start_recheck(cloud, det, config, diag_pose, *recheck)
@@ -922,6 +921,12 @@ def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
     return lateral > 0.02 * big_r or tilt > math.radians(0.2)
 
 
+def _scatter_floor(cfg: ImprovedConfig, rms: float) -> float:
+    """Tolerance floor (m) for a noiseless wall fitted to ``rms`` (m): six times that
+    scatter, from 0.8 mm up to the configured floor."""
+    return min(cfg.tol_floor, max(0.0008, 6.0 * float(rms)))
+
+
 def _thinned(
     cloud: PipeCloud, cfg: ImprovedConfig
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -952,18 +957,25 @@ def _wall_count(
     sp, tol = _thinned(cloud, cfg)
     pts = _transform(pose, sp)
     e = np.sqrt(np.square(pts[1]) + np.square(pts[2])) - big_r
-    q = np.square(e / (tol_scale * tol))
-    ok = q <= 1.0
     near = pts[0] < u_max
     n_near = int(np.count_nonzero(near))
-    if n_near >= 40:
-        ok &= near
-        q = q[near]
-    else:
-        n_near = int(ok.size)
+    if n_near < 40:
+        near[:] = True
+        n_near = int(near.size)
+    return _wall_fit(e[near], tol_scale * tol[near], n_near)
+
+
+def _wall_fit(
+    e: NDArray[np.float64], tol: NDArray[np.float64], n: int
+) -> tuple[int, int, float, float]:
+    """``(n_ok, n, cost, rms)`` of returns ``e`` off the wall (m) with tolerances ``tol``
+    (m): how many lie within their tolerance, ``n`` (passed through), the truncated quadratic
+    cost ``sum min((e / tol)^2, 1)``, and the rms of ``e`` over those within (m)."""
+    q = np.square(e / tol)
+    ok = q <= 1.0
     n_ok = int(np.count_nonzero(ok))
     rms = math.sqrt(float(np.mean(np.square(e[ok])))) if n_ok else math.inf
-    return n_ok, n_near, float(np.minimum(q, 1.0).sum()), rms
+    return n_ok, n, float(np.minimum(q, 1.0).sum()), rms
 
 
 def _common_wall_fit(
@@ -972,25 +984,20 @@ def _common_wall_fit(
     cfg: ImprovedConfig,
     poses: list[SensorInPipe],
     u_max: float,
-) -> list[tuple[int, float, float]]:
-    """For each pose, ``(n_ok, cost, rms)`` as :func:`_wall_count` gives them, over one set
-    of returns for all: those nearer than ``u_max`` along the axis under every pose (a tilted
-    pose would otherwise count returns the others leave out). Empty when fewer than 40
-    returns are in that set."""
+) -> list[tuple[int, int, float, float]]:
+    """For each pose, what :func:`_wall_count` gives, over one set of returns for all: those
+    nearer than ``u_max`` along the axis under every pose (a tilted pose would otherwise count
+    returns the others leave out). Empty when fewer than 40 returns are in that set."""
     sp, tol = _thinned(cloud, cfg)
     pts = [_transform(p, sp) for p in poses]
     near = np.logical_and.reduce([q[0] < u_max for q in pts])
-    out: list[tuple[int, float, float]] = []
-    if np.count_nonzero(near) < 40:
-        return out
-    for q in pts:
-        e = np.sqrt(np.square(q[1][near]) + np.square(q[2][near])) - big_r
-        c = np.square(e / tol[near])
-        ok = c <= 1.0
-        n_ok = int(np.count_nonzero(ok))
-        rms = math.sqrt(float(np.mean(np.square(e[ok])))) if n_ok else math.inf
-        out.append((n_ok, float(np.minimum(c, 1.0).sum()), rms))
-    return out
+    n_near = int(np.count_nonzero(near))
+    if n_near < 40:
+        return []
+    return [
+        _wall_fit(np.sqrt(np.square(q[1][near]) + np.square(q[2][near])) - big_r, tol[near], n_near)
+        for q in pts
+    ]
 
 
 def _gentle_start(det: Detection) -> float | None:
@@ -1037,7 +1044,7 @@ def _start_recheck(
     fits = _common_wall_fit(cloud, big_r, cfg, poses, u_cap)
     if not fits:  # (too little wall before the arc to choose on)
         return None
-    best = max(range(len(poses)), key=lambda k: (fits[k][0], -fits[k][1]))
+    best = max(range(len(poses)), key=lambda k: (fits[k][0], -fits[k][2]))
     if best == 0 or not _pose_moved(chosen, poses[best], big_r):
         return None
     if best == 1:
@@ -1051,8 +1058,7 @@ def _start_recheck(
     sub.update(axis_info)
     radius = _wall_radius(cloud, big_r, cfg, u_cap, sub)
     if floor is not None:
-        rms = sub.get("wall_radius_rms", fits[best][2])
-        cloud.floor = min(cfg.tol_floor, max(0.0008, 6.0 * float(rms)))
+        cloud.floor = _scatter_floor(cfg, sub.get("wall_radius_rms", fits[best][3]))
         sub["tolerance_floor"] = cloud.floor
     redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
     if redone.kind != det.kind:  # (the structure stands; so does the pose it was found under)
