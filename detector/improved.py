@@ -53,11 +53,13 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    ``rho``. Initial values come from a coarse grid over ``(L, angle)`` with the lobe's mean
    roll; all lobes are then refined jointly by Tukey-weighted Gauss-Newton on the returns of
    every lobe (each return assigned to the surface it fits best). Two lobes on opposite sides
-   are also fitted as one pipe across (a single cylinder of the clamped radius, both its ways
-   open), kept unless the free branches fit significantly better. A single lobe is also fitted
-   as a long-radius bend (a torus of bend radius ``R_b`` between the two straight pipes, the
-   reference point still where the straight axes meet) when the straight axes fit it loosely or
-   leave more than 5 % of its returns out, and the better fit is kept.
+   are fitted again, each branch to the returns of its own opening (fitted to the nearer of
+   two cylinders, noisy returns at the openings' rims fall between them and the branches lean
+   apart for them), and also as one pipe across (a single cylinder of the clamped radius, both
+   its ways open), which is kept unless the two branches fit significantly better. A single
+   lobe is also fitted as a long-radius bend (a torus of bend radius ``R_b`` between the two
+   straight pipes, the reference point still where the straight axes meet) when the straight
+   axes fit it loosely or leave more than 5 % of its returns out, and the better fit is kept.
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
    circumference; its option has the clamped diameter. Its side branches are no wider than the
@@ -94,6 +96,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -1697,6 +1700,36 @@ def _line_resjac(
     return best, jac
 
 
+def _own_branch_resjac(
+    pts: tuple[NDArray, NDArray, NDArray, NDArray], labels: NDArray[np.intp], n_l: int
+) -> Callable[[NDArray], tuple[NDArray, NDArray]]:
+    """Residuals and Jacobian (as :func:`_line_resjac`) of the returns to the outgoing cylinder
+    of their own lobe: ``labels[i]`` is the lobe of return ``i``, ``-1`` for a return of no lobe
+    (an inner return near them), which goes to the nearest cylinder."""
+    groups = [np.flatnonzero(labels == k) for k in range(n_l)]
+    rest = np.flatnonzero(labels < 0)
+    sub = [tuple(np.ascontiguousarray(a[g]) for a in pts) for g in groups]
+    sub_rest = tuple(np.ascontiguousarray(a[rest]) for a in pts)
+    n = labels.size
+
+    def resjac(v: NDArray) -> tuple[NDArray, NDArray]:
+        res = np.empty(n)
+        jac = np.zeros((n, v.size))
+        for k, (g, pk) in enumerate(zip(groups, sub)):
+            vk = np.concatenate([v[:1], v[1 + 3 * k : 4 + 3 * k]])
+            r, jk = _line_resjac(pk, vk, 1, True)
+            res[g] = r
+            jac[g, 0] = jk[:, 0]
+            jac[g, 1 + 3 * k : 4 + 3 * k] = jk[:, 1:]
+        if rest.size:
+            r, jr = _line_resjac(sub_rest, v, n_l, True)
+            res[rest] = r
+            jac[rest] = jr
+        return res, jac
+
+    return resjac
+
+
 def _fit_axes(
     pts: NDArray[np.float64],
     x0: NDArray[np.float64],
@@ -1706,10 +1739,19 @@ def _fit_axes(
     c: float,
     c_final: float,
     iterations: int = 8,
+    labels: NDArray[np.intp] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Robust fit of ``n`` outgoing pipes (``[L, theta, phi, rho] x n``, the reference point
     shared) to the returns ``pts`` from ``x0`` within the bounds: Tukey cut-off shrinking from
-    ``c`` to ``c_final`` (m). Returns ``(x, residuals, weights)``."""
+    ``c`` to ``c_final`` (m). Each return is fitted to the nearest pipe, or with ``labels`` to
+    its own (:func:`_own_branch_resjac`). Returns ``(x, residuals, weights)``."""
+    if labels is not None:
+        resjac = _own_branch_resjac(pts, labels, n)
+    else:
+
+        def resjac(v: NDArray) -> tuple[NDArray, NDArray]:
+            return _line_resjac(pts, v, n, True)
+
     return robust_gauss_newton(
         None,
         x0,
@@ -1722,7 +1764,7 @@ def _fit_axes(
         step_tol=STEP_TOL,
         anneal=ANNEAL,
         cost_tol=COST_TOL,
-        resjac=lambda v: _line_resjac(pts, v, n, True),
+        resjac=resjac,
     )
 
 
@@ -1748,9 +1790,10 @@ def _branches(
     u_all = cloud.xyz[0]
     u_hi = float(_pct(u_all[lobe_mask], 95)) + 2.0 * big_r if lobe_mask.any() else 0.0
     near_inside = keep & ~lobe_mask & (u_all <= u_hi)
-    lobe_idx = np.concatenate(
-        [_subsample(np.flatnonzero(lb.mask.reshape(-1)), cfg.fit_points // 2) for lb in lobes]
-    )
+    lobe_sub = [
+        _subsample(np.flatnonzero(lb.mask.reshape(-1)), cfg.fit_points // 2) for lb in lobes
+    ]
+    lobe_idx = np.concatenate(lobe_sub)
     near_idx = _subsample(np.flatnonzero(near_inside.reshape(-1)), cfg.fit_points // 2)
     sub_idx = np.concatenate([lobe_idx, near_idx])
     if any_roll:
@@ -1926,10 +1969,24 @@ def _branches(
     else:
         diag["radius_model"] = "free"
     across = None
+    labels = None
+    lo_b, up_b = (lo_eq, up_eq) if x is x_eq else (lower, upper)
     opposite = n_l == 2 and abs(_wrap(lobes[0].roll - lobes[1].roll)) > math.radians(150)
-    if opposite and not any_roll and float(_dir(x[1], x[2]) @ _dir(x[4], x[5])) > -0.985:
-        # two openings on opposite sides, the branches fitted not along one axis: a pipe
-        # across (a tee from its stem, a wye from its branch, the side pipe of a cross)?
+    if opposite and not any_roll:
+        # two openings on opposite sides: a pipe across (a tee from its stem, a wye from its
+        # branch, the side pipe of a cross)? The two branches are fitted again, each to the
+        # returns of its own opening (and an inner return near them, on the far wall of the
+        # pipe across seen head-on, to the branch on its side of the incoming axis). Two
+        # cylinders fitted to the nearer of them take in the scatter of a noisy opening's rim
+        # between them, and lean apart by several degrees for it.
+        p_near = p_all[lobe_idx.size :]
+        side = np.stack(
+            [p_near[:, 1] * math.cos(lb.roll) + p_near[:, 2] * math.sin(lb.roll) for lb in lobes]
+        )
+        labels = np.concatenate(
+            [np.full(ix.size, k) for k, ix in enumerate(lobe_sub)] + [np.argmax(side, axis=0)]
+        )
+        x, res, w = _fit_axes(pts_all, x, n_l, lo_b, up_b, 2.0 * c_fin, c_fin, labels=labels)
         # One straight axis through the reference point, fitted as one cylinder of the standard
         # radius, is kept unless the two branches fit significantly better (likelihood ratio,
         # as for the radii)
@@ -1967,22 +2024,24 @@ def _branches(
         # allow it
         if across is not None:
             n_b = 1
-            lo_s = np.array([lower[0], math.radians(25.0), -10.0, float(across[3])])
-            up_s = np.array([upper[0], math.radians(155.0), 10.0, float(across[3])])
+            lo_b = np.array([lower[0], math.radians(25.0), -10.0, float(across[3])])
+            up_b = np.array([upper[0], math.radians(155.0), 10.0, float(across[3])])
+            labels = None
         else:
-            n_b, lo_s, up_s = (n_l, lo_eq, up_eq) if x is x_eq else (n_l, lower, upper)
+            n_b = n_l
         x, res, w = _standard_angles(
             pts_all,
             x,
             res,
             w,
             n_b,
-            lo_s,
-            up_s,
+            lo_b,
+            up_b,
             c_fin,
             sigma2,
             diag,
             radius_bounds=(lower[3::3], upper[3::3]) if across is None else None,
+            labels=labels,
         )
         if across is not None:
             across = x
@@ -2088,6 +2147,7 @@ def _standard_angles(
     sigma2: float,
     diag: dict[str, Any],
     radius_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+    labels: NDArray[np.intp] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The branch fit ``x`` (``[L, theta, phi, rho] x n_b``, its residuals and weights) with
     each deflection within ``SNAP_WITHIN`` of a standard fitting angle (tees and crosses
@@ -2100,7 +2160,8 @@ def _standard_angles(
     When the radii are held (``lower == upper``) and the held angle is rejected, it is tried
     once more with the radii free within ``radius_bounds`` (lower, upper per branch, m) but
     within ``SNAP_RADIUS`` of the held ones: a branch a millimetre narrower than the run, fitted
-    at the run's radius, leans by a degree or two instead."""
+    at the run's radius, leans by a degree or two instead. ``labels``: as for
+    :func:`_fit_axes`."""
     idx, angles = [], []
     for k in range(n_b):
         th = float(x[1 + 3 * k])
@@ -2113,15 +2174,7 @@ def _standard_angles(
     xs, lo, up = x.copy(), lower.copy(), upper.copy()
     xs[idx] = lo[idx] = up[idx] = angles
     xs = np.clip(xs, np.minimum(lo, xs), np.maximum(up, xs))
-    x_s, res_s, w_s = _fit_axes(
-        pts,
-        xs,
-        n_b,
-        lo,
-        up,
-        c=2.0 * c_fin,
-        c_final=c_fin,
-    )
+    x_s, res_s, w_s = _fit_axes(pts, xs, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin, labels=labels)
     cost = tukey_cost(res, c_fin)
 
     def accepted(x_s: NDArray[np.float64], res_s: NDArray[np.float64]) -> bool:
@@ -2140,7 +2193,9 @@ def _standard_angles(
         held = x[rho]
         lo[rho] = np.maximum(radius_bounds[0], held * (1.0 - SNAP_RADIUS))
         up[rho] = np.minimum(radius_bounds[1], held * (1.0 + SNAP_RADIUS))
-        x_r, res_r, w_r = _fit_axes(pts, x_s, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin)
+        x_r, res_r, w_r = _fit_axes(
+            pts, x_s, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin, labels=labels
+        )
         if accepted(x_r, res_r):
             diag["standard_angles"] = len(idx)
             diag["standard_angles_radius_free"] = True
