@@ -74,7 +74,7 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    when nothing nearer was found, or when a junction's branch fit rests on a handful of
    returns.
    A junction's branches are held at the standard angle of fittings (90 deg for tees and
-   crosses, 45 or 135 deg for laterals) when fitted within 10 deg of it and the returns do
+   crosses, 45 or 135 deg for laterals) when fitted within 25 deg of it and the returns do
    not reject it (likelihood ratio): a small opening far away shows a patch of the branch
    whose deflection trades against the reference point and the radius.
 5. **Kind and confidence.** One way on -> ``bend``; two or more -> ``junction``. Confidence
@@ -130,8 +130,11 @@ GIVEN_POSE_MARGIN = 0.02
 #: junction's branch fitted within ``SNAP_WITHIN`` of one is held at it when the returns allow
 #: (likelihood ratio at most ``SNAP_LR`` per branch) and it turns by at most
 #: ``SNAP_MAX_TURN`` about the run; a radius held with it may move by ``SNAP_RADIUS`` of itself.
+#: (A small branch's opening seen along the run from 20 cm under range noise is a few dozen
+#: returns that a deflection 10-15 deg off fits as well: the returns, not the distance from
+#: the standard angle, decide.)
 STANDARD_BRANCH_ANGLES = np.radians([45.0, 90.0, 135.0])
-SNAP_WITHIN = math.radians(10.0)
+SNAP_WITHIN = math.radians(25.0)
 SNAP_LR = 6.0
 SNAP_MAX_TURN = math.radians(3.0)
 SNAP_RADIUS = 0.03
