@@ -1707,12 +1707,9 @@ def _own_branch_resjac(
     pts: tuple[NDArray, NDArray, NDArray, NDArray], labels: NDArray[np.intp], n_l: int
 ) -> Callable[[NDArray], tuple[NDArray, NDArray]]:
     """Residuals and Jacobian (as :func:`_line_resjac`) of the returns to the outgoing cylinder
-    of their own lobe: ``labels[i]`` is the lobe of return ``i``, ``-1`` for a return of no lobe
-    (an inner return near them), which goes to the nearest cylinder."""
+    of their own lobe: ``labels[i]`` (in ``0 .. n_l - 1``) is the lobe of return ``i``."""
     groups = [np.flatnonzero(labels == k) for k in range(n_l)]
-    rest = np.flatnonzero(labels < 0)
     sub = [tuple(np.ascontiguousarray(a[g]) for a in pts) for g in groups]
-    sub_rest = tuple(np.ascontiguousarray(a[rest]) for a in pts)
     n = labels.size
 
     def resjac(v: NDArray) -> tuple[NDArray, NDArray]:
@@ -1724,10 +1721,6 @@ def _own_branch_resjac(
             res[g] = r
             jac[g, 0] = jk[:, 0]
             jac[g, 1 + 3 * k : 4 + 3 * k] = jk[:, 1:]
-        if rest.size:
-            r, jr = _line_resjac(sub_rest, v, n_l, True)
-            res[rest] = r
-            jac[rest] = jr
         return res, jac
 
     return resjac
