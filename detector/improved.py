@@ -80,7 +80,12 @@ clamped diameter and (optionally) the sensor pose in the pipe.
 5. **Kind and confidence.** One way on -> ``bend``; two or more -> ``junction``. Confidence
    combines the number of supporting returns and the fit residual relative to the tolerance.
    Degenerate inputs (no returns, too few wall returns, fits that fail or leave the physical
-   range) give ``straight`` with low confidence, never NaN.
+   range) give ``straight`` with low confidence, never NaN. The exception is a scan that sees
+   hardly anything ahead of the sensor where a straight pipe would show its wall to hundreds
+   of beams: the pipe is blocked within the sensor's minimum range (an end wall 10 cm ahead of
+   a 12 cm minimum range; anything else that near still lets beams on into the pipe beyond),
+   reported as a ``closure`` no farther than where the wall ahead would start to show, with
+   confidence 0.5.
 
 Speed: a scan whose returns all lie on the wall under the given pose is straight pipe before
 any fit. Returns are kept compact and component-first (one ``(3, 3) @ (3, N)`` product per
@@ -133,6 +138,13 @@ GIVEN_POSE_MARGIN = 0.02
 #: (A small branch's opening seen along the run from 20 cm under range noise is a few dozen
 #: returns that a deflection 10-15 deg off fits as well: the returns, not the distance from
 #: the standard angle, decide.)
+#: A scan whose beams would see a straight pipe's wall ahead of the sensor in at least
+#: ``BLIND_MIN_EXPECTED`` returns, but sees at most ``BLIND_MAX_AHEAD`` of that many there, is
+#: blocked ahead within the minimum range (an end wall 10 cm ahead of a sensor whose minimum
+#: range is 12 cm); the end wall gets confidence ``BLIND_CONFIDENCE`` (its distance is a bound).
+BLIND_MIN_EXPECTED = 200
+BLIND_MAX_AHEAD = 0.01
+BLIND_CONFIDENCE = 0.5
 STANDARD_BRANCH_ANGLES = np.radians([45.0, 90.0, 135.0])
 SNAP_WITHIN = math.radians(25.0)
 SNAP_LR = 6.0
@@ -650,6 +662,11 @@ def detect_improved(
     recheck: tuple[SensorInPipe, NDArray[np.float64], float, float] | None = None
     try:
         cloud = _prepare(scan, pose0, bias, config)
+        reach = _blocked_within_min_range(scan, cloud, big_r)
+        if reach is not None:
+            diag["blocked_within_min_range"] = reach
+            opt = StructureOption("closure", reach, 0.0, 0.0, 0.0, BLIND_CONFIDENCE)
+            return _timed(Detection("closure", [opt], BLIND_CONFIDENCE, diag), t0)
         # the given pose and the clamp reading explain every return already: straight pipe,
         # nothing to measure or refine (the common case, kept cheap)
         if refine_axis:
@@ -1110,6 +1127,36 @@ def _intact(
     diag.update(n_wall=n_wall, n_beyond=n_beyond, n_inside=n_inside, n_anomaly=0)
     conf = min(1.0, n_wall / 200.0) * n_wall / cloud.n
     return Detection.straight(confidence=conf, **diag)
+
+
+def _blocked_within_min_range(scan: Scan, cloud: PipeCloud, big_r: float) -> float | None:
+    """How far ahead (m) at most an end wall blocks the pipe within the sensor's minimum range,
+    when hardly any return comes from ahead of the sensor although a straight pipe would show
+    its wall to many beams there; ``None`` otherwise.
+
+    Ahead of a sensor on the axis of a straight pipe of radius ``R``, a beam at angle ``beta``
+    to the axis meets the wall at range ``R / sin(beta)``: beams whose range would lie within
+    ``[min_range, max_range]`` return. A bend, a junction or a reducer near the sensor still
+    sends beams on into the pipe beyond it; nothing ahead at all is an end wall nearer than
+    ``sqrt(min_range^2 - R^2)``, where the wall ahead would start to show. That reach is
+    returned: the end wall is no farther, its distance is not measured."""
+    spec = scan.spec or {}
+    min_range = float(spec.get("min_range", 0.0))
+    max_range = float(spec.get("max_range", math.inf))
+    if not (math.isfinite(min_range) and min_range > big_r):
+        return None
+    sb = np.abs(np.sin(scan.beam_angles))
+    ahead = np.cos(scan.beam_angles) > 0.0
+    with np.errstate(divide="ignore"):
+        wall_range = big_r / sb
+    seen = ahead & (wall_range >= min_range) & (wall_range <= max_range)
+    expected = int(np.count_nonzero(seen)) * scan.n_planes
+    if expected < BLIND_MIN_EXPECTED:
+        return None
+    n_ahead = int(np.count_nonzero(cloud.xyz_v[0] > 0.0))
+    if n_ahead > BLIND_MAX_AHEAD * expected:
+        return None
+    return math.sqrt(min_range * min_range - big_r * big_r)
 
 
 def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:

@@ -629,3 +629,21 @@ def test_small_noisy_tee_branch_fitted_well_off_the_standard_angle_is_held_at_it
     det = detect(scan, d)
     assert det.diagnostics.get("standard_angles") == 1, det.describe()
     _assert_ways_within(det, truth, 2, 0.005, 0.001, 1.0, 2.0)
+
+
+@pytest.mark.parametrize("diameter", [0.057, 0.125])
+def test_end_wall_within_the_minimum_range_is_a_closure(diameter: float) -> None:
+    # (ydlidar_x4, minimum range 12 cm) 10 cm before an end wall every beam ahead meets it or
+    # the wall before it inside the minimum range: no return at all, once read as straight
+    # pipe. The end wall is no farther than where the wall ahead would start to show.
+    scan, truth, d = scan_layout("closure", 0.1, sensor="ydlidar_x4", diameter=diameter)
+    det = detect(scan, d)
+    assert det.kind == "closure", det.describe()
+    reach = math.sqrt(0.12**2 - (diameter / 2) ** 2)
+    assert det.options[0].distance == pytest.approx(reach)
+    assert truth[0].distance <= det.options[0].distance < truth[0].distance + 0.02
+    # 5 cm farther back the wall ahead shows again: the end wall is measured as usual
+    scan, truth, d = scan_layout("closure", 0.15, sensor="ydlidar_x4", diameter=diameter)
+    det = detect(scan, d)
+    assert det.kind == "closure" and "blocked_within_min_range" not in det.diagnostics
+    assert abs(det.options[0].distance - truth[0].distance) < 0.01
