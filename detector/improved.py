@@ -178,6 +178,12 @@ CONE_FIRST_RING = 0.01
 #: returns cover this fraction of the azimuth at least.
 CONE_MIN_RETURNS = 6
 CONE_RING_COVERAGE = 0.75
+#: The rings' hinge (:func:`_ring_hinge_start`) looks this far (m) before the first returns off
+#: the wall; a ring rises when its median lies ``HINGE_MIN_SNR`` times its noise and at least
+#: ``HINGE_MIN_RISE`` (m) off the wall.
+HINGE_REACH = 0.15
+HINGE_MIN_SNR = 4.0
+HINGE_MIN_RISE = 0.0005
 #: A region of returns beyond the wall covering this fraction of the azimuth goes all round.
 ALL_ROUND = 0.75
 
@@ -1597,6 +1603,11 @@ def _widening_start(
             scatter = mad_sigma(ec - (uc - a_u) / b_u)
             if scatter <= max(3.0 * noise, CONE_LINE_SCATTER):
                 return min(u_first, max(u_first - 0.1, a_u)), True
+    # (under range noise the first centimetres of the cone, per return, are the wall's: the
+    # rings' medians are not)
+    hinge = _ring_hinge_start(xyz, e, noise, u_first, u_f, rise - margin)
+    if hinge is not None:
+        return hinge, True
     hi = min(u_first, u_f)
     if n_cone:
         first = uc <= uc.min() + CONE_FIRST_RING
@@ -1611,6 +1622,68 @@ def _widening_start(
         if k > 1.0:
             lo = max(lo, (k * u_c - u_f) / (k - 1.0))
     return (0.5 * (lo + hi) if lo <= hi else hi), False
+
+
+def _ring_hinge_start(
+    xyz: NDArray[np.float64],
+    e: NDArray[np.float64],
+    noise: float,
+    u_first: float,
+    u_f: float,
+    e_max: float,
+) -> float | None:
+    """Start of a widening (m along the axis) from the rings of beams before the wider pipe,
+    each ring's median offset from the wall radius (``e``, m) against its position: flat on
+    the wall, then rising along the cone. The kink of that hinge is the start, when at least
+    two rings rise past it by more than their noise and at least one lies flat before it;
+    ``None`` otherwise. Per return, the first centimetres of a gentle cone lie within a few
+    times the range noise of the wall; the median of a ring of a hundred returns does not.
+
+    ``u_first``: where the first returns off the wall crossed the wall radius (the start lies
+    before it); ``u_f``: where the wider pipe's returns begin; ``e_max``: offsets beyond this
+    are on the wider pipe, not the cone; ``noise``: the returns' median radial noise, m."""
+    u = xyz[0]
+    win = (u > u_first - HINGE_REACH) & (u < u_f) & (e < e_max) & (e > -4.0 * noise - 0.00035)
+    if np.count_nonzero(win) < 4 * CONE_MIN_RETURNS:
+        return None
+    p, ew = xyz[:, win], e[win]
+    bins = np.floor((p[0] - p[0].min()) / CONE_FIRST_RING).astype(np.int64)
+    counts = np.bincount(bins)
+    ub, eb, nb = [], [], []
+    for k in np.flatnonzero(counts >= CONE_MIN_RETURNS):
+        sel = bins == k
+        if _azimuth_coverage(p[:, sel].T) >= CONE_RING_COVERAGE:
+            ub.append(float(np.median(p[0, sel])))
+            eb.append(float(np.median(ew[sel])))
+            nb.append(float(counts[k]))
+    if len(ub) < 4:
+        return None
+    ua, ea, na = np.array(ub), np.array(eb), np.array(nb)
+    # (the median of n returns scatters by about 1.25 noise / sqrt(n))
+    sig_b = 1.25 * max(noise, 1e-5) / np.sqrt(na)
+    wts = 1.0 / np.square(sig_b)
+    grid = np.arange(float(ua.min()), min(u_first, float(ua.max())), 0.001)
+    best = None
+    for big_l in grid:
+        x = np.maximum(ua - big_l, 0.0)
+        sxx = float(np.sum(wts * x * x))
+        if sxx <= 0.0:
+            continue
+        b = float(np.sum(wts * x * ea)) / sxx
+        if b <= 0.0:
+            continue
+        chi2 = float(np.sum(wts * np.square(ea - b * x)))
+        if best is None or chi2 < best[0]:
+            best = (chi2, float(big_l), b)
+    if best is None:
+        return None
+    _, big_l, b = best
+    rising = (ua > big_l) & (b * (ua - big_l) > np.maximum(HINGE_MIN_SNR * sig_b, HINGE_MIN_RISE))
+    # (two rings at least, a ring on the wall before: one ring split between two bins makes
+    # no slope)
+    if not rising.any() or np.ptp(ua[rising]) < CONE_FIRST_RING or not np.any(ua < big_l):
+        return None
+    return big_l
 
 
 def _full_rings(p: NDArray[np.float64]) -> NDArray[np.bool_]:
