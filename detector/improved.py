@@ -41,8 +41,9 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    explained by a quadratic surface with a sag of millimetres, which tells it from the curved
    far wall of a pipe seen head-on) or a reducer (a cone from the wall radius to a new radius
    fitted as ``r(u)`` together with the wall just before it; a widening starts where the line
-   through its cone's rings of beams meets the wall radius, or, its cone seen by one ring or
-   none, in the middle of the interval the rings allow; an end wall seen through a narrowing,
+   through its cone's rings of beams meets the wall radius (under range noise, where the rings'
+   medians leave the wall), or, its cone seen by one ring or none, in the middle of the
+   interval the rings allow; an end wall seen through a narrowing,
    spread along the axis by the range noise, is left out of its fit and bounds the narrow
    radius from below). A far wall seen head-on is fitted as an outgoing pipe of the clamped
    radius with unknown roll, seen from inside; when it runs on evenly to both sides it is a

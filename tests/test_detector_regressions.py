@@ -647,3 +647,24 @@ def test_end_wall_within_the_minimum_range_is_a_closure(diameter: float) -> None
     det = detect(scan, d)
     assert det.kind == "closure" and "blocked_within_min_range" not in det.diagnostics
     assert abs(det.options[0].distance - truth[0].distance) < 0.01
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_noisy_gentle_widening_starts_where_the_rings_leave_the_wall(seed: int) -> None:
+    # (ydlidar_x4) a 57-to-75.5 mm widening over 15 cm, 15 cm ahead: per return, the first
+    # centimetres of the cone lie within the range noise of the wall, and the start came out
+    # 4.6 cm late; the medians of the rings of beams rise off the wall where the cone starts
+    scan, truth, d = scan_layout(
+        "reducer",
+        0.15,
+        sensor="ydlidar_x4",
+        seed=seed,
+        diameter_in=0.057,
+        diameter_out=0.0755,
+        taper_length=0.15,
+    )
+    det = detect(scan, d)
+    assert det.kind == "reducer", det.describe()
+    assert det.diagnostics["widening_start_from_cone"]
+    assert abs(det.options[0].distance - truth[0].distance) < 0.01, det.describe()
+    assert abs(det.options[0].diameter - 0.0755) < 0.002
