@@ -14,9 +14,12 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    cylinder misses its own wall returns by more than their noise explains, and the given pose
    stands when less than 5 cm of straight wall is in view before the structure and the pose
    explains it (near the start of a wide bend's arc a cylinder tilted about the nearest wall
-   fits the arc). Of candidate poses explaining as many wall returns, the one that fits them
-   most closely is kept (a cylinder tilted onto the first centimetres of a gentle taper or arc
-   explains no more of them, only more loosely). A long bend's arc and a taper leave the wall
+   fits the arc), unless a refined axis explains as many returns and fits 10 cm or more of
+   straight wall to a quarter of the scatter allowed (the given pose is then the misaligned
+   one, its wall drifting off the tolerance a little way ahead). Of candidate poses explaining
+   as many wall returns, the one that fits them most closely is kept (a cylinder tilted onto
+   the first centimetres of a gentle taper or arc explains no more of them, only more
+   loosely). A long bend's arc and a taper leave the wall
    so gently that the wall a pose was chosen on can reach a few centimetres into them: once
    one is fitted, the pose is chosen again on the wall ending 1 cm before its start (over one
    set of returns for every candidate pose) and the structure fitted again under it. The
@@ -154,6 +157,12 @@ SNAP_RADIUS = 0.03
 #: Less straight wall than this in view along the axis (m) before a structure: the given pose
 #: stands when it explains that wall.
 SHORT_WALL_VIEW = 0.05
+#: ... unless a refined axis explains as many of those returns and fits at least
+#: ``LONG_WALL_SPAN`` (m) of straight wall to within ``LONG_WALL_RMS`` of the scatter a straight
+#: wall may show (a sensor misaligned by 20 % of D and 4 deg sees its wall drift off the
+#: tolerance 12 cm ahead under the given pose).
+LONG_WALL_SPAN = 0.1
+LONG_WALL_RMS = 0.25
 #: The wall this far along the axis beyond the nearest returns (m) gives the first estimate of
 #: the pipe radius.
 NEAR_WALL = 0.03
@@ -761,7 +770,20 @@ def detect_improved(
                 # nearest returns): a refinement that explains hardly more returns than the
                 # given pose (a few of thousands) rests on the structure
                 best = 0
-            if best and given_fits and u_start0 - u_nearest < SHORT_WALL_VIEW:
+            # (a refinement that explains as many returns and fits a long straight wall to a
+            # fraction of its noise, where the given pose saw only a short one: the given pose
+            # is the misaligned one, its wall drifting off the tolerance some way ahead)
+            long_straight = [
+                k
+                for k, sc in enumerate(scores)
+                if k
+                and sc >= scores[best] - max(GIVEN_POSE_MARGIN * scores[best], 2)
+                and candidates[k][1].get("axis_span", 0.0) >= LONG_WALL_SPAN
+                and candidates[k][1].get("axis_rms", 1.0) <= LONG_WALL_RMS * rms_cap
+            ]
+            if best and given_fits and u_start0 - u_nearest < SHORT_WALL_VIEW and long_straight:
+                best = long_straight[-1]
+            elif best and given_fits and u_start0 - u_nearest < SHORT_WALL_VIEW:
                 # hardly any straight wall in view before the structure: a refinement can only
                 # lean on the structure (a cylinder tilted about the nearest wall, pivoting
                 # onto the arc of a turn); the given pose stands, as it explains that wall
