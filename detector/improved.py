@@ -2024,16 +2024,24 @@ def _branches(
         hole = _hole_prior(cloud, big_r, lobes, lobe_pts, wall, tol, u_edge, c0, *prior)
     c_fin = max(3.0 * tol_med, 0.003)
 
-    def free_fit(xs: NDArray, lo: NDArray, up: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-        return _fit_axes(
-            pts_all,
-            xs,
-            n_l,
-            lo,
-            up,
-            c=2.0 * c0,
-            c_final=c_fin,
+    # two openings on opposite sides (a tee from its stem, a wye from its branch, the side
+    # pipes of a cross): each branch is fitted to the returns of its own opening (and an inner
+    # return near them, on the far wall of a pipe across seen head-on, to the branch on its
+    # side of the incoming axis). Two cylinders fitted to the nearer of them take in the
+    # scatter of a noisy opening's rim between them, and lean apart by several degrees for it.
+    labels = None
+    opposite = n_l == 2 and abs(_wrap(lobes[0].roll - lobes[1].roll)) > math.radians(150)
+    if opposite and not any_roll:
+        p_near = p_all[lobe_idx.size :]
+        side = np.stack(
+            [p_near[:, 1] * math.cos(lb.roll) + p_near[:, 2] * math.sin(lb.roll) for lb in lobes]
         )
+        labels = np.concatenate(
+            [np.full(ix.size, k) for k, ix in enumerate(lobe_sub)] + [np.argmax(side, axis=0)]
+        )
+
+    def free_fit(xs: NDArray, lo: NDArray, up: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        return _fit_axes(pts_all, xs, n_l, lo, up, c=2.0 * c0, c_final=c_fin, labels=labels)
 
     x, res, w = free_fit(x0a, lower, upper)
     if hole is not None and not _fits_hole(x, hole, big_r, lower, upper):
@@ -2058,7 +2066,10 @@ def _branches(
     up_eq[3::3] = std_r
     if not any_roll and bool(np.all(np.abs(x[3::3] - std_r) <= 0.01 * big_r)):
         # the free fit found the clamped radius already: clamping it moves nothing that matters
-        res_eq = _line_resjac(pts_all, x_eq, n_l, False)[0]
+        if labels is None:
+            res_eq = _line_resjac(pts_all, x_eq, n_l, False)[0]
+        else:
+            res_eq = _own_branch_resjac(pts_all, labels, n_l)(x_eq)[0]
         w_eq = tukey_weights(res_eq, c_fin)
     else:
         x_eq, res_eq, w_eq = _fit_axes(
@@ -2070,6 +2081,7 @@ def _branches(
             c=2.0 * c0 if any_roll else 2.0 * c_fin,
             c_final=c_fin,
             iterations=12 if any_roll else 8,
+            labels=labels,
         )
     if any_roll:
         # (a far wall seen head-on fits a pipe deflected by theta and its mirror image deflected
@@ -2108,27 +2120,11 @@ def _branches(
     else:
         diag["radius_model"] = "free"
     across = None
-    labels = None
     lo_b, up_b = (lo_eq, up_eq) if x is x_eq else (lower, upper)
-    opposite = n_l == 2 and abs(_wrap(lobes[0].roll - lobes[1].roll)) > math.radians(150)
     if opposite and not any_roll:
-        # two openings on opposite sides: a pipe across (a tee from its stem, a wye from its
-        # branch, the side pipe of a cross)? The two branches are fitted again, each to the
-        # returns of its own opening (and an inner return near them, on the far wall of the
-        # pipe across seen head-on, to the branch on its side of the incoming axis). Two
-        # cylinders fitted to the nearer of them take in the scatter of a noisy opening's rim
-        # between them, and lean apart by several degrees for it.
-        p_near = p_all[lobe_idx.size :]
-        side = np.stack(
-            [p_near[:, 1] * math.cos(lb.roll) + p_near[:, 2] * math.sin(lb.roll) for lb in lobes]
-        )
-        labels = np.concatenate(
-            [np.full(ix.size, k) for k, ix in enumerate(lobe_sub)] + [np.argmax(side, axis=0)]
-        )
-        x, res, w = _fit_axes(pts_all, x, n_l, lo_b, up_b, 2.0 * c_fin, c_fin, labels=labels)
-        # One straight axis through the reference point, fitted as one cylinder of the standard
-        # radius, is kept unless the two branches fit significantly better (likelihood ratio,
-        # as for the radii)
+        # a pipe across? One straight axis through the reference point, fitted as one
+        # cylinder of the standard radius, is kept unless the two branches fit significantly
+        # better (likelihood ratio, as for the radii)
         k_main = 0 if lobes[0].n >= lobes[1].n else 1
         r_a = float(np.mean(std_r))  # (the side pipe of a cross may be narrower than the run)
         starts = [
