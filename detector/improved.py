@@ -2127,11 +2127,13 @@ def _branches(
         # better (likelihood ratio, as for the radii)
         k_main = 0 if lobes[0].n >= lobes[1].n else 1
         r_a = float(np.mean(std_r))  # (the side pipe of a cross may be narrower than the run)
-        starts = [
-            np.array([x[0], x[1 + 3 * k_main], x[2 + 3 * k_main], r_a]),
-            np.array([x[0], 0.5 * math.pi, lobes[k_main].roll, r_a]),
-            np.array([u_edge + big_r, 0.5 * math.pi, lobes[k_main].roll, r_a]),
-        ]
+        starts = [np.array([x[0], x[1 + 3 * k_main], x[2 + 3 * k_main], r_a])]
+        if float(_dir(x[1], x[2]) @ _dir(x[4], x[5])) > -0.985:
+            # (the branches not nearly in line: the pipe across may lie elsewhere)
+            starts += [
+                np.array([x[0], 0.5 * math.pi, lobes[k_main].roll, r_a]),
+                np.array([u_edge + big_r, 0.5 * math.pi, lobes[k_main].roll, r_a]),
+            ]
         best_a = None
         for xa0 in starts:
             xa, res_a, w_a = _fit_axes(
