@@ -4,30 +4,29 @@ Where the thesis categorises points by radius and fits an ellipse to the outline
 this method fits the 3D geometry of the structure itself, using what the PIRATE knows: the
 clamped diameter and (optionally) the sensor pose in the pipe.
 
-1. **Pipe frame.** Every return is mapped into the pipe frame (the known ``sensor_in_pipe`` pose,
-   else the thesis's centred-and-aligned assumption), then the pipe axis is refined by a robust
-   fit of a cylinder of the clamped radius to the wall points (4 parameters: cross-section
-   offset and tilt, with a weak prior towards the known pose when the wall seen is short). This
-   removes sensor misalignment (thesis 5.3) without any outside feedback; when the given pose
-   already explains the wall before the structure, only the fit over that whole stretch of wall
-   runs (from the given pose), not the first, wider one. A refinement is dropped when its
-   cylinder misses its own wall returns by more than their noise explains, and the given pose
-   stands when less than 5 cm of straight wall is in view before the structure and the pose
-   explains it (near the start of a wide bend's arc a cylinder tilted about the nearest wall
-   fits the arc), unless a refined axis explains as many returns and fits 10 cm or more of
-   straight wall to a quarter of the scatter allowed (the given pose is then the misaligned
-   one, its wall drifting off the tolerance a little way ahead). Of candidate poses explaining
-   as many wall returns, the one that fits them most closely is kept (a cylinder tilted onto
-   the first centimetres of a gentle taper or arc explains no more of them, only more
-   loosely). A long bend's arc and a taper leave the wall
-   so gently that the wall a pose was chosen on can reach a few centimetres into them: once
-   one is fitted, the pose is chosen again on the wall ending 1 cm before its start (over one
-   set of returns for every candidate pose) and the structure fitted again under it. The
-   pipe's radius is measured from the wall (the wall just beyond the nearest returns, then the
-   wall before the structure), within 3 mm of the clamp reading: the clamp's encoders read the
-   diameter to a millimetre or two. When fewer returns than a region needs leave the wall
-   tolerance under the given pose, or else under the refined axis, the scan is straight pipe
-   and nothing else runs (the common case in a run).
+1. **Pipe frame.** Every return is mapped into the pipe frame (the known ``sensor_in_pipe``
+   pose, else the thesis's centred-and-aligned assumption), then the pipe axis is refined by a
+   robust fit of a cylinder of the clamped radius to the wall points (4 parameters:
+   cross-section offset and tilt, with a weak prior towards the known pose when the wall seen is
+   short). This removes sensor misalignment (thesis 5.3) without any outside feedback; when the
+   given pose already explains the wall before the structure, only the fit over that whole
+   stretch of wall runs (from the given pose), not the first, wider one. A refinement is dropped
+   when its cylinder misses its own wall returns by more than their noise explains, and the
+   given pose stands when less than 5 cm of straight wall is in view before the structure and
+   the pose explains it (near the start of a wide bend's arc a cylinder tilted about the nearest
+   wall fits the arc), unless a refined axis explains as many returns and fits 10 cm or more of
+   straight wall to a quarter of the scatter allowed (the given pose is then the misaligned one,
+   its wall drifting off the tolerance a little way ahead). Of candidate poses explaining as
+   many wall returns, the one that fits them most closely is kept (a cylinder tilted onto the
+   first centimetres of a gentle taper or arc explains no more of them, only more loosely). A
+   long bend's arc and a taper leave the wall so gently that the wall a pose was chosen on can
+   reach a few centimetres into them: once one is fitted, the pose is chosen again on the wall
+   ending 1 cm before its start (over one set of returns for every candidate pose) and the
+   structure fitted again under it. The pipe's radius is measured from the wall (the wall just
+   beyond the nearest returns, then the wall before the structure), within 3 mm of the clamp
+   reading: the clamp's encoders read the diameter to a millimetre or two. When fewer returns
+   than a region needs leave the wall tolerance under the given pose, or else under the refined
+   axis, the scan is straight pipe and nothing else runs (the common case in a run).
 2. **Classification.** Each return's radial residual ``r - D/2`` is compared with a per-point
    tolerance from the sensor model in ``scan.spec`` (range noise projected on the radius, plus a
    floor; for a noiseless sensor whose wall the refined axis fits to a fraction of a millimetre,
@@ -45,25 +44,25 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    far wall of a pipe seen head-on) or a reducer (a cone from the wall radius to a new radius
    fitted as ``r(u)`` together with the wall just before it; a widening starts where the line
    through its cone's rings of beams meets the wall radius (under range noise, where the rings'
-   medians leave the wall), or, its cone seen by one ring or none, in the middle of the
-   interval the rings allow; an end wall seen through a narrowing,
-   spread along the axis by the range noise, is left out of its fit and bounds the narrow
-   radius from below). A far wall seen head-on is fitted as an outgoing pipe of the clamped
-   radius with unknown roll, seen from inside; when it runs on evenly to both sides it is a
-   pipe across (both ways open); when it looks flat within the range noise and only its
-   curvature tells it from an end wall, it overrules the end wall only as a single turn. With
-   lobes, each lobe is an outgoing pipe: a cylinder whose axis meets the incoming axis at the
-   reference point ``(L, 0, 0)`` with deflection ``angle``, roll ``direction`` and radius
-   ``rho``. Initial values come from a coarse grid over ``(L, angle)`` with the lobe's mean
-   roll; all lobes are then refined jointly by Tukey-weighted Gauss-Newton on the returns of
-   every lobe (each return assigned to the surface it fits best). Two lobes on opposite sides
-   are fitted again, each branch to the returns of its own opening (fitted to the nearer of
-   two cylinders, noisy returns at the openings' rims fall between them and the branches lean
-   apart for them), and also as one pipe across (a single cylinder of the clamped radius, both
-   its ways open), which is kept unless the two branches fit significantly better. A single
-   lobe is also fitted as a long-radius bend (a torus of bend radius ``R_b`` between the two
-   straight pipes, the reference point still where the straight axes meet) when the straight
-   axes fit it loosely or leave more than 5 % of its returns out, and the better fit is kept.
+   medians leave the wall), or, its cone seen by one ring or none, in the middle of the interval
+   the rings allow; an end wall seen through a narrowing, spread along the axis by the range
+   noise, is left out of its fit and bounds the narrow radius from below). A far wall seen
+   head-on is fitted as an outgoing pipe of the clamped radius with unknown roll, seen from
+   inside; when it runs on evenly to both sides it is a pipe across (both ways open); when it
+   looks flat within the range noise and only its curvature tells it from an end wall, it
+   overrules the end wall only as a single turn. With lobes, each lobe is an outgoing pipe: a
+   cylinder whose axis meets the incoming axis at the reference point ``(L, 0, 0)`` with
+   deflection ``angle``, roll ``direction`` and radius ``rho``. Initial values come from a
+   coarse grid over ``(L, angle)`` with the lobe's mean roll; all lobes are then refined jointly
+   by Tukey-weighted Gauss-Newton on the returns of every lobe (each return assigned to the
+   surface it fits best; with two lobes on opposite sides, to the branch of its own opening:
+   fitted to the nearer of two cylinders, noisy returns at the openings' rims fall between them
+   and the branches lean apart for them). Two lobes on opposite sides are also fitted as one
+   pipe across (a single cylinder of the clamped radius, both its ways open), which is kept
+   unless the two branches fit significantly better. A single lobe is also fitted as a
+   long-radius bend (a torus of bend radius ``R_b`` between the two straight pipes, the
+   reference point still where the straight axes meet) when the straight axes fit it loosely or
+   leave more than 5 % of its returns out, and the better fit is kept.
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
    circumference; its option has the clamped diameter. Its side branches are no wider than the
@@ -135,13 +134,6 @@ RADIUS_DEAD_BAND = 0.00025
 #: more of the wall returns.
 NO_WALL_VIEW = 0.01
 GIVEN_POSE_MARGIN = 0.02
-#: Deflections of standard branch fittings (tees and crosses, laterals either way), rad; a
-#: junction's branch fitted within ``SNAP_WITHIN`` of one is held at it when the returns allow
-#: (likelihood ratio at most ``SNAP_LR`` per branch) and it turns by at most
-#: ``SNAP_MAX_TURN`` about the run; a radius held with it may move by ``SNAP_RADIUS`` of itself.
-#: (A small branch's opening seen along the run from 20 cm under range noise is a few dozen
-#: returns that a deflection 10-15 deg off fits as well: the returns, not the distance from
-#: the standard angle, decide.)
 #: A scan whose beams would see a straight pipe's wall ahead of the sensor in at least
 #: ``BLIND_MIN_EXPECTED`` returns, but sees at most ``BLIND_MAX_AHEAD`` of that many there, is
 #: blocked ahead within the minimum range (an end wall 10 cm ahead of a sensor whose minimum
@@ -149,6 +141,13 @@ GIVEN_POSE_MARGIN = 0.02
 BLIND_MIN_EXPECTED = 200
 BLIND_MAX_AHEAD = 0.01
 BLIND_CONFIDENCE = 0.5
+#: Deflections of standard branch fittings (tees and crosses, laterals either way), rad; a
+#: junction's branch fitted within ``SNAP_WITHIN`` of one is held at it when the returns allow
+#: (likelihood ratio at most ``SNAP_LR`` per branch) and it turns by at most
+#: ``SNAP_MAX_TURN`` about the run; a radius held with it may move by ``SNAP_RADIUS`` of itself.
+#: (A small branch's opening seen along the run from 20 cm under range noise is a few dozen
+#: returns that a deflection 10-15 deg off fits as well: the returns, not the distance from
+#: the standard angle, decide.)
 STANDARD_BRANCH_ANGLES = np.radians([45.0, 90.0, 135.0])
 SNAP_WITHIN = math.radians(25.0)
 SNAP_LR = 6.0
