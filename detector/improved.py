@@ -832,13 +832,13 @@ def _wall_radius(
     n = int(np.count_nonzero(sel))
     if n < 100:
         return big_r
-    pts = xyz[:, sel]
-    if _azimuth_coverage(pts.T) < 0.75:
-        return big_r
-    de = float(np.median(e[sel]))
+    e_sel = e[sel]
+    de = float(np.median(e_sel))
     if not RADIUS_DEAD_BAND <= abs(de) <= cfg.max_radius_correction:
         return big_r
-    spread = float(mad_sigma(e[sel] - de))
+    if not _covers(xyz, np.flatnonzero(sel), 0.75):
+        return big_r
+    spread = float(mad_sigma(e_sel - de))
     if spread > _straight_wall_rms(cloud):  # not a straight wall about this axis
         return big_r
     diag["wall_radius"] = big_r + de
@@ -1756,10 +1756,27 @@ def _robust_line(x: NDArray, y: NDArray) -> tuple[float, float]:
     return a, b
 
 
-def _azimuth_coverage(p: NDArray, bins: int = 36) -> float:
-    phi = np.arctan2(p[:, 2], p[:, 1])
+def _covers(xyz: NDArray, idx: NDArray[np.intp], fraction: float, bins: int = 36) -> bool:
+    """Do the ``(3, n)`` points ``idx`` cover at least ``fraction`` of the azimuth (as
+    :func:`_azimuth_coverage`)? Every 16th of them is tried first: when those cover enough, so
+    do all of them."""
+    if idx.size >= 512:
+        few = idx[::16]
+        if _yz_coverage(xyz[1, few], xyz[2, few], bins) >= fraction:
+            return True
+    return _yz_coverage(xyz[1, idx], xyz[2, idx], bins) >= fraction
+
+
+def _yz_coverage(y: NDArray, z: NDArray, bins: int) -> float:
+    """Fraction of ``bins`` azimuth sectors occupied by points at cross-section ``(y, z)``."""
+    phi = np.arctan2(z, y)
     k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
     return float(np.count_nonzero(np.bincount(k, minlength=bins))) / bins
+
+
+def _azimuth_coverage(p: NDArray, bins: int = 36) -> float:
+    """Fraction of ``bins`` azimuth sectors that the ``(n, 3)`` points occupy."""
+    return _yz_coverage(p[:, 1], p[:, 2], bins)
 
 
 def _azimuth_uniformity(p: NDArray, bins: int = 12) -> float:
