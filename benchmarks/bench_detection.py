@@ -382,7 +382,7 @@ def beyond_requirements(record: Record) -> bool:
     thesis's requirements (:data:`REQUIRED_DISTANCE`, :data:`REQUIRED_ANGLE`)?"""
     e = record.errors
     return (
-        max(e.get("distance", [0.0]), default=0.0) > REQUIRED_DISTANCE
+        max(e.get("distance", []), default=0.0) > REQUIRED_DISTANCE
         or max(e.get("angle", []) + e.get("direction", []), default=0.0) > REQUIRED_ANGLE
     )
 

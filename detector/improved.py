@@ -769,24 +769,22 @@ def detect_improved(
                 # nearest returns): a refinement that explains hardly more returns than the
                 # given pose (a few of thousands) rests on the structure
                 best = 0
-            # (a refinement that explains as many returns and fits a long straight wall to a
-            # fraction of its noise, where the given pose saw only a short one: the given pose
-            # is the misaligned one, its wall drifting off the tolerance some way ahead)
-            long_straight = [
-                k
-                for k, sc in enumerate(scores)
-                if k
-                and sc >= scores[best] - max(GIVEN_POSE_MARGIN * scores[best], 2)
-                and candidates[k][1].get("axis_span", 0.0) >= LONG_WALL_SPAN
-                and candidates[k][1].get("axis_rms", 1.0) <= LONG_WALL_RMS * rms_cap
-            ]
-            if best and given_fits and u_start0 - u_nearest < SHORT_WALL_VIEW and long_straight:
-                best = long_straight[-1]
-            elif best and given_fits and u_start0 - u_nearest < SHORT_WALL_VIEW:
+            if best and given_fits and u_start0 - u_nearest < SHORT_WALL_VIEW:
                 # hardly any straight wall in view before the structure: a refinement can only
                 # lean on the structure (a cylinder tilted about the nearest wall, pivoting
-                # onto the arc of a turn); the given pose stands, as it explains that wall
-                best = 0
+                # onto the arc of a turn); the given pose stands, as it explains that wall,
+                # unless a refinement explains as many returns and fits a long straight wall
+                # to a fraction of its noise (then the given pose is the misaligned one, its
+                # wall drifting off the tolerance some way ahead)
+                long_straight = [
+                    k
+                    for k, sc in enumerate(scores)
+                    if k
+                    and sc >= scores[best] - max(GIVEN_POSE_MARGIN * scores[best], 2)
+                    and candidates[k][1].get("axis_span", 0.0) >= LONG_WALL_SPAN
+                    and candidates[k][1].get("axis_rms", 1.0) <= LONG_WALL_RMS * rms_cap
+                ]
+                best = long_straight[-1] if long_straight else 0
             pose, info = candidates[best]
             diag.update(info)
             diag["axis_pass"] = passes[best]
@@ -1669,37 +1667,29 @@ def _ring_hinge_start(
     if np.count_nonzero(win) < 4 * CONE_MIN_RETURNS:
         return None
     p, ew = xyz[:, win], e[win]
-    bins = np.floor((p[0] - p[0].min()) / CONE_FIRST_RING).astype(np.int64)
-    counts = np.bincount(bins)
-    ub, eb, nb = [], [], []
-    for k in np.flatnonzero(counts >= CONE_MIN_RETURNS):
-        sel = bins == k
-        if _azimuth_coverage(p[:, sel].T) >= CONE_RING_COVERAGE:
-            ub.append(float(np.median(p[0, sel])))
-            eb.append(float(np.median(ew[sel])))
-            nb.append(float(counts[k]))
-    if len(ub) < 4:
+    rings = _rings(p)
+    if len(rings) < 4:
         return None
-    ua, ea, na = np.array(ub), np.array(eb), np.array(nb)
+    ua = np.array([float(np.median(p[0, sel])) for sel in rings])
+    ea = np.array([float(np.median(ew[sel])) for sel in rings])
+    na = np.array([float(np.count_nonzero(sel)) for sel in rings])
     # (the median of n returns scatters by about 1.25 noise / sqrt(n))
     sig_b = 1.25 * max(noise, 1e-5) / np.sqrt(na)
     wts = 1.0 / np.square(sig_b)
+    # the hinge's kink on a 1 mm grid: for each, the weighted least-squares slope of the rings
+    # past it, and the misfit (a kink no ring rises past, or that falls, is no hinge)
     grid = np.arange(float(ua.min()), min(u_first, float(ua.max())), 0.001)
-    best = None
-    for big_l in grid:
-        x = np.maximum(ua - big_l, 0.0)
-        sxx = float(np.sum(wts * x * x))
-        if sxx <= 0.0:
-            continue
-        b = float(np.sum(wts * x * ea)) / sxx
-        if b <= 0.0:
-            continue
-        chi2 = float(np.sum(wts * np.square(ea - b * x)))
-        if best is None or chi2 < best[0]:
-            best = (chi2, float(big_l), b)
-    if best is None:
+    if grid.size == 0:
         return None
-    _, big_l, b = best
+    x = np.maximum(ua[None, :] - grid[:, None], 0.0)  # (G, rings)
+    sxx = np.sum(wts * x * x, axis=1)
+    b = np.sum(wts * x * ea, axis=1) / np.where(sxx > 0.0, sxx, 1.0)
+    chi2 = np.sum(wts * np.square(ea - b[:, None] * x), axis=1)
+    chi2 = np.where((sxx > 0.0) & (b > 0.0), chi2, np.inf)
+    j = int(np.argmin(chi2))
+    if not math.isfinite(float(chi2[j])):
+        return None
+    big_l, b = float(grid[j]), float(b[j])
     rising = (ua > big_l) & (b * (ua - big_l) > np.maximum(HINGE_MIN_SNR * sig_b, HINGE_MIN_RISE))
     # (two rings at least, a ring on the wall before: one ring split between two bins makes
     # no slope)
@@ -1708,19 +1698,28 @@ def _ring_hinge_start(
     return big_l
 
 
-def _full_rings(p: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Which of the ``(3, n)`` returns lie in a ``CONE_FIRST_RING`` long stretch of the axis
-    whose returns cover at least ``CONE_RING_COVERAGE`` of the azimuth: rings of beams all
-    round, not a stray return or part of a ring."""
-    keep = np.zeros(p.shape[1], dtype=bool)
+def _rings(p: NDArray[np.float64]) -> list[NDArray[np.bool_]]:
+    """The ``(3, n)`` returns in each ``CONE_FIRST_RING`` long stretch of the axis that holds at
+    least ``CONE_MIN_RETURNS`` of them covering at least ``CONE_RING_COVERAGE`` of the azimuth
+    (a ring of beams all round, not a stray return or part of a ring), nearest first: one mask
+    per ring."""
     if p.shape[1] < CONE_MIN_RETURNS:
-        return keep
+        return []
     bins = np.floor((p[0] - p[0].min()) / CONE_FIRST_RING).astype(np.int64)
     counts = np.bincount(bins)
+    out = []
     for k in np.flatnonzero(counts >= CONE_MIN_RETURNS):
         sel = bins == k
         if _azimuth_coverage(p[:, sel].T) >= CONE_RING_COVERAGE:
-            keep |= sel
+            out.append(sel)
+    return out
+
+
+def _full_rings(p: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which of the ``(3, n)`` returns lie in a ring of beams all round (:func:`_rings`)."""
+    keep = np.zeros(p.shape[1], dtype=bool)
+    for sel in _rings(p):
+        keep |= sel
     return keep
 
 
