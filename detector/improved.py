@@ -1171,6 +1171,9 @@ def _blocked_within_min_range(scan: Scan, cloud: PipeCloud, big_r: float) -> flo
     max_range = float(spec.get("max_range", math.inf))
     if not (math.isfinite(min_range) and min_range > big_r):
         return None
+    n_ahead = int(np.count_nonzero(cloud.xyz_v[0] > 0.0))
+    if n_ahead > BLIND_MAX_AHEAD * scan.ranges.size:  # (more than any expected count allows)
+        return None
     sb = np.abs(np.sin(scan.beam_angles))
     ahead = np.cos(scan.beam_angles) > 0.0
     with np.errstate(divide="ignore"):
@@ -1179,7 +1182,6 @@ def _blocked_within_min_range(scan: Scan, cloud: PipeCloud, big_r: float) -> flo
     expected = int(np.count_nonzero(seen)) * scan.n_planes
     if expected < BLIND_MIN_EXPECTED:
         return None
-    n_ahead = int(np.count_nonzero(cloud.xyz_v[0] > 0.0))
     if n_ahead > BLIND_MAX_AHEAD * expected:
         return None
     return math.sqrt(min_range * min_range - big_r * big_r)
