@@ -1895,14 +1895,15 @@ def _fit_axes(
     c: float,
     c_final: float,
     iterations: int = 8,
-    labels: NDArray[np.intp] | None = None,
+    own: Callable[[NDArray], tuple[NDArray, NDArray]] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Robust fit of ``n`` outgoing pipes (``[L, theta, phi, rho] x n``, the reference point
     shared) to the returns ``pts`` from ``x0`` within the bounds: Tukey cut-off shrinking from
-    ``c`` to ``c_final`` (m). Each return is fitted to the nearest pipe, or with ``labels`` to
-    its own (:func:`_own_branch_resjac`). Returns ``(x, residuals, weights)``."""
-    if labels is not None:
-        resjac = _own_branch_resjac(pts, labels, n)
+    ``c`` to ``c_final`` (m). Each return is fitted to the nearest pipe, or with ``own`` (from
+    :func:`_own_branch_resjac` on the same returns) to its own. Returns ``(x, residuals,
+    weights)``."""
+    if own is not None:
+        resjac = own
     else:
 
         def resjac(v: NDArray) -> tuple[NDArray, NDArray]:
@@ -2046,7 +2047,7 @@ def _branches(
     # return near them, on the far wall of a pipe across seen head-on, to the branch on its
     # side of the incoming axis). Two cylinders fitted to the nearer of them take in the
     # scatter of a noisy opening's rim between them, and lean apart by several degrees for it.
-    labels = None
+    own = None
     opposite = n_l == 2 and abs(_wrap(lobes[0].roll - lobes[1].roll)) > math.radians(150)
     if opposite and not any_roll:
         p_near = p_all[lobe_idx.size :]
@@ -2056,9 +2057,10 @@ def _branches(
         labels = np.concatenate(
             [np.full(ix.size, k) for k, ix in enumerate(lobe_sub)] + [np.argmax(side, axis=0)]
         )
+        own = _own_branch_resjac(pts_all, labels, n_l)
 
     def free_fit(xs: NDArray, lo: NDArray, up: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-        return _fit_axes(pts_all, xs, n_l, lo, up, c=2.0 * c0, c_final=c_fin, labels=labels)
+        return _fit_axes(pts_all, xs, n_l, lo, up, c=2.0 * c0, c_final=c_fin, own=own)
 
     x, res, w = free_fit(x0a, lower, upper)
     if hole is not None and not _fits_hole(x, hole, big_r, lower, upper):
@@ -2083,10 +2085,7 @@ def _branches(
     up_eq[3::3] = std_r
     if not any_roll and bool(np.all(np.abs(x[3::3] - std_r) <= 0.01 * big_r)):
         # the free fit found the clamped radius already: clamping it moves nothing that matters
-        if labels is None:
-            res_eq = _line_resjac(pts_all, x_eq, n_l, False)[0]
-        else:
-            res_eq = _own_branch_resjac(pts_all, labels, n_l)(x_eq)[0]
+        res_eq = _line_resjac(pts_all, x_eq, n_l, False)[0] if own is None else own(x_eq)[0]
         w_eq = tukey_weights(res_eq, c_fin)
     else:
         x_eq, res_eq, w_eq = _fit_axes(
@@ -2098,7 +2097,7 @@ def _branches(
             c=2.0 * c0 if any_roll else 2.0 * c_fin,
             c_final=c_fin,
             iterations=12 if any_roll else 8,
-            labels=labels,
+            own=own,
         )
     if any_roll:
         # (a far wall seen head-on fits a pipe deflected by theta and its mirror image deflected
@@ -2180,7 +2179,7 @@ def _branches(
             n_b = 1
             lo_b = np.array([lower[0], math.radians(25.0), -10.0, float(across[3])])
             up_b = np.array([upper[0], math.radians(155.0), 10.0, float(across[3])])
-            labels = None
+            own = None
         else:
             n_b = n_l
         x, res, w = _standard_angles(
@@ -2195,7 +2194,7 @@ def _branches(
             sigma2,
             diag,
             radius_bounds=(lower[3::3], upper[3::3]) if across is None else None,
-            labels=labels,
+            own=own,
         )
         if across is not None:
             across = x
@@ -2301,7 +2300,7 @@ def _standard_angles(
     sigma2: float,
     diag: dict[str, Any],
     radius_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
-    labels: NDArray[np.intp] | None = None,
+    own: Callable[[NDArray], tuple[NDArray, NDArray]] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The branch fit ``x`` (``[L, theta, phi, rho] x n_b``, its residuals and weights) with
     each deflection within ``SNAP_WITHIN`` of a standard fitting angle (tees and crosses
@@ -2314,7 +2313,7 @@ def _standard_angles(
     When the radii are held (``lower == upper``) and the held angle is rejected, it is tried
     once more with the radii free within ``radius_bounds`` (lower, upper per branch, m) but
     within ``SNAP_RADIUS`` of the held ones: a branch a millimetre narrower than the run, fitted
-    at the run's radius, leans by a degree or two instead. ``labels``: as for
+    at the run's radius, leans by a degree or two instead. ``own``: as for
     :func:`_fit_axes`."""
     idx, angles = [], []
     for k in range(n_b):
@@ -2328,7 +2327,7 @@ def _standard_angles(
     xs, lo, up = x.copy(), lower.copy(), upper.copy()
     xs[idx] = lo[idx] = up[idx] = angles
     xs = np.clip(xs, np.minimum(lo, xs), np.maximum(up, xs))
-    x_s, res_s, w_s = _fit_axes(pts, xs, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin, labels=labels)
+    x_s, res_s, w_s = _fit_axes(pts, xs, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin, own=own)
     cost = tukey_cost(res, c_fin)
 
     def accepted(x_s: NDArray[np.float64], res_s: NDArray[np.float64]) -> bool:
@@ -2347,9 +2346,7 @@ def _standard_angles(
         held = x[rho]
         lo[rho] = np.maximum(radius_bounds[0], held * (1.0 - SNAP_RADIUS))
         up[rho] = np.minimum(radius_bounds[1], held * (1.0 + SNAP_RADIUS))
-        x_r, res_r, w_r = _fit_axes(
-            pts, x_s, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin, labels=labels
-        )
+        x_r, res_r, w_r = _fit_axes(pts, x_s, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin, own=own)
         if accepted(x_r, res_r):
             diag["standard_angles"] = len(idx)
             diag["standard_angles_radius_free"] = True
