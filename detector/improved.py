@@ -171,6 +171,12 @@ GENTLE_START_MARGIN = 0.01
 #: A single way on whose straight-axes fit leaves out more than this fraction of its returns
 #: is also tried as a long-radius bend (as one that fits them loosely is).
 TORUS_TRY_SUPPORT = 0.95
+#: A long bend's torus under the given pose fitting this many times more closely (rms) than
+#: under the refined one: the refinement was laid into the arc, the given pose stands.
+TORUS_POSE_RATIO = 2.0
+#: A long bend's angle is polished on returns spread along its arc only when their range noise
+#: (median, plus 0.3 mm) is below this, m (a noiseless sensor's range resolution).
+TORUS_POLISH_MAX_NOISE = 0.001
 #: Returns of a widening this much (m; or three times their noise) short of the wider pipe's
 #: radius lie on its cone, not on the wider pipe.
 CONE_PLATEAU_MARGIN = 0.0015
@@ -453,6 +459,33 @@ def _subsample(idx: NDArray[np.intp], n: int) -> NDArray[np.intp]:
         return idx
     step = idx.size / n
     return idx[(np.arange(n) * step).astype(np.intp)]
+
+
+def _spread_along_axis(
+    idx: NDArray[np.intp], u: NDArray[np.float64], n: int, bins: int = 20
+) -> NDArray[np.intp]:
+    """``n`` of the returns ``idx`` (all of them when there are fewer), spread evenly along the
+    axis (``u``: their axial coordinates, m): each of ``bins`` equal stretches of their axial
+    extent gives an equal share, or all its returns when it holds fewer (what it leaves goes to
+    the fuller stretches), so a sparse far stretch weighs as much as the dense near wall."""
+    if idx.size <= n:
+        return idx
+    lo, hi = float(u.min()), float(u.max())
+    which = np.minimum(((u - lo) / max(hi - lo, 1e-9) * bins).astype(np.intp), bins - 1)
+    order = np.argsort(which, kind="stable")
+    counts = np.bincount(which, minlength=bins)
+    take = np.zeros(bins, dtype=np.intp)
+    left, sharing = n, int(np.count_nonzero(counts))
+    for b in np.argsort(counts, kind="stable"):  # the sparsest stretches first
+        if counts[b]:
+            take[b] = min(int(counts[b]), left // sharing)
+            left -= int(take[b])
+            sharing -= 1
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    picked = [
+        order[s0 + _subsample(np.arange(c), k)] for s0, c, k in zip(starts, counts, take) if k
+    ]
+    return idx[np.sort(np.concatenate(picked))]
 
 
 def _pct(x: NDArray[np.float64], q: float) -> float:
@@ -807,6 +840,9 @@ def detect_improved(
             redone = _start_recheck(cloud, det, config, diag_pose, *recheck)
             if redone is not None:
                 big_r, det = redone
+            redone = _torus_pose_check(cloud, det, config, diag_pose, *recheck)
+            if redone is not None:
+                big_r, det = redone
         det = _with_ring_holes(cloud, big_r, det, config)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
@@ -1116,6 +1152,54 @@ def _start_recheck(
         return None
     redone.diagnostics["start_recheck"] = True
     return radius, redone
+
+
+def _torus_pose_check(
+    cloud: PipeCloud,
+    det: Detection,
+    cfg: ImprovedConfig,
+    diag_pose: dict[str, Any],
+    pose0: SensorInPipe,
+    xyz0: NDArray[np.float64],
+    big_r: float,
+    wall_until: float,
+) -> tuple[float, Detection] | None:
+    """A long-radius bend whose arc starts a few centimetres ahead fills the view with curved
+    wall: an axis refined on the nearest wall-like returns is a cylinder laid into the arc's
+    start (up to 2 cm off centre), and the torus fitted under it misses its returns by a
+    millimetre where the right pose leaves a tenth of that. When the pose moved from the given
+    one and the bend's torus fits the returns under the given pose at most ``TORUS_POSE_RATIO``
+    times as loosely (rms), the given pose and its detection stand. ``(radius, detection)``
+    then, else ``None`` (the cloud keeps its pose)."""
+    rms = det.diagnostics.get("torus_rms")
+    if det.kind != "bend" or det.diagnostics.get("model") != "torus" or rms is None:
+        return None
+    chosen, xyz_chosen, floor = cloud.pose, cloud.xyz_v, cloud.floor
+    if not _pose_moved(chosen, pose0, big_r):
+        return None
+    cloud.restore(pose0, xyz0)
+    skip = ("axis_", "wall_radius", "tolerance_floor")
+    sub = {k: v for k, v in diag_pose.items() if not k.startswith(skip)}
+    sub["axis_pass"] = 0
+    radius = _wall_radius(cloud, big_r, cfg, wall_until, sub)
+    if floor is not None:
+        n_ok, _, _, wall_rms = _wall_count(cloud, radius, cfg, pose0, wall_until)
+        if n_ok:
+            cloud.floor = _scatter_floor(cfg, sub.get("wall_radius_rms", wall_rms))
+            sub["tolerance_floor"] = cloud.floor
+    redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
+    rms0 = redone.diagnostics.get("torus_rms")
+    if (
+        redone.kind == det.kind
+        and redone.diagnostics.get("model") == "torus"
+        and rms0 is not None
+        and rms0 * TORUS_POSE_RATIO <= rms
+    ):
+        redone.diagnostics["torus_pose_check"] = {"chosen_rms": rms, "given_rms": rms0}
+        return radius, redone
+    cloud.restore(chosen, xyz_chosen)
+    cloud.floor = floor
+    return None
 
 
 def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
@@ -2241,7 +2325,12 @@ def _branches(
     # arc lie within the noise of a mitre's straight axes, its far part does not)
     loose = rms > 2.0 * noise_med or support < TORUS_TRY_SUPPORT * p_all.shape[0]
     if n_l == 1 and not straight_on and loose:
-        tor = _fit_torus(p_all, big_r, big_l, fits[0], c0, c_fin, noise_med)
+        # (fitted on returns spread evenly along the axis: the few returns from the far end of
+        # the arc fix its angle, and an even subsample of all returns holds hardly any of them)
+        arc_cells = np.flatnonzero((lobe_mask | near_inside).reshape(-1))
+        spread = _spread_along_axis(arc_cells, u_all.reshape(-1)[arc_cells], cfg.fit_points)
+        p_fit = np.ascontiguousarray(cloud.points_at(spread))
+        tor = _fit_torus(p_all, big_r, big_l, fits[0], c0, c_fin, noise_med, p_fit)
         if tor is not None:
             xt, rms_t, sup_t, vis = tor
             diag.update(torus_rms=rms_t, torus_support=sup_t, torus_rb=float(xt[4]))
@@ -2527,21 +2616,28 @@ def _fit_torus(
     c0: float,
     c_fin: float,
     noise: float,
+    p_fit: NDArray | None = None,
 ) -> tuple[NDArray, float, int, float] | None:
     """Long-radius bend fit from two bend-radius starts (the second is skipped when the first
-    explains nearly every return within twice their ``noise``, m); returns (x, rms, support,
-    largest arc angle seen)."""
+    explains nearly every return within twice their ``noise``, m) on the returns ``p_fit``
+    (default ``p``); returns (x, rms, support, largest arc angle seen), the last three over
+    the returns ``p``."""
     sub = p[_subsample(np.arange(p.shape[0]), 300)]
     steps = np.vstack([np.zeros(4), np.diag(np.full(4, 1e-6))])  # (5, 4)
     cols = np.array([0, 1, 2, 4])
 
-    def resjac(x: NDArray) -> tuple[NDArray, NDArray]:
-        # residual and forward-difference Jacobian from one batched evaluation
-        dist = _torus_dist_batch(sub, x[cols] + steps)
-        jac = np.empty((sub.shape[0], 5))
-        jac[:, cols] = ((dist[1:] - dist[0]) / 1e-6).T
-        jac[:, 3] = -1.0
-        return dist[0] - x[3], jac
+    def resjac_on(pts: NDArray) -> Callable[[NDArray], tuple[NDArray, NDArray]]:
+        def resjac(x: NDArray) -> tuple[NDArray, NDArray]:
+            # residual and forward-difference Jacobian from one batched evaluation
+            dist = _torus_dist_batch(pts, x[cols] + steps)
+            jac = np.empty((pts.shape[0], 5))
+            jac[:, cols] = ((dist[1:] - dist[0]) / 1e-6).T
+            jac[:, 3] = -1.0
+            return dist[0] - x[3], jac
+
+        return resjac
+
+    resjac = resjac_on(sub)
 
     lower = np.array([-0.5, math.radians(5.0), -10.0, 0.5 * big_r, 0.2 * big_r])
     upper = np.array([3.0, math.radians(175.0), 10.0, 2.0 * big_r, 8.0 * big_r])
@@ -2587,6 +2683,33 @@ def _fit_torus(
     if best is None:
         return None
     x, rms, sup = best
+    if p_fit is not None and p_fit.shape[0] >= 40 and noise <= TORUS_POLISH_MAX_NOISE:
+        # polish on the returns spread along the axis, from the fit found, the pipe's radius
+        # held: the far end of the arc, a few returns of hundreds, fixes the angle (kept when
+        # it lowers the robust cost over them). Not under range noise: there those few far
+        # returns scatter by millimetres, and weighing them as much as the wall near the
+        # sensor adds more scatter to the angle than it takes bias out of it.
+        spread = p_fit[_subsample(np.arange(p_fit.shape[0]), 300)]
+
+        def spread_cost(xx: NDArray) -> float:
+            return tukey_cost(_torus_dist(spread, xx[0], xx[1], xx[2], xx[4]) - xx[3], c_fin)
+
+        x2, _, _ = robust_gauss_newton(
+            None,
+            x,
+            np.full(5, 1e-6),
+            resjac=resjac_on(spread),
+            c=c_fin,
+            iterations=10,
+            prior_sigma=np.array([math.inf, math.inf, math.inf, 1e-9, math.inf]),  # (rho held)
+            prior_mean=x,
+            lower=lower,
+            upper=upper,
+            step_tol=STEP_TOL,
+            cost_tol=COST_TOL,
+        )
+        if spread_cost(x2) < spread_cost(x):
+            x = x2
     res_full = _torus_dist(p, x[0], x[1], x[2], x[4]) - x[3]
     _, ang = _torus_parts(p, x[0], x[1], x[2], x[4])
     ok = np.abs(res_full) < c_fin

@@ -226,3 +226,26 @@ def test_bad_arguments_are_rejected():
         detect("not a scan", 0.1)
     with pytest.raises(ValueError, match="plane"):
         detect_planar(scan, 0.1, plane=5)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n_returns=st.integers(1, 3000),
+    n=st.integers(1, 400),
+    seed=st.integers(0, 2**31 - 1),
+    far_share=st.floats(0.0, 1.0),
+)
+def test_spread_along_axis_keeps_sparse_stretches(n_returns, n, seed, far_share):
+    # a dense near wall and a sparse far stretch: the subsample takes n returns (all when
+    # there are fewer), none twice, and every far return when they are within a fair share
+    from detector.improved import _spread_along_axis
+
+    rng = np.random.default_rng(seed)
+    n_far = int(far_share * 0.05 * n_returns)
+    u = np.concatenate([rng.uniform(0.0, 0.1, n_returns - n_far), rng.uniform(0.3, 0.4, n_far)])
+    idx = np.arange(1000, 1000 + u.size)
+    out = _spread_along_axis(idx, u, n, bins=20)
+    assert np.all(np.diff(out) > 0) and np.isin(out, idx).all()
+    assert out.size == min(n, idx.size)
+    if n_far <= n // 20:  # (within a stretch's fair share: the far returns are all kept)
+        assert (u[out - 1000] >= 0.3).sum() == n_far
