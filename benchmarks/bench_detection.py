@@ -16,7 +16,9 @@ Reproduces the thesis experiments (its table 4.1) and extends them:
   20 % of D and tilt up to 4 deg, thesis 5.3), then a clamped diameter off by up to 2 mm (the
   clamp's encoder error);
 - false alarms on straight pipe;
-- more long bends (three per diameter, from their own draw), whose far arc may be out of sight.
+- more long bends (three per diameter, from their own draw), whose far arc may be out of sight:
+  their figures are also split by whether the returns reach the end of the arc (the angle is
+  in the scan) or not (only a lower bound of it is).
 
 Ground truth is ``PipeNetwork.structures_ahead`` at the true sensor pose. Per kind: the
 classification accuracy (kind and number of ways on both right), mean and max |error| of
@@ -81,6 +83,8 @@ class Record:
     errors: dict[str, list[float]] = field(default_factory=dict)
     options: list[StructureOption] = field(default_factory=list)
     truth: list[StructureOption] = field(default_factory=list)
+    #: a long bend's: do returns reach the end of its arc? (None for other layouts)
+    arc_end_seen: bool | None = None
 
 
 def rot_from_tilt(yaw: float, pitch: float) -> np.ndarray:
@@ -253,6 +257,29 @@ def arc_lead(case: Case) -> float:
     return float(p["radius_factor"] * p["diameter"] * math.tan(0.5 * p["angle"]))
 
 
+#: A long bend's arc counts as seen to its end when returns reach within this of its angle.
+ARC_END_MARGIN = math.radians(0.5)
+
+
+def arc_end_seen(case: Case, dist: float, scan) -> bool | None:
+    """Do the returns of a long bend's scan (sensor centred and aligned, ``dist`` m before the
+    reference point) reach the end of its arc? Short of it, the bend's angle is not in the
+    scan: any larger angle fits the returns as well, and only a lower bound can be read.
+    ``None`` for other layouts."""
+    if case.layout != "long_bend":
+        return None
+    prm = case.params
+    angle, roll = prm["angle"], prm["direction"]
+    rb = prm["radius_factor"] * prm["diameter"]
+    towards = np.array([0.0, math.cos(roll), math.sin(roll)])  # the turn's side
+    centre = np.array([dist - rb * math.tan(0.5 * angle), 0.0, 0.0]) + rb * towards
+    q = scan.points("sensor") - centre
+    if not len(q):
+        return False
+    along = np.arctan2(q[:, 0], -(q @ towards))  # 0 where the arc starts
+    return bool(along.max() >= angle - ARC_END_MARGIN)
+
+
 class Runner:
     def __init__(self, rng: np.random.Generator) -> None:
         self.rng = rng
@@ -292,6 +319,7 @@ class Runner:
             self.n_scans += 1
             true_pose = pose if misalignment is None else pose.compose(misalignment)
             truth = net.structures_ahead(true_pose)
+            seen = arc_end_seen(case, float(dist), scan) if misalignment is None else None
             for method in METHODS:
                 t0 = time.perf_counter()
                 det = detect(scan, case.diameter, method)
@@ -308,6 +336,7 @@ class Runner:
                     errs,
                     det.options if keep else [],
                     truth if keep else [],
+                    seen,
                 )
                 out.append(rec)
         self.records += out
@@ -572,6 +601,10 @@ def long_bend_study(
         for case in cases:
             recs += runner.run_case(case, sensor, distances, f"long bends, {sensor}")
         text.append(overall_table(recs, f"Long bends ({len(cases)} more), {sensor} sensor"))
+        for seen, label in ((True, "returns reach the arc's end"), (False, "the arc's end unseen")):
+            part = [r for r in recs if r.arc_end_seen is seen]
+            n = len(part) // len(METHODS)
+            text.append(overall_table(part, f"Long bends, {sensor} sensor, {label} ({n} scans)"))
         text.append(summarise(recs, f"Long bends ({len(cases)} more), {sensor} sensor, 40-10 cm"))
     return "\n\n".join(text)
 
