@@ -62,7 +62,12 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    unless the two branches fit significantly better. A single lobe is also fitted as a
    long-radius bend (a torus of bend radius ``R_b`` between the two straight pipes, the
    reference point still where the straight axes meet) when the straight axes fit it loosely or
-   leave more than 5 % of its returns out, and the better fit is kept.
+   leave more than 5 % of its returns out, and the better fit is kept. For a noiseless sensor
+   the torus is then polished on returns spread evenly along the axis (the few returns from
+   the far end of the arc fix its angle; an even subsample of all returns holds two or three
+   of them). An arc that starts right ahead fills the view with curved wall, and an axis
+   refined on the nearest wall-like returns is laid into it: when the torus fits the returns
+   twice as closely under the given pose, the given pose stands.
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
    circumference; its option has the clamped diameter. Its side branches are no wider than the
