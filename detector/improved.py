@@ -2330,11 +2330,14 @@ def _branches(
     # arc lie within the noise of a mitre's straight axes, its far part does not)
     loose = rms > 2.0 * noise_med or support < TORUS_TRY_SUPPORT * p_all.shape[0]
     if n_l == 1 and not straight_on and loose:
-        # (fitted on returns spread evenly along the axis: the few returns from the far end of
-        # the arc fix its angle, and an even subsample of all returns holds hardly any of them)
-        arc_cells = np.flatnonzero((lobe_mask | near_inside).reshape(-1))
-        spread = _spread_along_axis(arc_cells, u_all.reshape(-1)[arc_cells], cfg.fit_points)
-        p_fit = np.ascontiguousarray(cloud.points_at(spread))
+        # (polished on returns spread evenly along the axis: the few returns from the far end
+        # of the arc fix its angle, and an even subsample of all returns holds hardly any of
+        # them; not under range noise, see _fit_torus)
+        p_fit = None
+        if noise_med <= TORUS_POLISH_MAX_NOISE:
+            arc_cells = np.flatnonzero((lobe_mask | near_inside).reshape(-1))
+            spread = _spread_along_axis(arc_cells, u_all.reshape(-1)[arc_cells], cfg.fit_points)
+            p_fit = np.ascontiguousarray(cloud.points_at(spread))
         tor = _fit_torus(p_all, big_r, big_l, fits[0], c0, c_fin, noise_med, p_fit)
         if tor is not None:
             xt, rms_t, sup_t, vis = tor
@@ -2623,10 +2626,10 @@ def _fit_torus(
     noise: float,
     p_fit: NDArray | None = None,
 ) -> tuple[NDArray, float, int, float] | None:
-    """Long-radius bend fit from two bend-radius starts (the second is skipped when the first
-    explains nearly every return within twice their ``noise``, m) on the returns ``p_fit``
-    (default ``p``); returns (x, rms, support, largest arc angle seen), the last three over
-    the returns ``p``."""
+    """Long-radius bend fit to the returns ``p`` from two bend-radius starts (the second is
+    skipped when the first explains nearly every return within twice their ``noise``, m),
+    polished on the returns ``p_fit`` when given; returns (x, rms, support, largest arc angle
+    seen), the last three over ``p``."""
     sub = p[_subsample(np.arange(p.shape[0]), 300)]
     steps = np.vstack([np.zeros(4), np.diag(np.full(4, 1e-6))])  # (5, 4)
     cols = np.array([0, 1, 2, 4])
@@ -2688,12 +2691,13 @@ def _fit_torus(
     if best is None:
         return None
     x, rms, sup = best
-    if p_fit is not None and p_fit.shape[0] >= 40 and noise <= TORUS_POLISH_MAX_NOISE:
+    if p_fit is not None and p_fit.shape[0] >= 40:
         # polish on the returns spread along the axis, from the fit found, the pipe's radius
         # held: the far end of the arc, a few returns of hundreds, fixes the angle (kept when
-        # it lowers the robust cost over them). Not under range noise: there those few far
-        # returns scatter by millimetres, and weighing them as much as the wall near the
-        # sensor adds more scatter to the angle than it takes bias out of it.
+        # it lowers the robust cost over them). The caller passes them for a noiseless sensor
+        # only: under range noise those few far returns scatter by millimetres, and weighing
+        # them as much as the wall near the sensor adds more scatter to the angle than it
+        # takes bias out of it.
         spread = p_fit[_subsample(np.arange(p_fit.shape[0]), 300)]
 
         def spread_cost(xx: NDArray) -> float:
