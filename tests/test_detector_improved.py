@@ -238,7 +238,7 @@ def test_bad_arguments_are_rejected():
 def test_spread_along_axis_keeps_sparse_stretches(n_returns, n, seed, far_share):
     # a dense near wall and a sparse far stretch: the subsample takes n returns (all when
     # there are fewer), none twice, and every far return when they are within a fair share
-    from detector.improved import _spread_along_axis
+    from detector.long_bend import _spread_along_axis
 
     rng = np.random.default_rng(seed)
     n_far = int(far_share * 0.05 * n_returns)

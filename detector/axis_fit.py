@@ -1,0 +1,336 @@
+"""The pipe axis and its wall for the improved detector (:mod:`detector.improved`): the axis
+refined by a robust fit of a cylinder to the wall returns, candidate poses compared by the wall
+returns they explain, the pipe's radius measured from its wall, straight pipe told before any
+other fit (every return on the wall), and where the structure starts along the axis.
+
+Lengths in metres, angles in radians.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from detector.detection import Detection
+from detector.grid import label_regions
+from detector.pipe_cloud import (
+    ANNEAL,
+    COST_TOL,
+    STEP_TOL,
+    PipeCloud,
+    _covers,
+    _pct,
+    _subsample,
+    _tolerance_v,
+    _transform,
+)
+from detector.robust import mad_sigma, robust_gauss_newton
+from detector.transforms import SensorInPipe
+
+if TYPE_CHECKING:
+    from detector.improved import ImprovedConfig
+
+
+#: The wall's own radius replaces the clamped one when they differ by more than this, m.
+RADIUS_DEAD_BAND = 0.00025
+
+
+# --------------------------------------------------------------------------- axis refinement
+def _axis_pose(params: NDArray[np.float64], sensor_origin: NDArray[np.float64]) -> SensorInPipe:
+    """Correction pose: pipe frame whose axis passes through (0, y0, z0) with slopes (a, b)."""
+    y0, z0, a, b = (float(v) for v in params)
+    n = math.sqrt(1.0 + a * a + b * b)
+    d0, d1, d2 = 1.0 / n, a / n, b / n
+    # rotation taking the new axis direction d to +x (minimal rotation about d x X)
+    s = math.hypot(d1, d2)
+    if s < 1e-12:
+        rot = np.eye(3)
+    else:
+        k1, k2 = d2 / s, -d1 / s
+        c1 = 1.0 - d0
+        rot = np.array(
+            [
+                [1.0 - c1, -s * k2, s * k1],
+                [s * k2, 1.0 + c1 * (k1 * k1 - 1.0), c1 * k1 * k2],
+                [-s * k1, c1 * k1 * k2, 1.0 + c1 * (k2 * k2 - 1.0)],
+            ]
+        )
+    origin = np.array([0.0, y0, z0])
+    # new coordinates: rot @ (p - origin), shifted along x so the sensor origin is at u = 0
+    pos = -(rot @ origin)
+    pos[0] -= float(rot[0] @ (sensor_origin - origin))
+    return SensorInPipe.trusted(pos, rot)
+
+
+def _cyl_axis_residual(
+    sub: NDArray[np.float64], big_r: float, x: NDArray[np.float64], want_jac: bool
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """Residual (distance to the axis - R) of ``(3, N)`` points for the axis through
+    (0, y0, z0) along (1, a, b), and its analytic Jacobian ``(N, 4)``."""
+    y0, z0, a, b = (float(v) for v in x)
+    n = math.sqrt(1.0 + a * a + b * b)
+    qu = sub[0]
+    qy = sub[1] - y0
+    qz = sub[2] - z0
+    t = (qu + a * qy + b * qz) * (1.0 / n)
+    dist = qu * qu + qy * qy + qz * qz - t * t
+    np.maximum(dist, 1e-18, out=dist)
+    np.sqrt(dist, out=dist)
+    res = dist - big_r
+    if not want_jac:
+        return res, None
+    inv = 1.0 / dist
+    jac = np.empty((4, qu.size))
+    jac[0] = (t * (a / n) - qy) * inv
+    jac[1] = (t * (b / n) - qz) * inv
+    tn = t * (1.0 / n)
+    jac[2] = tn * jac[0]
+    jac[3] = tn * jac[1]
+    return res, jac.T
+
+
+def _refine_axis(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float | None = None
+) -> tuple[SensorInPipe, dict[str, Any]]:
+    """Refine the pipe axis from the wall returns. Without ``u_max`` the nearest 60 % of the
+    wall-like returns are used (a structure ahead is farther away); with it, every wall-like
+    return before ``u_max`` (the start of the structure), which gives the tilt a long lever."""
+    xyz = cloud.xyz_v
+    info: dict[str, Any] = {"axis_points": 0}
+    if xyz.shape[1] < 20:
+        return cloud.pose, info
+    r = cloud.r_v
+    gate = max(0.35 * big_r, 0.01)
+    cand = np.flatnonzero(np.abs(r - big_r) < gate)
+    if cand.size < 20:
+        return cloud.pose, info
+    u = xyz[0, cand]
+    if u_max is None:
+        keep = max(400, int(0.6 * cand.size))
+        if keep < cand.size:
+            cut = float(np.partition(u, keep - 1)[keep - 1])
+            cand = cand[u <= cut]
+    else:
+        cand = cand[u < u_max]
+        if cand.size < 40:
+            return cloud.pose, info
+    sub = np.ascontiguousarray(xyz[:, _subsample(cand, cfg.axis_points)])
+    # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
+    # gentle taper would pass for a tilted wall), so it is held at the prior
+    span = float(_pct(sub[0], 95) - _pct(sub[0], 5))
+    tilt_sigma = cfg.prior_tilt if span >= 0.05 else math.radians(0.05)
+    prior = np.array([cfg.prior_offset, cfg.prior_offset, tilt_sigma, tilt_sigma])
+    info["axis_span"] = span
+    x, res, w = robust_gauss_newton(
+        None,
+        np.zeros(4),
+        np.full(4, 1e-5),
+        c=gate,
+        iterations=10,
+        prior_sigma=prior,
+        c_final=0.004,
+        step_tol=STEP_TOL,
+        anneal=ANNEAL,
+        cost_tol=COST_TOL,
+        resjac=lambda p: _cyl_axis_residual(sub, big_r, p, True),
+    )
+    info.update(
+        axis_points=int((w > 0).sum()),
+        axis_offset=[float(x[0]), float(x[1])],
+        axis_tilt_deg=math.degrees(math.atan(math.hypot(x[2], x[3]))),
+        axis_rms=float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9))),
+    )
+    if not np.all(np.isfinite(x)) or abs(x[0]) > big_r or abs(x[1]) > big_r:
+        return cloud.pose, info
+    if math.hypot(x[2], x[3]) > math.tan(math.radians(8.0)):
+        return cloud.pose, info
+    return _axis_pose(x, cloud.pose.position).compose(cloud.pose), info
+
+
+def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
+    """Do two poses differ by more than 2 % of the radius across or 0.2 deg in tilt?"""
+    lateral = float(np.abs(a.position[1:] - b.position[1:]).max())
+    tilt = float(np.abs(a.rotation[0] - b.rotation[0]).max())
+    return lateral > 0.02 * big_r or tilt > math.radians(0.2)
+
+
+# --------------------------------------------------------------------------- the wall
+def _wall_radius(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float, diag: dict[str, Any]
+) -> float:
+    """The pipe radius (m) the wall returns before ``u_max`` give under the current pose: their
+    median distance from the axis, when at least 100 returns within ``max_radius_correction``
+    (plus their tolerance) of the clamped radius ``big_r`` cover most of the circumference;
+    ``big_r`` otherwise, and when they scatter about it by more than their noise explains (a
+    curved wall: no straight pipe in view). Records ``wall_radius`` and the returns' scatter
+    about it (``wall_radius_rms``, 1.4826 MAD, m) in ``diag``. Corrections below
+    ``RADIUS_DEAD_BAND`` are not made (the clamp reading is as good as the fit there)."""
+    xyz = cloud.xyz_v
+    e = cloud.r_v - big_r
+    sel = (xyz[0] < u_max) & (np.abs(e) <= cfg.max_radius_correction + _tolerance_v(cloud, cfg))
+    n = int(np.count_nonzero(sel))
+    if n < 100:
+        return big_r
+    e_sel = e[sel]
+    de = float(np.median(e_sel))
+    if not RADIUS_DEAD_BAND <= abs(de) <= cfg.max_radius_correction:
+        return big_r
+    if not _covers(xyz, np.flatnonzero(sel), 0.75):
+        return big_r
+    spread = float(mad_sigma(e_sel - de))
+    if spread > _straight_wall_rms(cloud):  # not a straight wall about this axis
+        return big_r
+    diag["wall_radius"] = big_r + de
+    diag["wall_radius_rms"] = spread
+    return big_r + de
+
+
+def _straight_wall_rms(cloud: PipeCloud) -> float:
+    """Largest scatter (m) of wall returns about a straight cylinder that the returns' own
+    noise explains: 4 x their median radial noise, at least 0.6 mm."""
+    return max(4.0 * float(_pct(cloud.sigma_v, 50.0)), 0.0006)
+
+
+def _wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float) -> bool:
+    """Do at least 200 returns lie before ``u_max`` (at least 15 cm) along the axis, all but
+    1 % of them within the wall tolerance under the current pose?"""
+    if u_max < 0.15:  # (a short stretch of wall: the first pass's wider view helps)
+        return False
+    near = cloud.xyz_v[0] < u_max
+    n_near = int(np.count_nonzero(near))
+    if n_near < 200:
+        return False
+    e = cloud.r_v - big_r
+    n_off = int(np.count_nonzero(near & (np.abs(e) > _tolerance_v(cloud, cfg))))
+    return n_off <= 0.01 * n_near
+
+
+def _scatter_floor(cfg: ImprovedConfig, rms: float) -> float:
+    """Tolerance floor (m) for a noiseless wall fitted to ``rms`` (m): six times that
+    scatter, from 0.8 mm up to the configured floor."""
+    return min(cfg.tol_floor, max(0.0008, 6.0 * float(rms)))
+
+
+def _thinned(
+    cloud: PipeCloud, cfg: ImprovedConfig
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Every third valid return (sensor frame, ``(3, n)``) and its wall tolerance (m),
+    computed once per cloud: enough to compare poses by."""
+    if cloud.thin is None:
+        cloud.thin = (
+            np.ascontiguousarray(cloud.sensor_v[:, ::3]),
+            cfg.tol_floor + cfg.noise_k * cloud.sigma_v[::3],
+        )
+    return cloud.thin
+
+
+def _wall_count(
+    cloud: PipeCloud,
+    big_r: float,
+    cfg: ImprovedConfig,
+    pose: SensorInPipe,
+    u_max: float,
+    tol_scale: float = 1.0,
+) -> tuple[int, int, float, float]:
+    """Returns within ``tol_scale`` x the wall tolerance of the radius ``big_r`` under ``pose``,
+    counting those nearer than ``u_max`` along the axis (all of them when fewer than 40 are),
+    how many returns were counted (every third return), their truncated quadratic cost (the
+    sum of ``min((e / tol)^2, 1)`` over them, ``e`` the distance from the wall, ``tol`` the
+    tolerance: a return off the wall costs 1, one on it costs how far in the tolerance it
+    lies), and the rms distance from the wall of those within the tolerance (m)."""
+    sp, tol = _thinned(cloud, cfg)
+    pts = _transform(pose, sp)
+    e = np.sqrt(np.square(pts[1]) + np.square(pts[2])) - big_r
+    near = pts[0] < u_max
+    n_near = int(np.count_nonzero(near))
+    if n_near < 40:
+        near[:] = True
+        n_near = int(near.size)
+    return _wall_fit(e[near], tol_scale * tol[near], n_near)
+
+
+def _wall_fit(
+    e: NDArray[np.float64], tol: NDArray[np.float64], n: int
+) -> tuple[int, int, float, float]:
+    """``(n_ok, n, cost, rms)`` of returns ``e`` off the wall (m) with tolerances ``tol``
+    (m): how many lie within their tolerance, ``n`` (passed through), the truncated quadratic
+    cost ``sum min((e / tol)^2, 1)``, and the rms of ``e`` over those within (m)."""
+    q = np.square(e / tol)
+    ok = q <= 1.0
+    n_ok = int(np.count_nonzero(ok))
+    rms = math.sqrt(float(np.mean(np.square(e[ok])))) if n_ok else math.inf
+    return n_ok, n, float(np.minimum(q, 1.0).sum()), rms
+
+
+def _common_wall_fit(
+    cloud: PipeCloud,
+    big_r: float,
+    cfg: ImprovedConfig,
+    poses: list[SensorInPipe],
+    u_max: float,
+) -> list[tuple[int, int, float, float]]:
+    """For each pose, what :func:`_wall_count` gives, over one set of returns for all: those
+    nearer than ``u_max`` along the axis under every pose (a tilted pose would otherwise count
+    returns the others leave out). Empty when fewer than 40 returns are in that set."""
+    sp, tol = _thinned(cloud, cfg)
+    pts = [_transform(p, sp) for p in poses]
+    near = np.logical_and.reduce([q[0] < u_max for q in pts])
+    n_near = int(np.count_nonzero(near))
+    if n_near < 40:
+        return []
+    return [
+        _wall_fit(np.sqrt(np.square(q[1][near]) + np.square(q[2][near])) - big_r, tol[near], n_near)
+        for q in pts
+    ]
+
+
+def _intact(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, diag: dict[str, Any]
+) -> Detection | None:
+    """Straight pipe when fewer than ``min_anomaly_points`` returns leave the wall tolerance
+    (no region of anomalies can reach that size, so the classification would find nothing
+    else); ``None`` otherwise."""
+    e = cloud.r_v - big_r
+    tol = _tolerance_v(cloud, cfg)
+    if cloud.n < cfg.min_anomaly_points or np.count_nonzero(np.abs(e) > tol) >= (
+        cfg.min_anomaly_points
+    ):
+        return None
+    n_beyond = int(np.count_nonzero(e > tol))
+    n_inside = int(np.count_nonzero(e < -tol))
+    n_wall = cloud.n - n_beyond - n_inside
+    diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
+    diag["sensor_offset_pipe"] = [float(v) for v in cloud.pose.position[1:]]
+    diag.update(n_wall=n_wall, n_beyond=n_beyond, n_inside=n_inside, n_anomaly=0)
+    conf = min(1.0, n_wall / 200.0) * n_wall / cloud.n
+    return Detection.straight(confidence=conf, **diag)
+
+
+def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:
+    """Axial position where the wall stops being intact (first significant anomalies); the
+    horizon when there are none."""
+    xyz = cloud.xyz_v
+    r = cloud.r_v
+    tol = _tolerance_v(cloud, cfg)
+    idx = np.flatnonzero(np.abs(r - big_r) > 2.0 * tol)  # returns off the wall
+    if idx.size < cfg.min_anomaly_points:
+        return cfg.horizon
+    g, k = cloud.shape
+    mask = np.zeros(g * k, dtype=bool)
+    cells = cloud.cell[idx]
+    mask[cells] = True
+    labels, n_lab = label_regions(mask.reshape(g, k), cloud.wraps)
+    lab = labels.reshape(-1)[cells]
+    counts = np.bincount(lab, minlength=n_lab + 1)
+    good = counts >= cfg.min_anomaly_points
+    good[0] = False
+    sel = idx[good[lab]]
+    if not sel.size:
+        return cfg.horizon
+    u = xyz[0][sel]
+    # where the beams of those returns crossed the wall radius (sensor near the axis)
+    uc = u * big_r / np.maximum(r[sel], 1e-9)
+    return float(_pct(np.minimum(u, uc), 1)) - 0.005

@@ -1,0 +1,425 @@
+"""Axisymmetric structures for the improved detector (:mod:`detector.improved`): an end wall
+(closure) or a reducer, whose cone ``r(u)`` is fitted together with the wall just before it,
+and where a widening starts, from its cone's rings of beams.
+
+Lengths in metres, angles in radians.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from detector.detection import Detection
+from detector.options import StructureOption
+from detector.pipe_cloud import (
+    ANNEAL,
+    COST_TOL,
+    STEP_TOL,
+    PipeCloud,
+    _azimuth_coverage,
+    _confidence,
+    _pct,
+    _subsample,
+)
+from detector.robust import mad_sigma, robust_gauss_newton, tukey_weights
+
+if TYPE_CHECKING:
+    from detector.improved import ImprovedConfig
+
+
+#: Returns of a widening this much (m; or three times their noise) short of the wider pipe's
+#: radius lie on its cone, not on the wider pipe.
+CONE_PLATEAU_MARGIN = 0.0015
+#: A line along a widening's cone needs returns rising this much (m; or six times their noise)
+#: from the wall to the wider pipe: two rings of beams, not the spread of one.
+CONE_MIN_RISE = 0.002
+#: The returns of a cone seen by several rings lie on its line to within this much (m, robust
+#: standard deviation across it; or three times their noise).
+CONE_LINE_SCATTER = 0.00015
+#: Returns of a cone are binned this long (m along the axis) to find its first ring of beams
+#: (or the first few, close together near the sensor).
+CONE_FIRST_RING = 0.01
+#: Fewer returns than this off the wall are stray, not a ring of beams on a cone, whose
+#: returns cover this fraction of the azimuth at least.
+CONE_MIN_RETURNS = 6
+CONE_RING_COVERAGE = 0.75
+#: The rings' hinge (:func:`_ring_hinge_start`) looks this far (m) before the first returns off
+#: the wall; a ring rises when its median lies ``HINGE_MIN_SNR`` times its noise and at least
+#: ``HINGE_MIN_RISE`` (m) off the wall.
+HINGE_REACH = 0.15
+HINGE_MIN_SNR = 4.0
+HINGE_MIN_RISE = 0.0005
+
+
+def _axisymmetric(
+    cloud: PipeCloud,
+    big_r: float,
+    inside: NDArray[np.bool_],
+    beyond: NDArray[np.bool_],
+    wall: NDArray[np.bool_],
+    tol: NDArray[np.float64],
+    cfg: ImprovedConfig,
+    diag: dict[str, Any],
+) -> Detection:
+    """End wall (closure) or reducer/expander: the structure is (nearly) axisymmetric."""
+    contraction = bool(inside.sum() >= beyond.sum())
+    anomaly = inside if contraction else beyond
+    if anomaly.sum() < cfg.min_anomaly_points:
+        return Detection.straight(confidence=0.3, **diag)
+    p = cloud.points(anomaly)
+    u = p[:, 0]
+    r = np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2]))
+    tol_med = float(_pct(tol[anomaly], 50.0))
+    # --- closure: a plane perpendicular to the axis, seen down to the centre
+    if contraction:
+        u_med = float(_pct(u, 50.0))
+        tol_u = 0.003 + 2.0 * tol_med
+        on_plane = np.abs(u - u_med) <= tol_u
+        frac_plane = float(on_plane.mean())
+        diag["closure_plane_fraction"] = frac_plane
+        if np.count_nonzero(on_plane) >= cfg.min_anomaly_points:
+            up = u[on_plane]
+            dist = float(np.mean(up))
+            spread = float(np.std(up))
+            cov = _azimuth_coverage(p[on_plane])
+            # a cap is flat: a plane (tilted by any residual axis error) must explain it to
+            # within the range noise, where the far wall of a pipe seen head-on is curved
+            # (an even sample of the wall: a few hundred returns pin a plane and a quadric)
+            on_idx = np.flatnonzero(on_plane)
+            pick = on_idx[_subsample(np.arange(on_idx.size), 2 * cfg.fit_points)]
+            pp = p[pick]
+            uq = pp[:, 0]
+            design = np.stack([np.ones(uq.size), pp[:, 1], pp[:, 2]], axis=1)
+            coef = np.linalg.lstsq(design, uq, rcond=None)[0]
+            plane_rms = float(np.sqrt(np.mean((uq - design @ coef) ** 2)))
+            noise_u = float(_pct(cloud.values(anomaly, cloud.sigma_range_v)[pick], 50.0))
+            # under range noise a curved wall can pass for a plane: a quadratic surface must
+            # not explain it significantly better with a sag of millimetres (a cap's sag is
+            # the quantisation, a pipe's far wall sags by a good part of its radius)
+            quad = np.concatenate([design, (pp[:, 1:, None] * pp[:, None, 1:]).reshape(-1, 4)], 1)
+            coef_q = np.linalg.lstsq(quad, uq, rcond=None)[0]
+            rss_q = float(np.sum((uq - quad @ coef_q) ** 2))
+            rss_p = plane_rms**2 * uq.size
+            lr_curv = uq.size * math.log(max(rss_p, 1e-30) / max(rss_q, 1e-30))
+            sag = float(np.abs(quad[:, 3:] @ coef_q[3:]).max())
+            curved = lr_curv > 25.0 and sag > 0.003
+            flat_plane = plane_rms <= max(3.0 * noise_u, 0.001)
+            flat = flat_plane and not curved
+            diag["closure_curved"] = not flat
+            diag.update(
+                closure_rms=spread,
+                closure_plane_rms=plane_rms,
+                closure_sag=sag,
+                closure_curvature_lr=lr_curv,
+                closure_coverage=cov,
+                axisymmetric_support=1.0 if flat else 0.0,
+            )
+            plane_seen = frac_plane >= 0.8 and float(_pct(r[on_plane], 5)) < 0.5 * big_r
+            if not plane_seen:  # (not a cap seen head-on: only a clear curvature counts)
+                diag["closure_curved"] = curved
+            if plane_seen and spread <= 0.5 * tol_u and flat_plane:
+                conf = _confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
+                opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
+                # (curved only by the quadratic test: an end wall unless the returns show a
+                # turn; the caller decides)
+                diag["closure_tentative"] = not flat
+                return Detection("closure", [opt], conf, diag)
+    # --- reducer: r(u) = R + (R2 - R) clip((u - L) / T, 0, 1)
+    if contraction:
+        u_cross = u
+    else:
+        u_cross = u * big_r / np.maximum(r, 1e-9)  # where the beams crossed the wall radius
+    u_first = float(_pct(u_cross, 1))
+    r2 = _radius_mode(r, r.size)
+    # the start of a taper is one kink in r(u): it needs a denser sample than the other fits
+    sub = _subsample(np.arange(u.size), 2 * cfg.fit_points)
+    us, rs = u[sub], r[sub]
+    n_lead = 0
+    if contraction:
+        # the wall just before the first returns off it: a gentle taper leaves the wall
+        # tolerance only some way past its start, and the kink needs both sides
+        pw = cloud.points(wall)
+        lead = np.flatnonzero((pw[:, 0] > u_first - 0.15) & (pw[:, 0] < u_first))
+        lead = lead[_subsample(np.arange(lead.size), cfg.fit_points // 2)]
+        n_lead = int(lead.size)
+        us = np.concatenate([us, pw[lead, 0]])
+        rs = np.concatenate([rs, np.hypot(pw[lead, 1], pw[lead, 2])])
+    t0 = max(0.01, float(_pct(u, 30)) - u_first)
+
+    def resjac(x: NDArray) -> tuple[NDArray, NDArray]:
+        big_l, t_len, rr2 = x
+        t_len = max(t_len, 1e-4)
+        raw = (us - big_l) / t_len
+        frac = np.clip(raw, 0.0, 1.0)
+        ramp = (raw > 0.0) & (raw < 1.0)
+        jac = np.empty((us.size, 3))
+        jac[:, 0] = np.where(ramp, (rr2 - big_r) / t_len, 0.0)
+        jac[:, 1] = np.where(ramp, (rr2 - big_r) * raw / t_len, 0.0)
+        jac[:, 2] = -frac
+        return rs - (big_r + (rr2 - big_r) * frac), jac
+
+    c_fin = max(2.0 * tol_med, 0.002)
+    x, res, w = robust_gauss_newton(
+        None,
+        np.array([u_first, t0, r2]),
+        np.array([1e-4, 1e-4, 1e-5]),
+        c=max(4.0 * c_fin, 0.01),
+        iterations=10,
+        resjac=resjac,
+        # a widening starts where the beams leave the incoming pipe: its end edge is seen
+        # directly, the cone behind it mostly not
+        lower=np.array([-0.2 if contraction else u_first, 0.002, 0.0]),
+        upper=np.array([cfg.horizon if contraction else u_first, 1.0, 3.0 * big_r]),
+        c_final=c_fin,
+        step_tol=STEP_TOL,
+        anneal=ANNEAL,
+        cost_tol=COST_TOL,
+    )
+    if contraction:
+        # an end wall far down the narrower pipe, seen through it, is no part of the taper:
+        # its returns pull the plateau of the fit down (too narrow, the taper too long), all
+        # the way onto the end wall when grazing beams lose the narrower pipe's own wall.
+        # Without them, the taper ends where its returns end; the end wall, filling the
+        # narrower pipe's cross-section, still bounds its radius from below.
+        u_far = _pct(u, 97.0)
+        # (under range noise the end wall's returns spread along the axis by their range
+        # noise: a metre away, a centimetre and more either side)
+        sig_range = cloud.values(anomaly, cloud.sigma_range_v)
+        near_far = np.abs(u - u_far) <= 0.003 + 2.0 * tol_med
+        spread_u = 3.0 * float(_pct(sig_range[near_far], 50.0)) if near_far.any() else 0.0
+        window = 0.003 + 2.0 * tol_med + spread_u
+        far = np.abs(u - u_far) <= window
+        n_far = int(np.count_nonzero(far))
+        far_s = np.concatenate([far[sub], np.zeros(n_lead, dtype=bool)])
+        if (
+            30 <= n_far <= 0.9 * u.size
+            and float(_pct(r[far], 5)) < 0.3 * big_r
+            and np.count_nonzero(~far_s) >= 50
+            # (returns spread along a taper, not mostly on one wall: the far wall of a turn)
+            and diag.get("closure_plane_fraction", 0.0) < 0.8
+        ):
+            # (the end wall lies inside the incoming pipe; the outermost of its returns,
+            # beams along the narrower pipe's wall, bound that pipe's radius from below)
+            r_end = float(_pct(r[far], 98.0))
+            if float(_pct(r[far], 90.0)) < big_r - tol_med:
+                us, rs = us[~far_s], rs[~far_s]
+                # (started from the farthest returns left, on the narrower pipe: the first fit,
+                # pulled onto the end wall, can hold the plateau at the end wall's bound)
+                u_rest, r_rest = u[~far], r[~far]
+                r2_far = float(_pct(r_rest[u_rest >= _pct(u_rest, 90.0)], 50.0))
+                x, res, w = robust_gauss_newton(
+                    None,
+                    np.array([x[0], x[1], min(max(r2_far, r_end), big_r)]),
+                    np.array([1e-4, 1e-4, 1e-5]),
+                    c=max(4.0 * c_fin, 0.01),
+                    iterations=10,
+                    resjac=resjac,
+                    lower=np.array([-0.2, 0.002, r_end]),
+                    upper=np.array([cfg.horizon, 1.0, big_r]),
+                    c_final=c_fin,
+                    step_tol=STEP_TOL,
+                    anneal=ANNEAL,
+                    cost_tol=COST_TOL,
+                )
+                diag["reducer_end_wall_radius"] = r_end
+    support = float((w > 0.1).mean())
+    rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
+    big_l, t_len, r2 = (float(v) for v in x)
+    if not contraction:
+        big_l, along = _widening_start(cloud, big_r, r2, u_first, big_l)
+        diag["widening_start_from_cone"] = bool(along)
+    diag.update(reducer_r2=r2, reducer_taper=t_len, reducer_rms=rms, axisymmetric_support=support)
+    cov = _azimuth_coverage(p)
+    if not (math.isfinite(big_l) and math.isfinite(r2)):
+        return Detection.straight(confidence=0.0, **diag)
+    if r2 < 0.25 * big_r:
+        # the pipe closes (a cap seen obliquely, or a cone to nothing): a closure at its start;
+        # not when the end wall was found curved (the far wall of a pipe seen head-on)
+        if diag.get("closure_curved", False):
+            diag["axisymmetric_support"] = 0.0
+            return Detection.straight(confidence=0.0, **diag)
+        conf = 0.5 * _confidence(int(w.sum()), rms, c_fin) * cov
+        opt = StructureOption("closure", max(big_l, 0.0), 0.0, 0.0, 0.0, conf)
+        return Detection("closure", [opt], conf, diag)
+    conf = _confidence(int((w > 0.1).sum()), rms, c_fin) * cov * min(1.0, support / 0.6)
+    opt = StructureOption("reducer", max(big_l, 0.0), 2.0 * r2, 0.0, 0.0, conf)
+    return Detection("reducer", [opt], conf, diag)
+
+
+def _widening_start(
+    cloud: PipeCloud, big_r: float, r2: float, u_first: float, default: float
+) -> tuple[float, bool]:
+    """Start of a widening (m along the axis) to radius ``r2`` and whether its cone was seen
+    by two or more rings of beams.
+
+    ``u_first``: where the first beams that reach the wider pipe crossed the wall radius
+    ``big_r``. The start lies between the last beams on the wall and the first past it. The
+    cone's returns (off the wall by more than their noise, short of ``r2``):
+
+    - rising over two or more rings of beams, their line reaches the wall radius at the start;
+    - from one ring ``(u_c, r_c)``, its slope is unknown, but the cone through it must reach
+      the wider pipe (``r2`` less a margin for the returns counted on it) before the first
+      returns on the wider pipe (at ``u_f``): ``L >= (k u_c - u_f) / (k - 1)`` with
+      ``k = (r2 - margin - R) / (r_c - R)``.
+
+    Without a line, the middle of the interval left is the estimate. ``default`` when no wall
+    is in view before it.
+    """
+    xyz, sig = cloud.xyz_v, cloud.sigma_v
+    u = xyz[0]
+    e = cloud.r_v - big_r
+    noise = float(_pct(sig, 50.0))
+    rise = r2 - big_r
+    margin = max(3.0 * noise, CONE_PLATEAU_MARGIN)
+    plateau = e >= rise - margin
+    u_f = float(_pct(u[plateau], 1.0)) if np.any(plateau) else u_first * r2 / big_r
+    off_wall = np.maximum(0.00035, 4.0 * sig)
+    on = (np.abs(e) <= off_wall) & (u < u_f)
+    cone = (e > off_wall) & ~plateau & (u > min(u_first, u_f) - 0.1) & (u < u_f)
+    # (rings all round: part rings off the wall on one side are a slightly tilted axis)
+    cone[cone] = _full_rings(xyz[:, cone])
+    n_cone = int(np.count_nonzero(cone))
+    uc, ec = u[cone], e[cone]
+    if n_cone >= 20 and float(_pct(ec, 95) - _pct(ec, 5)) > max(6.0 * noise, CONE_MIN_RISE):
+        # (near its start the cone lies within the noise of the wall: the line alone places
+        # the start, bounded by the beams' crossings)
+        a_u, b_u = _robust_line(ec, uc)  # u = a + b e: the start at e = 0
+        # (a cone: returns on one line to within their noise)
+        if math.isfinite(a_u) and b_u > 0.0:
+            scatter = mad_sigma(ec - (uc - a_u) / b_u)
+            if scatter <= max(3.0 * noise, CONE_LINE_SCATTER):
+                return min(u_first, max(u_first - 0.1, a_u)), True
+    # (under range noise the first centimetres of the cone, per return, are the wall's: the
+    # rings' medians are not)
+    hinge = _ring_hinge_start(xyz, e, noise, u_first, u_f, rise - margin)
+    if hinge is not None:
+        return hinge, True
+    hi = min(u_first, u_f)
+    if n_cone:
+        first = uc <= uc.min() + CONE_FIRST_RING
+        hi = min(hi, float(uc.min()))
+    before = on & (u < hi)
+    if not np.any(before):
+        return default, False
+    lo = float(u[before].max())
+    if n_cone:
+        u_c, e_c = float(np.median(uc[first])), float(np.median(ec[first]))
+        k = (rise - margin) / max(e_c, 1e-6)
+        if k > 1.0:
+            lo = max(lo, (k * u_c - u_f) / (k - 1.0))
+    return (0.5 * (lo + hi) if lo <= hi else hi), False
+
+
+def _ring_hinge_start(
+    xyz: NDArray[np.float64],
+    e: NDArray[np.float64],
+    noise: float,
+    u_first: float,
+    u_f: float,
+    e_max: float,
+) -> float | None:
+    """Start of a widening (m along the axis) from the rings of beams before the wider pipe,
+    each ring's median offset from the wall radius (``e``, m) against its position: flat on
+    the wall, then rising along the cone. The kink of that hinge is the start, when at least
+    two rings rise past it by more than their noise and at least one lies flat before it;
+    ``None`` otherwise. Per return, the first centimetres of a gentle cone lie within a few
+    times the range noise of the wall; the median of a ring of a hundred returns does not.
+
+    ``u_first``: where the first returns off the wall crossed the wall radius (the start lies
+    before it); ``u_f``: where the wider pipe's returns begin; ``e_max``: offsets beyond this
+    are on the wider pipe, not the cone; ``noise``: the returns' median radial noise, m."""
+    u = xyz[0]
+    win = (u > u_first - HINGE_REACH) & (u < u_f) & (e < e_max) & (e > -4.0 * noise - 0.00035)
+    if np.count_nonzero(win) < 4 * CONE_MIN_RETURNS:
+        return None
+    p, ew = xyz[:, win], e[win]
+    rings = _rings(p)
+    if len(rings) < 4:
+        return None
+    ua = np.array([float(np.median(p[0, sel])) for sel in rings])
+    ea = np.array([float(np.median(ew[sel])) for sel in rings])
+    na = np.array([float(np.count_nonzero(sel)) for sel in rings])
+    # (the median of n returns scatters by about 1.25 noise / sqrt(n))
+    sig_b = 1.25 * max(noise, 1e-5) / np.sqrt(na)
+    wts = 1.0 / np.square(sig_b)
+    # the hinge's kink on a 1 mm grid: for each, the weighted least-squares slope of the rings
+    # past it, and the misfit (a kink no ring rises past, or that falls, is no hinge)
+    grid = np.arange(float(ua.min()), min(u_first, float(ua.max())), 0.001)
+    if grid.size == 0:
+        return None
+    x = np.maximum(ua[None, :] - grid[:, None], 0.0)  # (G, rings)
+    sxx = np.sum(wts * x * x, axis=1)
+    b = np.sum(wts * x * ea, axis=1) / np.where(sxx > 0.0, sxx, 1.0)
+    chi2 = np.sum(wts * np.square(ea - b[:, None] * x), axis=1)
+    chi2 = np.where((sxx > 0.0) & (b > 0.0), chi2, np.inf)
+    j = int(np.argmin(chi2))
+    if not math.isfinite(float(chi2[j])):
+        return None
+    big_l, b = float(grid[j]), float(b[j])
+    rising = (ua > big_l) & (b * (ua - big_l) > np.maximum(HINGE_MIN_SNR * sig_b, HINGE_MIN_RISE))
+    # (two rings at least, a ring on the wall before: one ring split between two bins makes
+    # no slope)
+    if not rising.any() or np.ptp(ua[rising]) < CONE_FIRST_RING or not np.any(ua < big_l):
+        return None
+    return big_l
+
+
+def _rings(p: NDArray[np.float64]) -> list[NDArray[np.bool_]]:
+    """The ``(3, n)`` returns in each ``CONE_FIRST_RING`` long stretch of the axis that holds at
+    least ``CONE_MIN_RETURNS`` of them covering at least ``CONE_RING_COVERAGE`` of the azimuth
+    (a ring of beams all round, not a stray return or part of a ring), nearest first: one mask
+    per ring."""
+    if p.shape[1] < CONE_MIN_RETURNS:
+        return []
+    bins = np.floor((p[0] - p[0].min()) / CONE_FIRST_RING).astype(np.int64)
+    counts = np.bincount(bins)
+    out = []
+    for k in np.flatnonzero(counts >= CONE_MIN_RETURNS):
+        sel = bins == k
+        if _azimuth_coverage(p[:, sel].T) >= CONE_RING_COVERAGE:
+            out.append(sel)
+    return out
+
+
+def _full_rings(p: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which of the ``(3, n)`` returns lie in a ring of beams all round (:func:`_rings`)."""
+    keep = np.zeros(p.shape[1], dtype=bool)
+    for sel in _rings(p):
+        keep |= sel
+    return keep
+
+
+def _radius_mode(r: NDArray, n: int) -> float:
+    """Most frequent radius: 1 mm histogram peak refined by the median of its neighbourhood."""
+    bins = np.floor(r / 0.001).astype(np.int64)
+    lo = int(bins.min())
+    cnt = np.bincount(bins - lo)
+    smooth = np.convolve(cnt, np.ones(3), mode="same")
+    peak = (int(np.argmax(smooth)) + lo + 0.5) * 0.001
+    near = np.abs(r - peak) <= 0.002
+    return float(_pct(r[near], 50.0)) if near.any() else float(peak)
+
+
+def _robust_line(x: NDArray, y: NDArray) -> tuple[float, float]:
+    """Robust fit ``y = a + b x`` (Tukey IRLS)."""
+    w = np.ones_like(x)
+    a, b = float(_pct(y, 50.0)), 0.0
+    for _ in range(6):
+        sw = w.sum()
+        if sw <= 0:
+            break
+        xm = float((w * x).sum() / sw)
+        ym = float((w * y).sum() / sw)
+        sxx = float((w * (x - xm) ** 2).sum())
+        if sxx <= 1e-18:
+            break
+        b = float((w * (x - xm) * (y - ym)).sum() / sxx)
+        a = ym - b * xm
+        res = y - (a + b * x)
+        s = max(mad_sigma(res), 1e-4)
+        w = tukey_weights(res, 4.685 * s)
+    return a, b

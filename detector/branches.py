@@ -1,0 +1,874 @@
+"""Openings and outgoing pipes for the improved detector (:mod:`detector.improved`): lobes
+(regions of returns beyond the wall), outgoing cylinders fitted to them (bends and junctions,
+a pipe across, the standard angles of fittings, the holes a run's side branches cut in its
+wall, whether the run goes on straight), and a single way on tried as a long-radius bend
+(:mod:`detector.long_bend`).
+
+Lengths in metres, angles in radians.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from detector.detection import Detection
+from detector.grid import label_regions
+from detector.long_bend import _fit_torus, _spread_along_axis
+from detector.options import StructureOption, option_order
+from detector.pipe_cloud import (
+    ANNEAL,
+    COST_TOL,
+    STEP_TOL,
+    PipeCloud,
+    _azimuth_coverage,
+    _confidence,
+    _dir,
+    _pct,
+    _region_stats,
+    _subsample,
+)
+from detector.robust import robust_gauss_newton, tukey_cost, tukey_weights
+from detector.transforms import option_direction
+
+if TYPE_CHECKING:
+    from detector.improved import ImprovedConfig
+
+
+#: A region of returns beyond the wall covering this fraction of the azimuth goes all round.
+ALL_ROUND = 0.75
+#: Deflections of standard branch fittings (tees and crosses, laterals either way), rad; a
+#: junction's branch fitted within ``SNAP_WITHIN`` of one is held at it when the returns allow
+#: (likelihood ratio at most ``SNAP_LR`` per branch) and it turns by at most
+#: ``SNAP_MAX_TURN`` about the run; a radius held with it may move by ``SNAP_RADIUS`` of itself.
+#: (A small branch's opening seen along the run from 20 cm under range noise is a few dozen
+#: returns that a deflection 10-15 deg off fits as well: the returns, not the distance from
+#: the standard angle, decide.)
+STANDARD_BRANCH_ANGLES = np.radians([45.0, 90.0, 135.0])
+SNAP_WITHIN = math.radians(25.0)
+SNAP_LR = 6.0
+SNAP_MAX_TURN = math.radians(3.0)
+SNAP_RADIUS = 0.03
+#: A single way on whose straight-axes fit leaves out more than this fraction of its returns
+#: is also tried as a long-radius bend (as one that fits them loosely is).
+TORUS_TRY_SUPPORT = 0.95
+#: A long bend's angle is polished on returns spread along its arc only when their range noise
+#: (median, plus 0.3 mm) is below this, m (a noiseless sensor's range resolution).
+TORUS_POLISH_MAX_NOISE = 0.001
+
+
+# --------------------------------------------------------------------------- lobes
+@dataclass
+class Lobe:
+    mask: NDArray[np.bool_]
+    roll: float
+    n: int
+
+
+def _find_lobes(
+    cloud: PipeCloud,
+    beyond: NDArray[np.bool_],
+    big_r: float,
+    cfg: ImprovedConfig,
+    labelled: tuple[NDArray[np.int32], int] | None = None,
+) -> list[Lobe]:
+    """Openings: regions of returns beyond the wall (``labelled``: their regions, when known)."""
+    labels, n_lab = label_regions(beyond, cloud.wraps) if labelled is None else labelled
+    if n_lab == 0:
+        return []
+    lobes: list[Lobe] = []
+    counts, row_span = _region_stats(labels, n_lab)
+    cand = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
+    regions = [(labels == k, int(counts[k])) for k in cand[cand > 0].tolist()]
+    regions = [part for m, n in regions for part in _split_all_round(cloud, m, n, big_r, cfg)]
+    for m, n in regions:
+        p = cloud.points(m)
+        depth = float(_pct(np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2])), 90)) - big_r
+        floor = cfg.tol_floor if cloud.floor is None else cloud.floor
+        if depth < max(3.0 * floor, 0.1 * big_r):
+            continue  # a shallow sliver (seam leaks, noise), not an opening
+        roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
+        lobes.append(Lobe(m, roll, n))
+    # merge lobes within 45 deg of roll (an opening split by dropouts)
+    lobes.sort(key=lambda lb: -lb.n)
+    merged: list[Lobe] = []
+    for lb in lobes:
+        for mg in merged:
+            if abs(_wrap(lb.roll - mg.roll)) < math.radians(45.0):
+                mg.mask = mg.mask | lb.mask
+                p = cloud.points(mg.mask)
+                mg.roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
+                mg.n += lb.n
+                break
+        else:
+            merged.append(Lobe(lb.mask.copy(), lb.roll, lb.n))
+    # a lobe must be a real opening, not a sliver: compare with the largest
+    if merged:
+        biggest = max(m.n for m in merged)
+        merged = [m for m in merged if m.n >= max(cfg.min_lobe_points, 0.05 * biggest)]
+    return merged
+
+
+def _split_all_round(
+    cloud: PipeCloud, mask: NDArray[np.bool_], n: int, big_r: float, cfg: ImprovedConfig
+) -> list[tuple[NDArray[np.bool_], int]]:
+    """A region of returns beyond the wall that goes all round the axis, split into its deep
+    parts when there are two or more: entering a wider run from a tee's stem, the run's wall
+    lies a step beyond the stem's all round and joins the two ways on into one region; only
+    along the run do the returns reach deep (beyond half the region's 90th-percentile depth).
+    Otherwise the region as it is (``(mask, n)``)."""
+    p = cloud.points(mask)
+    if _azimuth_coverage(p) < ALL_ROUND:
+        return [(mask, n)]
+    depth = np.hypot(cloud.xyz[1][mask], cloud.xyz[2][mask]) - big_r
+    deep = np.zeros_like(mask)
+    deep[mask] = depth > 0.5 * float(_pct(depth, 90.0))
+    labels, n_lab = label_regions(deep, cloud.wraps)
+    if n_lab < 2:
+        return [(mask, n)]
+    counts, row_span = _region_stats(labels, n_lab)
+    parts = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
+    parts = parts[parts > 0]
+    if parts.size < 2:
+        return [(mask, n)]
+    return [(labels == k, int(counts[k])) for k in parts.tolist()]
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+# --------------------------------------------------------------------------- outgoing pipes
+@dataclass
+class BranchFit:
+    theta: float
+    phi: float
+    rho: float
+    rb: float = 0.0
+
+
+def _line_points(p: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """(x, y, z, y^2 + z^2) of ``(N, 3)`` points as contiguous arrays, for :func:`_line_resjac`."""
+    px, py, pz = (np.ascontiguousarray(p[:, k]) for k in range(3))
+    return px, py, pz, py * py + pz * pz
+
+
+def _line_resjac(
+    pts: tuple[NDArray, NDArray, NDArray, NDArray], x: NDArray, n_l: int, want_jac: bool
+) -> tuple[NDArray, NDArray | None]:
+    """Residuals of points (:func:`_line_points`) to the nearest of ``n_l`` outgoing cylinders
+    whose axes meet the incoming axis at ``(x[0], 0, 0)``; parameters per lobe:
+    (theta, phi, rho)."""
+    px, py, pz, r2 = pts
+    qx = px - x[0]
+    qq = qx * qx + r2
+    if n_l == 1:
+        th, ph, rho = float(x[1]), float(x[2]), float(x[3])
+        ct, st, cp, sp = math.cos(th), math.sin(th), math.cos(ph), math.sin(ph)
+        lat = py * cp + pz * sp
+        t = ct * qx + st * lat
+        dist = qq - t * t
+        np.maximum(dist, 1e-18, out=dist)
+        np.sqrt(dist, out=dist)
+        res = dist - rho
+        if not want_jac:
+            return res, None
+        g = t / dist
+        jac = np.empty((4, px.size))
+        jac[0] = ct * g - qx / dist
+        jac[1] = (st * qx - ct * lat) * g
+        jac[2] = (py * sp - pz * cp) * (st * g)
+        jac[3] = -1.0
+        return res, jac.T
+    th, ph, rho = x[1::3], x[2::3], x[3::3]
+    ct, st, cp, sp = np.cos(th), np.sin(th), np.cos(ph), np.sin(ph)
+    lat_all = cp[:, None] * py + sp[:, None] * pz  # (n_l, N)
+    t_all = ct[:, None] * qx + st[:, None] * lat_all
+    dist_all = qq - t_all * t_all
+    np.maximum(dist_all, 1e-18, out=dist_all)
+    np.sqrt(dist_all, out=dist_all)
+    res_all = dist_all - rho[:, None]
+    arg = np.argmin(np.abs(res_all), axis=0)  # each return on its nearest cylinder
+    cols = np.arange(px.size)
+    best = res_all[arg, cols]
+    if not want_jac:
+        return best, None
+    t, dist, lat = t_all[arg, cols], dist_all[arg, cols], lat_all[arg, cols]
+    ctk, stk, cpk, spk = ct[arg], st[arg], cp[arg], sp[arg]
+    g = t / dist
+    jac = np.zeros((px.size, 1 + 3 * n_l))
+    jac[:, 0] = ctk * g - qx / dist
+    k = 1 + 3 * arg
+    jac[cols, k] = (stk * qx - ctk * lat) * g
+    jac[cols, k + 1] = (py * spk - pz * cpk) * (stk * g)
+    jac[cols, k + 2] = -1.0
+    return best, jac
+
+
+def _own_branch_resjac(
+    pts: tuple[NDArray, NDArray, NDArray, NDArray], labels: NDArray[np.intp], n_l: int
+) -> Callable[[NDArray], tuple[NDArray, NDArray]]:
+    """Residuals and Jacobian (as :func:`_line_resjac`) of the returns to the outgoing cylinder
+    of their own lobe: ``labels[i]`` (in ``0 .. n_l - 1``) is the lobe of return ``i``."""
+    groups = [np.flatnonzero(labels == k) for k in range(n_l)]
+    sub = [tuple(np.ascontiguousarray(a[g]) for a in pts) for g in groups]
+    n = labels.size
+
+    def resjac(v: NDArray) -> tuple[NDArray, NDArray]:
+        res = np.empty(n)
+        jac = np.zeros((n, v.size))
+        for k, (g, pk) in enumerate(zip(groups, sub)):
+            vk = np.concatenate([v[:1], v[1 + 3 * k : 4 + 3 * k]])
+            r, jk = _line_resjac(pk, vk, 1, True)
+            res[g] = r
+            jac[g, 0] = jk[:, 0]
+            jac[g, 1 + 3 * k : 4 + 3 * k] = jk[:, 1:]
+        return res, jac
+
+    return resjac
+
+
+def _fit_axes(
+    pts: NDArray[np.float64],
+    x0: NDArray[np.float64],
+    n: int,
+    lower: NDArray[np.float64],
+    upper: NDArray[np.float64],
+    c: float,
+    c_final: float,
+    iterations: int = 8,
+    own: Callable[[NDArray], tuple[NDArray, NDArray]] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Robust fit of ``n`` outgoing pipes (``[L, theta, phi, rho] x n``, the reference point
+    shared) to the returns ``pts`` from ``x0`` within the bounds: Tukey cut-off shrinking from
+    ``c`` to ``c_final`` (m). Each return is fitted to the nearest pipe, or with ``own`` (from
+    :func:`_own_branch_resjac` on the same returns) to its own. Returns ``(x, residuals,
+    weights)``."""
+    if own is not None:
+        resjac = own
+    else:
+
+        def resjac(v: NDArray) -> tuple[NDArray, NDArray]:
+            return _line_resjac(pts, v, n, True)
+
+    return robust_gauss_newton(
+        None,
+        x0,
+        np.full(x0.size, 1e-5),
+        c=c,
+        iterations=iterations,
+        lower=lower,
+        upper=upper,
+        c_final=c_final,
+        step_tol=STEP_TOL,
+        anneal=ANNEAL,
+        cost_tol=COST_TOL,
+        resjac=resjac,
+    )
+
+
+def _branches(
+    cloud: PipeCloud,
+    big_r: float,
+    lobes: list[Lobe],
+    keep: NDArray[np.bool_],
+    wall: NDArray[np.bool_],
+    tol: NDArray[np.float64],
+    cfg: ImprovedConfig,
+    diag: dict[str, Any],
+    any_roll: bool = False,
+) -> Detection:
+    """Bends and junctions: one outgoing pipe per lobe (``any_roll``: the lobe's roll is
+    unknown and searched too)."""
+    lobes = _nearest_structure_lobes(cloud, lobes, big_r, diag)
+    # returns of the outgoing pipes: the lobes, and the inner returns near them (the far wall
+    # of a turn seen head-on), not far end walls of a run that goes on
+    lobe_mask = np.zeros_like(keep)
+    for lb in lobes:
+        lobe_mask |= lb.mask
+    u_all = cloud.xyz[0]
+    u_hi = float(_pct(u_all[lobe_mask], 95)) + 2.0 * big_r if lobe_mask.any() else 0.0
+    near_inside = keep & ~lobe_mask & (u_all <= u_hi)
+    lobe_sub = [
+        _subsample(np.flatnonzero(lb.mask.reshape(-1)), cfg.fit_points // 2) for lb in lobes
+    ]
+    lobe_idx = np.concatenate(lobe_sub)
+    near_idx = _subsample(np.flatnonzero(near_inside.reshape(-1)), cfg.fit_points // 2)
+    sub_idx = np.concatenate([lobe_idx, near_idx])
+    if any_roll:
+        sub_idx = _subsample(np.flatnonzero(keep.reshape(-1)), cfg.fit_points)
+    p_all = np.ascontiguousarray(cloud.points_at(sub_idx))
+    pts_all = _line_points(p_all)
+    tol_med = float(_pct(tol.reshape(-1)[sub_idx], 50.0))
+    noise_med = float(_pct(cloud.sigma_r.reshape(-1)[sub_idx], 50.0)) + 0.3e-3
+    lobe_pts = []
+    u_edge = math.inf
+    for lb in lobes:
+        lp = cloud.points(lb.mask)
+        lp = lp[_subsample(np.arange(lp.shape[0]), 200)]
+        lobe_pts.append(lp)
+        # where the beams left the incoming cylinder (sensor near the axis)
+        rr = np.sqrt(np.square(lp[:, 1]) + np.square(lp[:, 2]))
+        uc = lp[:, 0] * big_r / np.maximum(rr, 1e-9)
+        u_edge = min(u_edge, float(_pct(uc, 1)))
+    # --- does the incoming pipe go on? Then this is a junction seen along its run: every
+    # lobe is a side branch of a standard fitting (tee 90 deg, wye 45 deg), no wider than
+    # the run
+    straight_on, cov_on = _straight_on(cloud, big_r, u_edge + big_r, wall, cfg)
+    diag["straight_on_coverage"] = cov_on
+    # --- coarse grid per lobe over (L, theta) with the lobe's roll and radius R
+    # one way on and no run going on: a bend, deflecting up to 90 deg (wye branches at 135 deg
+    # come with a second way)
+    bend_only = len(lobes) == 1 and not straight_on
+    thetas = np.radians(np.arange(30.0, 101.0 if bend_only else 151.0, 7.5))
+    l_grid = u_edge + np.linspace(0.0, 3.0 * big_r, 13)
+    if any_roll:
+        # the far wall of a turn lies past the turn's reference point
+        u_near = min(float(lp[:, 0].min()) for lp in lobe_pts)
+        l_grid = u_near + np.linspace(-4.0 * big_r, 0.0, 13)
+    c0 = max(6.0 * tol_med, 0.006)
+    total = np.zeros(l_grid.size)
+    per_lobe = []
+    rolls_of = []
+    for lb, lp in zip(lobes, lobe_pts):
+        rolls = np.radians(np.arange(0.0, 360.0, 20.0)) if any_roll else np.array([lb.roll])
+        rolls_of.append(rolls)
+        st = np.sin(thetas)
+        dirs = np.stack(
+            [
+                np.tile(np.cos(thetas), rolls.size),
+                (np.cos(rolls)[:, None] * st).reshape(-1),
+                (np.sin(rolls)[:, None] * st).reshape(-1),
+            ]
+        )  # (3, RT)
+        lq = lp[_subsample(np.arange(lp.shape[0]), 50 if any_roll else 60)]
+        qx = lq[None, :, 0] - l_grid[:, None]  # (L, n)
+        qq = qx * qx + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]
+        lat = lq[:, 1:] @ dirs[1:]  # (n, RT)
+        t = qx[:, :, None] * dirs[0] + lat[None]  # (L, n, RT)
+        # squared residual to the wall, capped (in place: these arrays are the largest here)
+        sq = t * t
+        np.subtract(qq[..., None], sq, out=sq)
+        np.maximum(sq, 0.0, out=sq)
+        np.sqrt(sq, out=sq)
+        sq -= big_r
+        np.square(sq, out=sq)
+        np.minimum(sq, c0 * c0, out=sq)
+        # the sensor sees every wall from inside its pipe: the wall normal (away from the
+        # axis) must not face the sensor; a cylinder behind the returns (the same patch
+        # seen from outside) is penalised like an outlier
+        qp = qx * lq[None, :, 0] + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]  # q . p
+        dp = lq[:, 0:1] * dirs[0] + lat  # (n, RT): d . p
+        t *= dp[None]
+        np.subtract(qp[..., None], t, out=t)
+        np.copyto(sq, c0 * c0, where=t < 0.0)
+        cost = sq.mean(axis=1)  # (L, RT)
+        per_lobe.append(cost)
+        total += cost.min(axis=1)
+    i_l = int(np.argmin(total))
+    x0 = [float(l_grid[i_l])]
+    for rolls, cost in zip(rolls_of, per_lobe):
+        k = int(np.argmin(cost[i_l]))
+        x0 += [float(thetas[k % thetas.size]), float(rolls[k // thetas.size]), big_r]
+    n_l = len(lobes)
+    x0a = np.array(x0)
+    # physical ranges: bends deflect 30-90 deg, branches 45, 90 or 135 deg
+    lower = np.array([-0.5] + [math.radians(25.0), -10.0, 0.25 * big_r] * n_l)
+    # (a side branch of a run that goes on is no wider than the run)
+    rho_max = 1.05 * big_r if straight_on else 2.5 * big_r
+    th_max = math.radians(100.0 if bend_only else 150.0)
+    upper = np.array([cfg.horizon] + [th_max, 10.0, rho_max] * n_l)
+    hole = None
+    if straight_on and not any_roll:
+        prior = (x0a.copy(), lower.copy(), upper.copy())
+        hole = _hole_prior(cloud, big_r, lobes, lobe_pts, wall, tol, u_edge, c0, *prior)
+    c_fin = max(3.0 * tol_med, 0.003)
+
+    # two openings on opposite sides (a tee from its stem, a wye from its branch, the side
+    # pipes of a cross): each branch is fitted to the returns of its own opening (and an inner
+    # return near them, on the far wall of a pipe across seen head-on, to the branch on its
+    # side of the incoming axis). Two cylinders fitted to the nearer of them take in the
+    # scatter of a noisy opening's rim between them, and lean apart by several degrees for it.
+    own = None
+    opposite = n_l == 2 and abs(_wrap(lobes[0].roll - lobes[1].roll)) > math.radians(150)
+    if opposite and not any_roll:
+        p_near = p_all[lobe_idx.size :]
+        side = np.stack(
+            [p_near[:, 1] * math.cos(lb.roll) + p_near[:, 2] * math.sin(lb.roll) for lb in lobes]
+        )
+        labels = np.concatenate(
+            [np.full(ix.size, k) for k, ix in enumerate(lobe_sub)] + [np.argmax(side, axis=0)]
+        )
+        own = _own_branch_resjac(pts_all, labels, n_l)
+
+    def free_fit(xs: NDArray, lo: NDArray, up: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        return _fit_axes(pts_all, xs, n_l, lo, up, c=2.0 * c0, c_final=c_fin, own=own)
+
+    x, res, w = free_fit(x0a, lower, upper)
+    if hole is not None and not _fits_hole(x, hole, big_r, lower, upper):
+        # the returns through the openings led the fit astray (few and noisy, far away):
+        # start again from the holes in the run's wall and stay near them
+        x0a, lower, upper = prior
+        x, res, w = free_fit(x0a, lower, upper)
+        diag.update(hole_reference=float(prior[0][0]), hole_prior_used=True)
+    # --- the outgoing radii: the clamped radius (a standard fitting) unless the returns
+    # call for another one. A free radius is poorly observed from a partial view of an
+    # opening under range noise, so it is kept only when it fits significantly better
+    # (likelihood ratio against the residual noise, a few units per extra parameter).
+    # (a far wall seen head-on is too small a part of a pipe to size it: clamped from the
+    # coarse start)
+    # (the standard radius of a side branch whose hole in the run's wall is clearly narrower
+    # is the hole's)
+    std_r = np.array([h[3] for h in hole]) if hole is not None else np.full(n_l, big_r)
+    x_eq = x0a.copy() if any_roll else x.copy()
+    x_eq[3::3] = std_r
+    lo_eq, up_eq = lower.copy(), upper.copy()
+    lo_eq[3::3] = std_r
+    up_eq[3::3] = std_r
+    if not any_roll and bool(np.all(np.abs(x[3::3] - std_r) <= 0.01 * big_r)):
+        # the free fit found the clamped radius already: clamping it moves nothing that matters
+        res_eq = _line_resjac(pts_all, x_eq, n_l, False)[0] if own is None else own(x_eq)[0]
+        w_eq = tukey_weights(res_eq, c_fin)
+    else:
+        x_eq, res_eq, w_eq = _fit_axes(
+            pts_all,
+            x_eq,
+            n_l,
+            lo_eq,
+            up_eq,
+            c=2.0 * c0 if any_roll else 2.0 * c_fin,
+            c_final=c_fin,
+            iterations=12 if any_roll else 8,
+            own=own,
+        )
+    if any_roll:
+        # (a far wall seen head-on fits a pipe deflected by theta and its mirror image deflected
+        # by pi - theta about nearly as well: the mirror of the solution is a second start)
+        x_m = x_eq.copy()
+        x_m[1], x_m[2] = math.pi - x_eq[1], x_eq[2] + math.pi
+        x_m[1] = min(max(x_m[1], lo_eq[1]), up_eq[1])
+        x_m, res_m, w_m = _fit_axes(
+            pts_all,
+            x_m,
+            n_l,
+            lo_eq,
+            up_eq,
+            c=2.0 * c_fin,
+            c_final=c_fin,
+        )
+        if tukey_cost(res_m, c_fin) < tukey_cost(res_eq, c_fin):
+            x_eq, res_eq, w_eq = x_m, res_m, w_m
+    cost_free = tukey_cost(res, c_fin)
+    cost_eq = tukey_cost(res_eq, c_fin)
+    n_in = max(int((w > 0.1).sum()), 1)
+    sigma2 = max(2.0 * cost_free / n_in, noise_med**2)
+    lr = 2.0 * (cost_eq - cost_free) / sigma2
+    diag.update(radius_lr=float(lr), radius_free=[float(v) for v in x[3::3]])
+    # (a free fit that ends on the deflection bounds has not found a pipe: the radius traded
+    # against the angle)
+    th_lo, th_hi = lower[1] + math.radians(1.0), upper[1] - math.radians(1.0)
+    free_on_bound = bool(np.any((x[1::3] <= th_lo) | (x[1::3] >= th_hi)))
+    eq_on_bound = bool(np.any((x_eq[1::3] <= th_lo) | (x_eq[1::3] >= th_hi)))
+    diag["radius_free_on_bound"] = free_on_bound
+    weak = any_roll or bool(diag.get("hole_prior_used", False))  # too little to size a pipe
+    if weak or lr <= cfg.radius_lr_per_branch * n_l or (free_on_bound and not eq_on_bound):
+        x, res, w = x_eq, res_eq, w_eq
+    if x is x_eq:
+        diag["radius_model"] = "clamped" if bool(np.all(std_r == big_r)) else "hole"
+    else:
+        diag["radius_model"] = "free"
+    across = None
+    lo_b, up_b = (lo_eq, up_eq) if x is x_eq else (lower, upper)
+    if opposite and not any_roll:
+        # a pipe across? One straight axis through the reference point, fitted as one
+        # cylinder of the standard radius, is kept unless the two branches fit significantly
+        # better (likelihood ratio, as for the radii)
+        k_main = 0 if lobes[0].n >= lobes[1].n else 1
+        r_a = float(np.mean(std_r))  # (the side pipe of a cross may be narrower than the run)
+        starts = [np.array([x[0], x[1 + 3 * k_main], x[2 + 3 * k_main], r_a])]
+        if float(_dir(x[1], x[2]) @ _dir(x[4], x[5])) > -0.985:
+            # (the branches not nearly in line: the pipe across may lie elsewhere)
+            starts += [
+                np.array([x[0], 0.5 * math.pi, lobes[k_main].roll, r_a]),
+                np.array([u_edge + big_r, 0.5 * math.pi, lobes[k_main].roll, r_a]),
+            ]
+        best_a = None
+        for xa0 in starts:
+            xa, res_a, w_a = _fit_axes(
+                pts_all,
+                xa0,
+                1,
+                np.array([lower[0], math.radians(25.0), -10.0, r_a]),
+                np.array([upper[0], math.radians(155.0), 10.0, r_a]),
+                c=2.0 * c0,
+                c_final=c_fin,
+            )
+            cost_a = tukey_cost(res_a, c_fin)
+            if best_a is None or cost_a < best_a[0]:
+                best_a = (cost_a, xa, res_a, w_a)
+        cost_a, xa, res_a, w_a = best_a
+        # (the two branches: three more deflection and roll parameters, two more radii)
+        n_extra = 4 if diag["radius_model"] == "free" else 2
+        lr_a = 2.0 * (cost_a - tukey_cost(res, c_fin)) / sigma2
+        diag["across_lr"] = float(lr_a)
+        if lr_a <= 0.5 * cfg.radius_lr_per_branch * max(n_extra, 1):
+            across = xa
+            x, res, w = xa, res_a, w_a
+    if not any_roll and (across is not None or n_l >= 2 or straight_on):
+        # a junction: its branches leave at the standard angles of fittings when the returns
+        # allow it
+        if across is not None:
+            n_b = 1
+            lo_b = np.array([lower[0], math.radians(25.0), -10.0, float(across[3])])
+            up_b = np.array([upper[0], math.radians(155.0), 10.0, float(across[3])])
+            own = None
+        else:
+            n_b = n_l
+        x, res, w = _standard_angles(
+            pts_all,
+            x,
+            res,
+            w,
+            n_b,
+            lo_b,
+            up_b,
+            c_fin,
+            sigma2,
+            diag,
+            radius_bounds=(lower[3::3], upper[3::3]) if across is None else None,
+            own=own,
+        )
+        if across is not None:
+            across = x
+    rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
+    support = int((w > 0.1).sum())
+    diag.update(fit_rms=rms, fit_support=support, fit_points=int(p_all.shape[0]))
+    model = "straight_axes"
+    if across is not None:
+        model = "pipe_across"
+        th_a, ph_a = float(across[1]), float(across[2])
+        r_a = float(across[3])
+        fits = [BranchFit(th_a, ph_a, r_a), BranchFit(math.pi - th_a, ph_a + math.pi, r_a)]
+    else:
+        fits = [BranchFit(x[1 + 3 * k], x[2 + 3 * k], x[3 + 3 * k]) for k in range(n_l)]
+    if any_roll and w.sum() > 0:
+        # a cylinder's axis has no sign: the way on is the half the returns lie along
+        f = fits[0]
+        along = (p_all - np.array([x[0], 0.0, 0.0])) @ _dir(f.theta, f.phi)
+        ahead = float(np.sum(w * (along > 0.5 * big_r))) / max(float(w.sum()), 1e-9)
+        behind = float(np.sum(w * (along < -0.5 * big_r))) / max(float(w.sum()), 1e-9)
+        diag.update(far_wall_ahead=ahead, far_wall_behind=behind)
+        flipped = BranchFit(math.pi - f.theta, f.phi + math.pi, f.rho)
+        balanced = min(ahead, behind) >= 0.05 and min(ahead, behind) >= 0.5 * max(ahead, behind)
+        if balanced and abs(f.theta - 0.5 * math.pi) < math.radians(20.0):
+            # the far wall runs on evenly to both sides of the axis' foot: a pipe across,
+            # both its ways open (a tee seen from its stem)
+            fits = [f, flipped]
+        else:
+            # (the returns' mean position along the axis, from its foot, m)
+            lean = float(np.sum(w * along)) / max(float(w.sum()), 1e-9)
+            diag["far_wall_lean"] = lean / big_r
+            if abs(lean) < cfg.far_wall_min_lean * big_r:
+                # the far wall lies about evenly to both sides of the axis' foot (a turn by
+                # about 90 deg seen head-on, its opening unseen): it shows a way on, not which
+                # of the two; a guess would be the mirror image as often as not
+                diag["reason"] = "far wall: way on undetermined"
+                return Detection.straight(confidence=0.0, **diag)
+            if lean < 0.0:
+                fits = [flipped]
+    big_l = float(x[0])
+    # --- a single way on that the straight model explains poorly: a long-radius bend (torus)
+    lower_bound = False
+    # (or that leaves out more than a few of the returns: the first centimetres of a gentle
+    # arc lie within the noise of a mitre's straight axes, its far part does not)
+    loose = rms > 2.0 * noise_med or support < TORUS_TRY_SUPPORT * p_all.shape[0]
+    if n_l == 1 and not straight_on and loose:
+        # (polished on returns spread evenly along the axis: the few returns from the far end
+        # of the arc fix its angle, and an even subsample of all returns holds hardly any of
+        # them; not under range noise, see _fit_torus)
+        p_fit = None
+        if noise_med <= TORUS_POLISH_MAX_NOISE:
+            arc_cells = np.flatnonzero((lobe_mask | near_inside).reshape(-1))
+            spread = _spread_along_axis(arc_cells, u_all.reshape(-1)[arc_cells], cfg.fit_points)
+            p_fit = np.ascontiguousarray(cloud.points_at(spread))
+        tor = _fit_torus(p_all, big_r, big_l, fits[0], c0, c_fin, noise_med, p_fit)
+        if tor is not None:
+            xt, rms_t, sup_t, vis = tor
+            diag.update(torus_rms=rms_t, torus_support=sup_t, torus_rb=float(xt[4]))
+            if sup_t >= support * 0.98 and rms_t < rms * 0.85:
+                big_l = float(xt[0])
+                fits = [BranchFit(xt[1], xt[2], xt[3], xt[4])]
+                rms, support = rms_t, sup_t
+                model = "torus"
+                # the end of the arc unseen: the angle is only a lower bound
+                lower_bound = vis >= float(xt[1]) - math.radians(3.0)
+                diag["torus_visible_arc_deg"] = math.degrees(vis)
+    diag["model"] = model
+    diag["angle_lower_bound"] = lower_bound
+    if not (math.isfinite(big_l) and -0.5 <= big_l <= cfg.horizon):
+        diag["reason"] = "fit left the physical range"
+        return Detection.straight(confidence=0.0, **diag)
+    conf = _confidence(support, rms, c_fin / 3.0) * (0.6 if lower_bound else 1.0)
+    options: list[StructureOption] = []
+    for f in fits:
+        angle, direction = option_direction(_dir(f.theta, f.phi), cloud.pose)
+        # a long bend's arc radius (torus model; 0 for the straight-axes model) for the turn
+        radius = float(f.rb) if model == "torus" else 0.0
+        options.append(
+            StructureOption(
+                "bend", big_l, 2.0 * float(f.rho), direction, angle, conf, bend_radius=radius
+            )
+        )
+    if straight_on:
+        options.append(StructureOption("junction", big_l, 2.0 * big_r, 0.0, 0.0, conf * cov_on))
+    kind = "bend" if len(options) == 1 else "junction"
+    options = [
+        StructureOption(
+            kind,
+            o.distance,
+            o.diameter,
+            o.direction,
+            o.angle,
+            o.confidence,
+            bend_radius=o.bend_radius if kind == "bend" else 0.0,
+        )
+        for o in options
+    ]
+    options.sort(key=option_order)
+    return Detection(kind, options, conf, diag)
+
+
+def _standard_angles(
+    pts: NDArray[np.float64],
+    x: NDArray[np.float64],
+    res: NDArray[np.float64],
+    w: NDArray[np.float64],
+    n_b: int,
+    lower: NDArray[np.float64],
+    upper: NDArray[np.float64],
+    c_fin: float,
+    sigma2: float,
+    diag: dict[str, Any],
+    radius_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+    own: Callable[[NDArray], tuple[NDArray, NDArray]] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The branch fit ``x`` (``[L, theta, phi, rho] x n_b``, its residuals and weights) with
+    each deflection within ``SNAP_WITHIN`` of a standard fitting angle (tees and crosses
+    90 deg, laterals 45 deg: :data:`STANDARD_BRANCH_ANGLES`) held at that angle and the rest
+    refitted, when the returns do not reject it (likelihood ratio against the residual noise
+    ``sigma2``, m^2, at most ``SNAP_LR`` per angle held). A small opening far away shows a
+    patch of the branch's wall whose deflection trades against the reference point and the
+    radius by a few degrees; a standard angle the patch fits as well is the better estimate.
+
+    When the radii are held (``lower == upper``) and the held angle is rejected, it is tried
+    once more with the radii free within ``radius_bounds`` (lower, upper per branch, m) but
+    within ``SNAP_RADIUS`` of the held ones: a branch a millimetre narrower than the run, fitted
+    at the run's radius, leans by a degree or two instead. ``own``: as for
+    :func:`_fit_axes`."""
+    idx, angles = [], []
+    for k in range(n_b):
+        th = float(x[1 + 3 * k])
+        j = int(np.argmin(np.abs(STANDARD_BRANCH_ANGLES - th)))
+        if 1e-6 < abs(STANDARD_BRANCH_ANGLES[j] - th) <= SNAP_WITHIN:
+            idx.append(1 + 3 * k)
+            angles.append(float(STANDARD_BRANCH_ANGLES[j]))
+    if not idx:
+        return x, res, w
+    xs, lo, up = x.copy(), lower.copy(), upper.copy()
+    xs[idx] = lo[idx] = up[idx] = angles
+    xs = np.clip(xs, np.minimum(lo, xs), np.maximum(up, xs))
+    x_s, res_s, w_s = _fit_axes(pts, xs, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin, own=own)
+    cost = tukey_cost(res, c_fin)
+
+    def accepted(x_s: NDArray[np.float64], res_s: NDArray[np.float64]) -> bool:
+        lr = 2.0 * (tukey_cost(res_s, c_fin) - cost) / max(sigma2, 1e-12)
+        diag["standard_angle_lr"] = float(lr)
+        # (held at the standard angle, the branch must stay where it was: a fit that turns it
+        # about the run's axis to make up for the deflection rests on too few returns)
+        turned = max(abs(_wrap(float(x_s[2 + 3 * k] - x[2 + 3 * k]))) for k in range(n_b))
+        return lr <= SNAP_LR * len(idx) and turned <= SNAP_MAX_TURN
+
+    if accepted(x_s, res_s):
+        diag["standard_angles"] = len(idx)
+        return x_s, res_s, w_s
+    rho = slice(3, None, 3)
+    if radius_bounds is not None and bool(np.all(lo[rho] >= up[rho])):
+        held = x[rho]
+        lo[rho] = np.maximum(radius_bounds[0], held * (1.0 - SNAP_RADIUS))
+        up[rho] = np.minimum(radius_bounds[1], held * (1.0 + SNAP_RADIUS))
+        x_r, res_r, w_r = _fit_axes(pts, x_s, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin, own=own)
+        if accepted(x_r, res_r):
+            diag["standard_angles"] = len(idx)
+            diag["standard_angles_radius_free"] = True
+            return x_r, res_r, w_r
+    return x, res, w
+
+
+def _nearest_structure_lobes(
+    cloud: PipeCloud, lobes: list[Lobe], big_r: float, diag: dict[str, Any]
+) -> list[Lobe]:
+    """The lobes of the nearest structure: a lobe that starts more than four radii past the
+    far end of the nearest lobe is an opening of another structure farther along the run
+    (seen past this one), not a way on of this one."""
+    if len(lobes) < 2:
+        return lobes
+    spans = []
+    for lb in lobes:
+        u = cloud.points(lb.mask)[:, 0]
+        spans.append((float(_pct(u, 2.0)), float(_pct(u, 98.0))))
+    first = min(range(len(lobes)), key=lambda i: spans[i][0])
+    reach = spans[first][1] + 4.0 * big_r
+    keep = [lb for lb, (u0, _) in zip(lobes, spans) if u0 <= reach]
+    if len(keep) < len(lobes):
+        diag["lobes_farther_on"] = len(lobes) - len(keep)
+    return keep
+
+
+def _hole_prior(
+    cloud: PipeCloud,
+    big_r: float,
+    lobes: list[Lobe],
+    lobe_pts: list[NDArray],
+    wall: NDArray[np.bool_],
+    tol: NDArray[np.float64],
+    u_edge: float,
+    c0: float,
+    x0: NDArray,
+    lower: NDArray,
+    upper: NDArray,
+) -> list[tuple[float, float, float, float]] | None:
+    """Side branches of a run that goes on, seen far away: the few returns through an opening
+    leave the branch's deflection and the reference point ill-determined, but the hole in the
+    run's wall is plain. A branch of radius ``rho`` deflected by ``theta`` cuts a hole of
+    half-length ``rho / sin(theta)`` centred ``R cot(theta)`` past the reference point, and
+    ``asin(rho / R)`` wide on either side of its roll (a narrower branch: a narrower hole);
+    the start (``x0``) and the bounds of the fit are set from it, in place. Returns the centre,
+    half-length, how far off they may be seen, and the branch radius (``R`` unless the hole
+    is clearly narrower) of each lobe's hole; ``None`` (nothing changed) when a hole is not
+    found for every lobe."""
+    u_grid = cloud.xyz[0]
+    near_u = wall & (u_grid > u_edge - 2.0 * big_r) & (u_grid < u_edge + 8.0 * big_r)
+    p_w = cloud.points(near_u)
+    tol_w = float(np.median(tol[near_u])) if near_u.any() else 0.0
+    u_w = p_w[:, 0]
+    phi_w = np.arctan2(p_w[:, 2], p_w[:, 1])
+    ths = np.radians(np.arange(30.0, 150.1, 2.5))
+    sin_t, cos_t = np.sin(ths), np.cos(ths)
+    ells, thetas, slack = [], [], []
+    holes: list[tuple[float, float, float, float]] = []
+    for lb, lp in zip(lobes, lobe_pts):
+        ang = np.mod(phi_w - lb.roll + math.pi, 2.0 * math.pi) - math.pi
+        near = np.abs(ang)
+        us = np.sort(u_w[near < math.radians(15.0)])
+        if us.size < 10:
+            return None
+        gaps = np.diff(us)
+        # the widest gap for its place: far away the beams meet the wall sparsely, so a gap
+        # is measured against the axial spacing of neighbouring beams there
+        mid_u = 0.5 * (us[1:] + us[:-1])
+        beam_spacing = np.maximum(mid_u * mid_u / big_r * cloud.beam_step, 1e-3)
+        i = int(np.argmax(gaps / beam_spacing))
+        if gaps[i] < 0.5 * big_r:
+            return None
+        half = 0.5 * float(gaps[i])
+        centre = 0.5 * float(us[i] + us[i + 1])
+        rho = _hole_radius(ang, u_w, centre, half, big_r, tol_w)
+        if gaps[i] < rho:
+            return None
+        # each edge is known to within the axial spacing of neighbouring beams there
+        step = centre * centre / big_r * cloud.beam_step
+        spacing = float(np.median(gaps[max(0, i - 5) : i + 6]))  # of the returns seen
+        # deflections along a grid: the reference point that puts the hole's centre where it
+        # is seen, scored by the returns through the opening and by the hole length (returns
+        # at the edges fall off the wall, so a hole may look longer, never shorter)
+        ell_t = centre - big_r * cos_t / sin_t  # (T,)
+        lq = lp[_subsample(np.arange(lp.shape[0]), 100)]
+        qx = lq[None, :, 0] - ell_t[:, None]  # (T, n)
+        lat = lq[:, 1] * math.cos(lb.roll) + lq[:, 2] * math.sin(lb.roll)  # (n,)
+        t = qx * cos_t[:, None] + lat[None, :] * sin_t[:, None]
+        qq = qx * qx + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]
+        res = np.sqrt(np.maximum(qq - t * t, 0.0)) - rho
+        cost = np.minimum(res * res, c0 * c0).mean(axis=1)
+        excess = np.maximum(0.0, rho / sin_t - half) / max(spacing, 0.005)
+        cost += c0 * c0 * np.minimum(1.0, 0.25 * excess * excess)
+        cost = np.where(ths > 0.5 * math.pi + 1e-6, cost / 0.7, cost)  # forward branches first
+        j = int(np.argmin(cost))
+        best = (float(cost[j]), float(ths[j]), float(ell_t[j]))
+        assert best is not None
+        thetas.append(best[1])
+        ells.append(best[2])
+        slack.append(max(0.25 * big_r, 0.5 * step))
+        holes.append((centre, half, slack[-1], rho))
+    ell = float(np.mean(ells))
+    d_ell = max(slack) + float(np.ptp(ells))
+    x0[0] = ell
+    lower[0], upper[0] = ell - d_ell, ell + d_ell
+    for k, th in enumerate(thetas):
+        x0[1 + 3 * k] = th
+        x0[3 + 3 * k] = holes[k][3]
+        lower[1 + 3 * k] = max(lower[1 + 3 * k], th - math.radians(7.5))
+        upper[1 + 3 * k] = min(upper[1 + 3 * k], th + math.radians(7.5))
+    return holes
+
+
+def _hole_radius(
+    ang: NDArray[np.float64],
+    u: NDArray[np.float64],
+    centre: float,
+    half: float,
+    big_r: float,
+    tol: float,
+) -> float:
+    """Radius (m) of the branch whose hole in the run's wall (radius ``big_r``) is centred at
+    ``centre`` along the axis, ``half`` long each way, from the hole's width around the
+    branch's roll, measured between the nearest wall returns on either side (``ang``: their
+    angles from the roll, rad; ``u``: along the axis) across its middle. A beam at angle
+    ``phi`` from the roll meets the branch's wall ``rho / sin(phi)`` from the axis, within the
+    wall tolerance ``tol`` of the run's wall (and so counted as wall) once
+    ``sin(phi) >= rho / (R + tol)``: the nearest wall returns lie at that angle. ``big_r``
+    unless the hole is clearly (10 %) narrower than a full-size branch's."""
+    mid = np.abs(u - centre) < 0.4 * half
+    a = ang[mid]
+    left, right = a[a > 0.0], a[a < 0.0]
+    if left.size == 0 or right.size == 0:
+        return big_r
+    width = 0.5 * float(left.min() - right.max())
+    rho = (big_r + tol) * math.sin(min(width, 0.5 * math.pi))
+    return max(rho, 0.25 * big_r) if rho < 0.9 * big_r else big_r
+
+
+def _fits_hole(
+    x: NDArray,
+    holes: list[tuple[float, float, float, float]],
+    big_r: float,
+    lower: NDArray,
+    upper: NDArray,
+) -> bool:
+    """Does a branch fit put every branch where its hole in the run's wall is seen, without
+    resting on a deflection bound?"""
+    for k, (centre, half, slack, rho) in enumerate(holes):
+        th = float(x[1 + 3 * k])
+        if th <= lower[1 + 3 * k] + math.radians(1.0) or th >= upper[1 + 3 * k] - math.radians(1.0):
+            return False
+        if abs(float(x[0]) + big_r / math.tan(th) - centre) > slack:
+            return False
+        if rho / math.sin(th) > half + slack:  # (a hole may look longer, never shorter)
+            return False
+    return True
+
+
+def _straight_on(
+    cloud: PipeCloud, big_r: float, big_l: float, wall: NDArray[np.bool_], cfg: ImprovedConfig
+) -> tuple[bool, float]:
+    """Is the incoming pipe's wall seen again well beyond the structure, all around?"""
+    u = cloud.xyz[0]
+    far = wall & (u > big_l + 4.0 * big_r)
+    if far.sum() < 10:
+        return False, 0.0
+    cov = _azimuth_coverage(cloud.points(far))
+    return cov >= cfg.straight_on_coverage, cov

@@ -1,0 +1,327 @@
+"""A scan's returns in the pipe frame (:class:`PipeCloud`) and the small helpers every part of
+the improved detector (:mod:`detector.improved`) shares: the scan pattern's grid and beam
+directions (cached), the returns' wall tolerance, percentiles and even subsamples, azimuth
+coverage, the sizes of labelled regions, a fit's confidence, and when the robust fits stop.
+
+Lengths in metres, angles in radians.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from detector.grid import build_grid
+from detector.scan import Scan
+from detector.transforms import SensorInPipe
+
+if TYPE_CHECKING:
+    from detector.improved import ImprovedConfig
+
+
+X_AXIS = np.array([1.0, 0.0, 0.0])
+#: Fits stop when no parameter moves by more than this (metres, radians): far below the
+#: accuracy that matters, and most fits then end in a few iterations.
+STEP_TOL = 1e-6
+#: Fits shrink their robust cut-off over this many iterations, then run to convergence.
+ANNEAL = 3
+#: ... or once a step lowers the robust cost by less than this fraction.
+COST_TOL = 1e-4
+
+
+@dataclass
+class PipeCloud:
+    """Returns of one scan in the pipe frame.
+
+    The valid returns are kept compact, component-first (``(3, N)``), so a pose change is one
+    dense ``(3, 3) @ (3, N)`` product; ``cell`` places each on the unrolled scan grid (cropped
+    to the beam-angle columns that hold returns), whose ``(G, K)`` views (:attr:`valid`,
+    :attr:`sigma_r`, :attr:`xyz`, :attr:`pts`) are built on demand for region labelling.
+    """
+
+    wraps: bool  # the grid's first and last rows are neighbours
+    shape: tuple[int, int]  # (G, K) of the cropped grid
+    cell: NDArray[np.intp]  # (N,) flat grid cell of each return
+    sensor_v: NDArray[np.float64]  # (3, N) sensor frame
+    sigma_v: NDArray[np.float64]  # (N,) radial noise of each return
+    sigma_range_v: NDArray[np.float64]  # (N,) range noise of each return
+    pose: SensorInPipe
+    beam_step: float = 0.0  # angle between neighbouring beams of a plane, radians
+    xyz_v: NDArray[np.float64] = field(init=False)  # (3, N) pipe frame
+    thin: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(init=False, default=None)
+    tol0: NDArray[np.float64] | None = field(init=False, default=None)  # floor + noise part
+    floor: float | None = field(init=False, default=None)  # tolerance floor for the regions
+    _valid: NDArray[np.bool_] | None = field(init=False, default=None)
+    _sigma: NDArray[np.float64] | None = field(init=False, default=None)
+    _xyz: NDArray[np.float64] | None = field(init=False, default=None)
+    _r_v: NDArray[np.float64] | None = field(init=False, default=None)
+    _tol_v: NDArray[np.float64] | None = field(init=False, default=None)
+
+    @property
+    def n(self) -> int:
+        return int(self.cell.size)
+
+    def _grid(self, values: NDArray, fill: float | bool) -> NDArray:
+        g, k = self.shape
+        if values.ndim == 1:
+            out = np.full(g * k, fill, dtype=values.dtype)
+            out[self.cell] = values
+            return out.reshape(g, k)
+        out = np.full((values.shape[0], g * k), fill, dtype=values.dtype)
+        for row, vals in zip(out, values):  # (row by row: a faster scatter)
+            row[self.cell] = vals
+        return out.reshape(values.shape[0], g, k)
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """(G, K) True where the cell holds a return."""
+        if self._valid is None:
+            self._valid = self._grid(np.ones(self.n, dtype=bool), False)
+        return self._valid
+
+    @property
+    def sigma_r(self) -> NDArray[np.float64]:
+        """(G, K) radial noise of each return (0 where none)."""
+        if self._sigma is None:
+            self._sigma = self._grid(self.sigma_v, 0.0)
+        return self._sigma
+
+    @property
+    def xyz(self) -> NDArray[np.float64]:
+        """(3, G, K) pipe-frame points (0 where there is no return)."""
+        if self._xyz is None:
+            self._xyz = self._grid(self.xyz_v, 0.0)
+        return self._xyz
+
+    @property
+    def pts(self) -> NDArray[np.float64]:
+        """(G, K, 3) view of the pipe-frame points."""
+        return self.xyz.transpose(1, 2, 0)
+
+    def values(self, mask: NDArray[np.bool_], per_return: NDArray) -> NDArray:
+        """Per-return values (``(N,)`` compact order) of the grid cells in ``mask``."""
+        return per_return[np.flatnonzero(mask.reshape(-1)[self.cell])]
+
+    def points(self, mask: NDArray[np.bool_]) -> NDArray[np.float64]:
+        """(n, 3) pipe-frame points of the grid cells in ``mask`` (in grid order)."""
+        idx = np.flatnonzero(mask.reshape(-1)[self.cell])
+        return np.take(self.xyz_v, idx, axis=1).T
+
+    def points_at(self, flat_cells: NDArray[np.intp]) -> NDArray[np.float64]:
+        """(n, 3) pipe-frame points of the given flat grid cells."""
+        return np.take(self.xyz.reshape(3, -1), flat_cells, axis=1).T
+
+    def set_pose(self, pose: SensorInPipe) -> None:
+        self.pose = pose
+        self.xyz_v = _transform(pose, self.sensor_v)
+        self._xyz = self._r_v = self._tol_v = None
+
+    @property
+    def r_v(self) -> NDArray[np.float64]:
+        """(N,) distance of each return from the pipe axis under the current pose."""
+        if self._r_v is None:
+            self._r_v = np.sqrt(np.square(self.xyz_v[1]) + np.square(self.xyz_v[2]))
+        return self._r_v
+
+    def restore(self, pose: SensorInPipe, xyz_v: NDArray[np.float64]) -> None:
+        """Go back to a pose whose points were computed before."""
+        self.pose, self.xyz_v = pose, xyz_v
+        self._xyz = self._r_v = self._tol_v = None
+
+
+def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Sensor-frame ``(3, N)`` coordinates into the pipe frame."""
+    out = pose.rotation @ xyz
+    out += pose.position[:, None]
+    return out
+
+
+#: Unrolled grid and beam directions per scan pattern (plane and beam angles), reused.
+_PATTERNS: dict[bytes, tuple[bool, int, NDArray, NDArray, NDArray, NDArray, float]] = {}
+#: The pattern of the last scan with its angles (consecutive scans share one).
+_LAST_PATTERN: list[tuple[NDArray, NDArray, tuple] | None] = [None]
+
+
+def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray, float]:
+    """(wraps, K, flat scan index of each grid cell (G*K,), unit beam direction (3, G*K),
+    |sin beta| and |cos beta| (2, G*K), the cells where the half-plane has no such beam, the
+    angle between neighbouring beams) of the scan's angle pattern."""
+    last = _LAST_PATTERN[0]
+    if (
+        last is not None
+        and np.array_equal(last[0], scan.plane_angles)
+        and np.array_equal(last[1], scan.beam_angles)
+    ):
+        return last[2]
+    key = scan.plane_angles.tobytes() + b"|" + scan.beam_angles.tobytes()
+    hit = _PATTERNS.get(key)
+    if hit is not None:
+        _LAST_PATTERN[0] = (scan.plane_angles.copy(), scan.beam_angles.copy(), hit)
+        return hit
+    grid = build_grid(scan)
+    steps = np.abs(np.diff(np.sort(scan.beam_angles)))
+    steps = steps[steps > 1e-9]
+    beam_step = float(np.median(steps)) if steps.size else 0.0
+    missing = grid.beam.reshape(-1) < 0
+    beam = np.maximum(grid.beam, 0).reshape(-1)
+    plane = grid.plane.reshape(-1)
+    src = plane * scan.n_beams + beam
+    dirs = scan.directions()[plane, beam].T  # (3, G*K)
+    beta = scan.beam_angles[beam]
+    trig = np.stack([np.abs(np.sin(beta)), np.abs(np.cos(beta))])
+    hit = (
+        grid.wraps,
+        int(grid.beam.shape[1]),
+        src,
+        np.ascontiguousarray(dirs),
+        trig,
+        np.flatnonzero(missing),
+        beam_step,
+    )
+    if len(_PATTERNS) >= 16:
+        _PATTERNS.pop(next(iter(_PATTERNS)))
+    _PATTERNS[key] = hit
+    _LAST_PATTERN[0] = (scan.plane_angles.copy(), scan.beam_angles.copy(), hit)
+    return hit
+
+
+def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig) -> PipeCloud:
+    wraps, k_cols, src, dirs, trig, src_missing, beam_step = _pattern(scan)
+    ok = scan.valid.reshape(-1)[src]  # (missing cells point at a copy of a real one ...)
+    ok[src_missing] = False  # (... and are dropped here)
+    cell = np.flatnonzero(ok)
+    pb = src[cell]
+    ranges = np.maximum(scan.ranges.reshape(-1)[pb] - range_bias, 0.0)
+    local = np.take(dirs, cell, axis=1)
+    local *= ranges
+    if scan.n_planes > 1 and float(np.ptp(scan.nominal_positions, axis=0).max()) > 1e-9:
+        # continuous sweep: express every plane in the last plane's sensor frame (odometry)
+        plane = pb // scan.n_beams
+        world = np.einsum("nij,jn->in", scan.nominal_rotations[plane], local)
+        world += scan.nominal_positions[plane].T
+        local = scan.nominal_rotations[-1].T @ (world - scan.nominal_positions[-1][:, None])
+    near = local[0] <= cfg.horizon
+    if not near.all():
+        keep = np.flatnonzero(near)
+        cell, ranges, local = cell[keep], ranges[keep], np.take(local, keep, axis=1)
+    tr = np.take(trig, cell, axis=1)
+    # crop the grid to the beam-angle columns that hold returns
+    g = src.size // max(k_cols, 1)
+    row, col = np.divmod(cell, k_cols)
+    if cell.size:
+        k0, k1 = int(col.min()), int(col.max()) + 1
+    else:
+        k0, k1 = 0, 1
+    shape = (g, k1 - k0)
+    cell = row * shape[1] + (col - k0)
+    spec = scan.spec or {}
+    sig = float(spec.get("noise_sigma", 0.0))
+    sig_rel = float(spec.get("noise_sigma_rel", 0.0))
+    res = float(spec.get("range_resolution", 0.0))
+    jitter = float(spec.get("angular_jitter", 0.0))
+    if sig_rel != 0.0:
+        sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
+    else:  # (the same numbers, without the per-return terms that vanish)
+        sigma_range = np.full(ranges.size, math.sqrt(sig**2 + (res**2) / 12.0))
+    sigma_r = sigma_range * tr[0]
+    if jitter != 0.0:
+        sigma_r += ranges * jitter * tr[1]
+    cloud = PipeCloud(
+        wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose, beam_step
+    )
+    cloud.set_pose(pose)
+    return cloud
+
+
+def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
+    """(G, K) radial tolerance of each return: floor, sensor noise and residual axis error."""
+    floor = cfg.tol_floor if cloud.floor is None else cloud.floor
+    return floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(cloud.xyz[0])
+
+
+def _tolerance_v(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
+    """(N,) radial tolerance of each return (compact order) under the current pose."""
+    if cloud.tol0 is None:
+        cloud.tol0 = cfg.tol_floor + cfg.noise_k * cloud.sigma_v
+    if cloud._tol_v is None:
+        cloud._tol_v = cloud.tol0 + cfg.axis_slope * np.abs(cloud.xyz_v[0])
+    return cloud._tol_v
+
+
+def _subsample(idx: NDArray[np.intp], n: int) -> NDArray[np.intp]:
+    if idx.size <= n:
+        return idx
+    step = idx.size / n
+    return idx[(np.arange(n) * step).astype(np.intp)]
+
+
+def _pct(x: NDArray[np.float64], q: float) -> float:
+    """``np.percentile(x, q)`` (linear interpolation) by partial sorting; 0 for empty input."""
+    n = x.size
+    if n == 0:
+        return 0.0
+    h = (n - 1) * q / 100.0
+    lo = min(int(h), n - 1)
+    if lo + 1 >= n:
+        return float(np.partition(x, lo)[lo])
+    part = np.partition(x, (lo, lo + 1))
+    return float(part[lo] + (h - lo) * (part[lo + 1] - part[lo]))
+
+
+def _dir(theta: float, phi: float) -> NDArray[np.float64]:
+    st = math.sin(theta)
+    return np.array([math.cos(theta), st * math.cos(phi), st * math.sin(phi)])
+
+
+def _region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
+    """(cells, grid rows spanned) of each label 0..n_lab of a labelled grid."""
+    flat = labels.reshape(-1)
+    nz = np.flatnonzero(flat)
+    lab = flat[nz]
+    counts = np.bincount(lab, minlength=n_lab + 1)
+    occupied = np.zeros((n_lab + 1, labels.shape[0]), dtype=bool)
+    occupied[lab, nz // labels.shape[1]] = True
+    return counts, np.count_nonzero(occupied, axis=1)
+
+
+def _covers(xyz: NDArray, idx: NDArray[np.intp], fraction: float, bins: int = 36) -> bool:
+    """Do the ``(3, n)`` points ``idx`` cover at least ``fraction`` of the azimuth (as
+    :func:`_azimuth_coverage`)? Every 16th of them is tried first: when those cover enough, so
+    do all of them."""
+    if idx.size >= 512:
+        few = idx[::16]
+        if _yz_coverage(xyz[1, few], xyz[2, few], bins) >= fraction:
+            return True
+    return _yz_coverage(xyz[1, idx], xyz[2, idx], bins) >= fraction
+
+
+def _yz_coverage(y: NDArray, z: NDArray, bins: int) -> float:
+    """Fraction of ``bins`` azimuth sectors occupied by points at cross-section ``(y, z)``."""
+    phi = np.arctan2(z, y)
+    k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
+    return float(np.count_nonzero(np.bincount(k, minlength=bins))) / bins
+
+
+def _azimuth_coverage(p: NDArray, bins: int = 36) -> float:
+    """Fraction of ``bins`` azimuth sectors that the ``(n, 3)`` points occupy."""
+    return _yz_coverage(p[:, 1], p[:, 2], bins)
+
+
+def _azimuth_uniformity(p: NDArray, bins: int = 12) -> float:
+    """Smallest azimuth-bin count relative to the median bin count (1: even all around)."""
+    if p.shape[0] == 0:
+        return 0.0
+    phi = np.arctan2(p[:, 2], p[:, 1])
+    k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
+    cnt = np.bincount(k, minlength=bins)
+    med = float(_pct(cnt, 50.0))
+    return float(cnt.min()) / med if med > 0 else 0.0
+
+
+def _confidence(n_support: int, rms: float, tol: float) -> float:
+    c = (1.0 - math.exp(-n_support / 30.0)) * math.exp(-((rms / max(tol, 1e-6)) ** 2) / 4.0)
+    return float(min(1.0, max(0.0, c)))
