@@ -9,13 +9,14 @@ Lengths in metres, angles in radians.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from detector.detection import Detection
 from detector.grid import label_regions
+from detector.improved_config import ImprovedConfig
 from detector.pipe_cloud import (
     ANNEAL,
     COST_TOL,
@@ -29,10 +30,6 @@ from detector.pipe_cloud import (
 )
 from detector.robust import mad_sigma, robust_gauss_newton
 from detector.transforms import SensorInPipe
-
-if TYPE_CHECKING:
-    from detector.improved import ImprovedConfig
-
 
 #: The wall's own radius replaces the clamped one when they differ by more than this, m.
 RADIUS_DEAD_BAND = 0.00025

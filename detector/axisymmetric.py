@@ -8,12 +8,13 @@ Lengths in metres, angles in radians.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from detector.detection import Detection
+from detector.improved_config import ImprovedConfig
 from detector.options import StructureOption
 from detector.pipe_cloud import (
     ANNEAL,
@@ -26,10 +27,6 @@ from detector.pipe_cloud import (
     _subsample,
 )
 from detector.robust import mad_sigma, robust_gauss_newton, tukey_weights
-
-if TYPE_CHECKING:
-    from detector.improved import ImprovedConfig
-
 
 #: Returns of a widening this much (m; or three times their noise) short of the wider pipe's
 #: radius lie on its cone, not on the wider pipe.

@@ -12,13 +12,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from detector.detection import Detection
 from detector.grid import label_regions
+from detector.improved_config import ImprovedConfig
 from detector.long_bend import _fit_torus, _spread_along_axis
 from detector.options import StructureOption, option_order
 from detector.pipe_cloud import (
@@ -35,10 +36,6 @@ from detector.pipe_cloud import (
 )
 from detector.robust import robust_gauss_newton, tukey_cost, tukey_weights
 from detector.transforms import option_direction
-
-if TYPE_CHECKING:
-    from detector.improved import ImprovedConfig
-
 
 #: A region of returns beyond the wall covering this fraction of the azimuth goes all round.
 ALL_ROUND = 0.75

@@ -105,8 +105,9 @@ robust fits anneal their cut-off over three iterations and then stop on a small 
 Modules: :mod:`detector.pipe_cloud` (the returns in the pipe frame, their tolerances, shared
 helpers), :mod:`detector.axis_fit` (the axis refinement and the wall checks of step 1),
 :mod:`detector.axisymmetric` (end walls and reducers), :mod:`detector.branches` (lobes,
-outgoing pipes, junctions) and :mod:`detector.long_bend` (the torus model); this module chooses
-the pose, classifies the returns and checks the pose again once a structure is fitted.
+outgoing pipes, junctions), :mod:`detector.long_bend` (the torus model) and
+:mod:`detector.improved_config` (the tuning); this module chooses the pose, classifies the
+returns and checks the pose again once a structure is fitted.
 
 All lengths in metres, angles in radians.
 """
@@ -115,7 +116,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -138,6 +138,7 @@ from detector.branches import Lobe, _branches, _find_lobes
 from detector.detection import Detection
 from detector.grazing import find_ring_holes
 from detector.grid import label_regions
+from detector.improved_config import DEFAULT_CONFIG, ImprovedConfig
 from detector.options import StructureOption, option_order
 from detector.pipe_cloud import (
     PipeCloud,
@@ -184,52 +185,6 @@ GENTLE_START_MARGIN = 0.01
 #: A long bend's torus under the given pose fitting this many times more closely (rms) than
 #: under the refined one: the refinement was laid into the arc, the given pose stands.
 TORUS_POSE_RATIO = 2.0
-
-
-@dataclass(frozen=True)
-class ImprovedConfig:
-    """Tuning of the improved detector. Lengths in metres, angles in radians.
-
-    Attributes:
-        tol_floor: smallest radial tolerance of a wall return.
-        noise_k: tolerance = floor + ``noise_k`` x the return's radial noise (sensor model)
-            + ``axis_slope`` x the return's distance along the axis (residual axis error).
-        min_lobe_points: fewest returns beyond the wall in an opening.
-        min_region_rows: fewest azimuth rows an anomaly region must span.
-        min_anomaly_points: fewest non-wall returns for anything but ``straight``.
-        horizon: returns farther along the axis are ignored.
-        fit_points: returns used per structure fit (evenly subsampled).
-        axis_points: wall returns used for the pipe-axis refinement.
-        prior_offset, prior_tilt: prior standard deviation of the pipe-axis refinement.
-        straight_on_coverage: fraction of the circumference on which the wall must be seen
-            beyond a junction for a straight-on option.
-        radius_lr_per_branch: likelihood-ratio threshold (per outgoing pipe) above which a
-            free outgoing radius replaces the clamped one.
-        max_radius_correction: largest change of the clamped radius that the wall returns
-            may make (the encoders' error; the thesis checks the diameter to +-5 mm).
-        far_wall_min_lean: a far wall seen head-on gives the way on only when its returns lie
-            on average at least this many radii (of the clamped pipe) along the fitted axis
-            from the axis' foot; nearer, the direction is undetermined and no turn is reported.
-    """
-
-    tol_floor: float = 0.002
-    axis_slope: float = 0.002
-    noise_k: float = 3.0
-    min_lobe_points: int = 6
-    min_region_rows: int = 3
-    min_anomaly_points: int = 10
-    horizon: float = 2.0
-    fit_points: int = 300
-    axis_points: int = 300
-    prior_offset: float = 0.01
-    prior_tilt: float = math.radians(3.0)
-    straight_on_coverage: float = 0.5
-    radius_lr_per_branch: float = 12.0
-    max_radius_correction: float = 0.003
-    far_wall_min_lean: float = 0.15
-
-
-DEFAULT_CONFIG = ImprovedConfig()
 
 
 # --------------------------------------------------------------------------- main entry

@@ -10,20 +10,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from detector.grid import build_grid
+from detector.improved_config import ImprovedConfig
 from detector.scan import Scan
 from detector.transforms import SensorInPipe
 
-if TYPE_CHECKING:
-    from detector.improved import ImprovedConfig
-
-
-X_AXIS = np.array([1.0, 0.0, 0.0])
 #: Fits stop when no parameter moves by more than this (metres, radians): far below the
 #: accuracy that matters, and most fits then end in a few iterations.
 STEP_TOL = 1e-6
