@@ -116,6 +116,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -506,6 +507,31 @@ def _gentle_start(det: Detection) -> float | None:
     return None
 
 
+def _detect_again(
+    cloud: PipeCloud,
+    cfg: ImprovedConfig,
+    diag_pose: dict[str, Any],
+    axis_info: dict[str, Any],
+    big_r: float,
+    wall_until: float,
+    floor: float | None,
+    wall_rms: Callable[[float], float],
+) -> tuple[float, Detection]:
+    """Detect again under the pose a check moved the cloud to: the diagnostics of the first
+    pose choice (``diag_pose``) with its axis entries replaced by ``axis_info``, the radius
+    measured on the wall before ``wall_until`` (m), and for a noiseless wall (a tolerance
+    ``floor`` was set) the floor from the wall's scatter (``wall_rms(radius)``, m, when the
+    radius fit measured none). Returns ``(radius, detection)``."""
+    skip = ("axis_", "wall_radius", "tolerance_floor")
+    sub = {k: v for k, v in diag_pose.items() if not k.startswith(skip)}
+    sub.update(axis_info)
+    radius = _wall_radius(cloud, big_r, cfg, wall_until, sub)
+    if floor is not None:
+        cloud.floor = _scatter_floor(cfg, sub.get("wall_radius_rms", wall_rms(radius)))
+        sub["tolerance_floor"] = cloud.floor
+    return radius, _detect_in_pipe_frame(cloud, radius, cfg, sub)
+
+
 def _start_recheck(
     cloud: PipeCloud,
     det: Detection,
@@ -547,14 +573,10 @@ def _start_recheck(
     else:
         cloud.set_pose(refined)
         axis_info = {**info, "axis_pass": 3, "axis_wall_until": u_cap}
-    skip = ("axis_", "wall_radius", "tolerance_floor")
-    sub = {k: v for k, v in diag_pose.items() if not k.startswith(skip)}
-    sub.update(axis_info)
-    radius = _wall_radius(cloud, big_r, cfg, u_cap, sub)
-    if floor is not None:
-        cloud.floor = _scatter_floor(cfg, sub.get("wall_radius_rms", fits[best][3]))
-        sub["tolerance_floor"] = cloud.floor
-    redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
+    wall_rms = fits[best][3]
+    radius, redone = _detect_again(
+        cloud, cfg, diag_pose, axis_info, big_r, u_cap, floor, lambda _: wall_rms
+    )
     if redone.kind != det.kind:  # (the structure stands; so does the pose it was found under)
         cloud.restore(chosen, xyz_chosen)
         cloud.floor = floor
@@ -587,16 +609,16 @@ def _torus_pose_check(
     if not _pose_moved(chosen, pose0, big_r):
         return None
     cloud.restore(pose0, xyz0)
-    skip = ("axis_", "wall_radius", "tolerance_floor")
-    sub = {k: v for k, v in diag_pose.items() if not k.startswith(skip)}
-    sub["axis_pass"] = 0
-    radius = _wall_radius(cloud, big_r, cfg, wall_until, sub)
-    if floor is not None:
-        n_ok, _, _, wall_rms = _wall_count(cloud, radius, cfg, pose0, wall_until)
-        if n_ok:
-            cloud.floor = _scatter_floor(cfg, sub.get("wall_radius_rms", wall_rms))
-            sub["tolerance_floor"] = cloud.floor
-    redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
+    radius, redone = _detect_again(
+        cloud,
+        cfg,
+        diag_pose,
+        {"axis_pass": 0},
+        big_r,
+        wall_until,
+        floor,
+        lambda r: _wall_count(cloud, r, cfg, pose0, wall_until)[3],
+    )
     rms0 = redone.diagnostics.get("torus_rms")
     if (
         redone.kind == det.kind

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from detector_scans import match, rot_tilt, scan_layout, wrap
 
-from detector import Detection, detect
+from detector import Detection, StructureOption, detect
 from detector.robust import robust_gauss_newton
 from pipe_env.geometry import Pose
 
@@ -34,6 +34,25 @@ def _assert_ways_within(
         assert abs(o.angle - t.angle) < math.radians(angle_deg), det.describe()
         if direction_deg is not None:
             assert abs(wrap(o.direction - t.direction)) < math.radians(direction_deg)
+
+
+def _long_bend_seen(
+    distance: float, diameter: float, angle: float, direction: float, radius_factor: float
+) -> tuple[Detection, StructureOption, StructureOption]:
+    """A long bend's reference point ``distance`` m ahead (ideal sensor), detected: the
+    detection (asserted a bend), its option and the true one."""
+    scan, truth, d = scan_layout(
+        "long_bend",
+        distance,
+        diameter=diameter,
+        angle=angle,
+        direction=direction,
+        radius_factor=radius_factor,
+    )
+    det = detect(scan, d)
+    assert det.kind == "bend", det.describe()
+    ((o, t),) = match(det.options, truth)
+    return det, o, t
 
 
 def test_widening_with_an_end_wall_far_down_is_a_reducer():
@@ -497,17 +516,7 @@ def test_long_bend_axis_is_chosen_on_the_wall_before_its_arc(
     # the first centimetres of a gentle arc lie within the wall tolerance: the wall the pose
     # was chosen on reached 2-3 cm into the arc, and the axis refined on it leaned onto the
     # arc, tilting the bend's angle by as much
-    scan, truth, d = scan_layout(
-        "long_bend",
-        distance,
-        diameter=diameter,
-        angle=angle,
-        direction=direction,
-        radius_factor=radius_factor,
-    )
-    det = detect(scan, d)
-    assert det.kind == "bend", det.describe()
-    ((o, t),) = match(det.options, truth)
+    det, o, t = _long_bend_seen(distance, diameter, angle, direction, radius_factor)
     assert abs(o.angle - t.angle) < math.radians(0.5), det.describe()
     assert abs(o.distance - t.distance) < 0.005, det.describe()
     assert abs(o.bend_radius - t.bend_radius) < 0.01, det.describe()
@@ -517,12 +526,7 @@ def test_long_bend_fit_runs_down_its_narrow_valley():
     # the reference point, the angle and the arc radius of a long bend trade off: ten
     # iterations stopped 7 mm short and 2.9 deg shallow, and that loose fit (1.5 mm rms)
     # passed for good enough to skip the second start
-    scan, truth, d = scan_layout(
-        "long_bend", 0.15, diameter=0.125, angle=0.8817, direction=-2.2754, radius_factor=1.9355
-    )
-    det = detect(scan, d)
-    assert det.kind == "bend", det.describe()
-    ((o, t),) = match(det.options, truth)
+    det, o, t = _long_bend_seen(0.15, 0.125, 0.8817, -2.2754, 1.9355)
     assert abs(o.angle - t.angle) < math.radians(0.5), det.describe()
     assert abs(o.distance - t.distance) < 0.005, det.describe()
     assert det.diagnostics["torus_rms"] < 0.0005
@@ -708,18 +712,8 @@ def test_long_bend_starting_right_ahead_keeps_the_given_pose(
     # the arc starts 0.5-2.5 cm ahead and fills the view: the axis refined on the nearest
     # wall-like returns was a cylinder laid into the arc's start, and the torus fitted under it
     # missed its returns by 1.6 mm; under the given pose it fits them to 0.15 mm
-    scan, truth, d = scan_layout(
-        "long_bend",
-        distance,
-        diameter=diameter,
-        angle=angle,
-        direction=direction,
-        radius_factor=radius_factor,
-    )
-    det = detect(scan, d)
-    assert det.kind == "bend", det.describe()
+    det, o, t = _long_bend_seen(distance, diameter, angle, direction, radius_factor)
     assert "torus_pose_check" in det.diagnostics, det.describe()
-    ((o, t),) = match(det.options, truth)
     assert abs(o.angle - t.angle) < math.radians(1.0), det.describe()
     assert abs(o.distance - t.distance) < 0.005, det.describe()
 
@@ -727,11 +721,6 @@ def test_long_bend_starting_right_ahead_keeps_the_given_pose(
 def test_long_bend_angle_is_polished_on_returns_spread_along_the_arc():
     # the returns from the last degrees of the arc are a few dozen of thousands, and an even
     # subsample of the returns holds two or three of them: the torus stopped 1.4 deg short
-    scan, truth, d = scan_layout(
-        "long_bend", 0.225, diameter=0.1, angle=1.2528, direction=-1.2496, radius_factor=2.7350
-    )
-    det = detect(scan, d)
-    assert det.kind == "bend", det.describe()
-    ((o, t),) = match(det.options, truth)
+    det, o, t = _long_bend_seen(0.225, 0.1, 1.2528, -1.2496, 2.7350)
     assert abs(o.angle - t.angle) < math.radians(0.5), det.describe()
     assert abs(o.distance - t.distance) < 0.005, det.describe()
