@@ -65,9 +65,10 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    leave more than 5 % of its returns out, and the better fit is kept. For a noiseless sensor
    the torus is then polished on returns spread evenly along the axis (the few returns from
    the far end of the arc fix its angle; an even subsample of all returns holds two or three
-   of them). An arc that starts right ahead fills the view with curved wall, and an axis
-   refined on the nearest wall-like returns is laid into it: when the torus fits the returns
-   twice as closely under the given pose, the given pose stands.
+   of them; the polish refines the bend, the unpolished fit decides whether there is one).
+   An arc that starts right ahead fills the view with curved wall, and an axis refined on the
+   nearest wall-like returns is laid into it: when the torus fits the returns 1.5 times as
+   closely under the given pose, the given pose stands.
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
    circumference; its option has the clamped diameter. Its side branches are no wider than the
@@ -183,9 +184,10 @@ NEAR_WALL = 0.03
 #: The pose of a long-radius bend or a reducer is chosen again on the wall ending this far
 #: (m) before the fitted arc or taper starts, when it was chosen on wall returns past that.
 GENTLE_START_MARGIN = 0.01
-#: A long bend's torus under the given pose fitting this many times more closely (rms) than
-#: under the refined one: the refinement was laid into the arc, the given pose stands.
-TORUS_POSE_RATIO = 2.0
+#: A long bend's torus under the given pose fitting this many times more closely (rms, before
+#: any polish) than under the refined one: the refinement was laid into the arc, the given
+#: pose stands (under range noise both fit to the noise, and the ratio stays near 1).
+TORUS_POSE_RATIO = 1.5
 
 
 # --------------------------------------------------------------------------- main entry

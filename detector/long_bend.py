@@ -153,6 +153,12 @@ def _fit_torus(
     if best is None:
         return None
     x, rms, sup = best
+    # the evidence for the model (rms and support over ``p``) is the fit's before any polish:
+    # the polish refines a bend's parameters, it does not decide whether there is a bend
+    res_full = _torus_dist(p, x[0], x[1], x[2], x[4]) - x[3]
+    ok = np.abs(res_full) < c_fin
+    n_ok = int(ok.sum())
+    rms_full = float(np.sqrt(np.mean(res_full[ok] ** 2))) if n_ok else math.inf
     if p_fit is not None and p_fit.shape[0] >= 40:
         # polish on the returns spread along the axis, from the fit found, the pipe's radius
         # held: the far end of the arc, a few returns of hundreds, fixes the angle (kept when
@@ -181,13 +187,10 @@ def _fit_torus(
         )
         if spread_cost(x2) < spread_cost(x):
             x = x2
-    res_full = _torus_dist(p, x[0], x[1], x[2], x[4]) - x[3]
+            ok = np.abs(_torus_dist(p, x[0], x[1], x[2], x[4]) - x[3]) < c_fin
     _, ang = _torus_parts(p, x[0], x[1], x[2], x[4])
-    ok = np.abs(res_full) < c_fin
     vis = float(np.max(ang[ok])) if ok.any() else 0.0
-    sup_full = int(ok.sum() * (p.shape[0] / max(sub.shape[0], 1)) / (p.shape[0] / sub.shape[0]))
-    rms_full = float(np.sqrt(np.mean(res_full[ok] ** 2))) if ok.any() else math.inf
-    return x, rms_full, int(ok.sum()) if sup_full >= 0 else sup, vis
+    return x, rms_full, n_ok, vis
 
 
 def _spread_along_axis(
