@@ -90,8 +90,9 @@ def _fit_torus(
 ) -> tuple[NDArray, float, int, float] | None:
     """Long-radius bend fit to the returns ``p`` from two bend-radius starts (the second is
     skipped when the first explains nearly every return within twice their ``noise``, m),
-    polished on the returns ``p_fit`` when given; returns (x, rms, support, largest arc angle
-    seen), the last three over ``p``."""
+    polished on the returns ``p_fit`` when given. Returns (x, rms, support, largest arc angle
+    seen): ``x`` polished, the rms (m) and support of the fit before the polish, the arc angle
+    (rad) of the polished bend; the last three over ``p``."""
     sub = p[_subsample(np.arange(p.shape[0]), 300)]
     steps = np.vstack([np.zeros(4), np.diag(np.full(4, 1e-6))])  # (5, 4)
     cols = np.array([0, 1, 2, 4])
