@@ -51,6 +51,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from detector import detect, detect_planar  # noqa: E402
 from detector.detection import Detection  # noqa: E402
 from detector.options import StructureOption  # noqa: E402
+from detector.scan import Scan  # noqa: E402
 from pipe_env import layouts  # noqa: E402
 from pipe_env.geometry import Pose  # noqa: E402
 from pipe_env.lidar import RotatingLidar  # noqa: E402
@@ -261,7 +262,7 @@ def arc_lead(case: Case) -> float:
 ARC_END_MARGIN = math.radians(0.5)
 
 
-def arc_end_seen(case: Case, dist: float, scan) -> bool | None:
+def arc_end_seen(case: Case, dist: float, scan: Scan) -> bool | None:
     """Do the returns of a long bend's scan (sensor centred and aligned, ``dist`` m before the
     reference point) reach the end of its arc? Short of it, the bend's angle is not in the
     scan: any larger angle fits the returns as well, and only a lower bound can be read.

@@ -1,0 +1,55 @@
+"""The accuracy study's own geometry: whether a long bend's scan reaches the end of its arc."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+import pytest
+from detector_scans import scan_layout
+
+_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_detection.py"
+_spec = importlib.util.spec_from_file_location("bench_detection", _PATH)
+bench = importlib.util.module_from_spec(_spec)
+sys.modules["bench_detection"] = bench  # (its dataclasses look their module up)
+_spec.loader.exec_module(bench)
+
+
+@pytest.mark.parametrize(
+    ("distance", "params", "seen"),
+    [
+        # a gentle 47 deg bend of 57 mm: its whole arc is in view from 40 cm
+        (
+            0.4,
+            {"diameter": 0.057, "angle": 0.8147, "direction": 2.7253, "radius_factor": 1.8903},
+            True,
+        ),
+        # a 74 deg, 3 D bend of 75 mm: from 40 cm the beams reach 53 deg into its arc
+        (
+            0.4,
+            {"diameter": 0.075, "angle": 1.2981, "direction": 1.7289, "radius_factor": 2.9862},
+            False,
+        ),
+        # the same bend from 17.5 cm, where its arc starts: now the returns reach its end
+        (
+            0.175,
+            {"diameter": 0.075, "angle": 1.2981, "direction": 1.7289, "radius_factor": 2.9862},
+            True,
+        ),
+    ],
+)
+def test_long_bend_arc_end_seen(distance: float, params: dict, seen: bool) -> None:
+    scan, _, d = scan_layout("long_bend", distance, **params)
+    case = bench.Case("long bend", "long_bend", params, d)
+    assert bench.arc_end_seen(case, distance, scan) is seen
+
+
+def test_other_layouts_have_no_arc() -> None:
+    scan, _, d = scan_layout("closure", 0.3, diameter=0.1)
+    assert (
+        bench.arc_end_seen(bench.Case("closure", "closure", {"diameter": 0.1}, d), 0.3, scan)
+        is None
+    )
+    assert math.isclose(bench.ARC_END_MARGIN, math.radians(0.5))
