@@ -118,6 +118,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -222,7 +223,7 @@ def detect_improved(
         bias = 0.0
     diag: dict[str, Any] = {"method": "improved", "n_points": int(scan.n_valid)}
     # (the given pose, its points, the radius and the wall's extent the pose was chosen on)
-    recheck: tuple[SensorInPipe, NDArray[np.float64], float, float] | None = None
+    recheck: GivenPose | None = None
     try:
         cloud = _prepare(scan, pose0, bias, config)
         reach = _blocked_within_min_range(scan, cloud, big_r)
@@ -340,7 +341,7 @@ def detect_improved(
                 cloud.restore(pose, xyz_of[best])
             else:
                 cloud.set_pose(pose)
-            recheck = (pose0, xyz_of[0], big_r, u_near)
+            recheck = GivenPose(pose0, xyz_of[0], big_r, u_near)
             big_r = _wall_radius(cloud, big_r, config, u_near, diag)
             # a noiseless wall fitted closely: the tolerance floor shrinks towards its scatter
             # (under the given pose, the wall returns' own scatter about it)
@@ -352,10 +353,10 @@ def detect_improved(
         diag_pose = dict(diag) if recheck is not None else diag
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
         if recheck is not None:
-            redone = _start_recheck(cloud, det, config, diag_pose, *recheck)
+            redone = _start_recheck(cloud, det, config, diag_pose, recheck)
             if redone is not None:
                 big_r, det = redone
-            redone = _torus_pose_check(cloud, det, config, diag_pose, *recheck)
+            redone = _torus_pose_check(cloud, det, config, diag_pose, recheck)
             if redone is not None:
                 big_r, det = redone
         det = _with_ring_holes(cloud, big_r, det, config)
@@ -497,6 +498,18 @@ def _with_ring_holes(
 
 
 # --------------------------------------------------------------------------- the pose again
+@dataclass(frozen=True)
+class GivenPose:
+    """What a check of the chosen pose goes back to: the given pose, its points (``(3, N)``,
+    pipe frame), the pipe radius (m) and how far along the axis the wall the pose was chosen
+    on reaches (m)."""
+
+    pose: SensorInPipe
+    xyz: NDArray[np.float64]
+    radius: float
+    wall_until: float
+
+
 def _gentle_start(det: Detection) -> float | None:
     """Where a structure that leaves the wall gradually starts, m along the axis: a long
     bend's arc (``bend_radius x tan(angle / 2)`` before its reference point), a reducer's
@@ -529,7 +542,8 @@ def _detect_again(
     sub.update(axis_info)
     radius = _wall_radius(cloud, big_r, cfg, wall_until, sub)
     if floor is not None:
-        cloud.floor = _scatter_floor(cfg, sub.get("wall_radius_rms", wall_rms(radius)))
+        rms = sub.get("wall_radius_rms")
+        cloud.floor = _scatter_floor(cfg, wall_rms(radius) if rms is None else rms)
         sub["tolerance_floor"] = cloud.floor
     return radius, _detect_in_pipe_frame(cloud, radius, cfg, sub)
 
@@ -539,10 +553,7 @@ def _start_recheck(
     det: Detection,
     cfg: ImprovedConfig,
     diag_pose: dict[str, Any],
-    pose0: SensorInPipe,
-    xyz0: NDArray[np.float64],
-    big_r: float,
-    wall_until: float,
+    given: GivenPose,
 ) -> tuple[float, Detection] | None:
     """A long-radius bend's arc, or a gentle taper, leaves the straight wall so slowly that its
     first centimetres lie within the wall tolerance: the pose was chosen on wall returns up to
@@ -551,6 +562,7 @@ def _start_recheck(
     given pose, the chosen one, or the axis refined there): the most returns within the
     tolerance, then the closest fit. ``(radius, detection)`` under the new pose when it moved
     and the structure kept its kind, else ``None`` (the cloud keeps its pose)."""
+    pose0, xyz0, big_r, wall_until = given.pose, given.xyz, given.radius, given.wall_until
     start = _gentle_start(det)
     if start is None or (det.kind == "reducer" and cloud.floor is None):
         # (a reducer under range noise: its tolerance is the noise's, and a pose chosen again
@@ -592,10 +604,7 @@ def _torus_pose_check(
     det: Detection,
     cfg: ImprovedConfig,
     diag_pose: dict[str, Any],
-    pose0: SensorInPipe,
-    xyz0: NDArray[np.float64],
-    big_r: float,
-    wall_until: float,
+    given: GivenPose,
 ) -> tuple[float, Detection] | None:
     """A long-radius bend whose arc starts a few centimetres ahead fills the view with curved
     wall: an axis refined on the nearest wall-like returns is a cylinder laid into the arc's
@@ -604,6 +613,7 @@ def _torus_pose_check(
     one and the bend's torus fits the returns under the given pose at most ``TORUS_POSE_RATIO``
     times as loosely (rms), the given pose and its detection stand. ``(radius, detection)``
     then, else ``None`` (the cloud keeps its pose)."""
+    pose0, xyz0, big_r, wall_until = given.pose, given.xyz, given.radius, given.wall_until
     rms = det.diagnostics.get("torus_rms")
     if det.kind != "bend" or det.diagnostics.get("model") != "torus" or rms is None:
         return None
