@@ -170,3 +170,25 @@ def test_too_many_pairs_for_the_pool_fall_back_to_automatic_collisions() -> None
     assert _same(_near(ex, ex.data), _automatic(ex, ex.data))
     ex.run(go_straight(0.05))
     assert near.overruns == 0
+
+
+def test_static_walls_posed_once_change_nothing_in_the_robot_drive() -> None:
+    """The world poses its static wall geoms once (MuJoCo's sleeping, with the robot kept
+    awake): the drive is bit-for-bit the drive with every geom posed at every step."""
+    net = layouts.t_junction(0.09, direction=math.pi / 2)
+    sleep = int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    results = []
+    for posed_once in (True, False):
+        ex = Executor.for_network(net, lidar=None)
+        assert bool(ex.model.opt.enableflags & sleep)
+        assert np.all(ex.model.tree_sleep_policy == mujoco.mjtSleepPolicy.mjSLEEP_NEVER)
+        if not posed_once:
+            ex.model.opt.enableflags &= ~sleep
+        ex.run(go_straight(0.1))
+        status = _turn(ex, net)
+        assert ex.data.ntree_awake == ex.model.ntree  # (the robot never slept)
+        results.append((status, ex.data.qpos.copy(), ex.data.geom_xpos.copy(), ex.data.time))
+    (s0, q0, g0, t0), (s1, q1, g1, t1) = results
+    assert s0 == s1 == "done" and t0 == t1
+    assert np.array_equal(q0, q1)
+    assert np.array_equal(g0, g1)  # the walls too (and the robot's geoms)
