@@ -18,9 +18,12 @@ adds a little to every step: the figures are ratios within the same run.
 
 ``--contacts near,all`` runs the same episodes twice: with the robot colliding only with the
 wall pieces near it (the default) and with MuJoCo's automatic collisions against all of them
-(the reference), and prints both.
+(the reference), and prints both. ``--walls once,every`` does the same for the static wall
+geoms: posed once (the default, MuJoCo's sleeping with the robot kept awake) or at every step
+(the reference). Two runs print their ratio.
 
 Usage: python benchmarks/bench_physics.py [--episodes 3] [--seed 0] [--contacts near,all]
+[--walls once,every]
 """
 
 from __future__ import annotations
@@ -94,7 +97,7 @@ class _Clock:
         self._undo.clear()
 
 
-def run(contacts: str, episodes: int, seed: int) -> dict[str, Any]:
+def run(contacts: str, episodes: int, seed: int, walls: str = "once") -> dict[str, Any]:
     """Episodes of random valid actions on fresh seeded networks; the time split."""
     clock = _Clock()
     clock.wrap(Executor, "_physics", "physics")
@@ -111,6 +114,8 @@ def run(contacts: str, episodes: int, seed: int) -> dict[str, Any]:
         ex = original_for_network(cls, *args, **kwargs)
         if contacts == "all":
             ex.use_near_contacts(False)
+        if walls == "every":
+            ex.model.opt.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
         made.append(ex)
         return ex
 
@@ -159,6 +164,7 @@ def run(contacts: str, episodes: int, seed: int) -> dict[str, Any]:
         mj["rest of the step"] = 1.0 - sum(mj.values())
     return {
         "contacts": contacts,
+        "walls": walls,
         "episodes": episodes,
         "decisions": decisions,
         "wall_s": round(wall, 2),
@@ -180,15 +186,26 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=3)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--contacts", default="near", help="comma-separated: near, all")
+    parser.add_argument("--walls", default="once", help="comma-separated: once, every")
     parser.add_argument("--json", default=None)
     args = parser.parse_args()
-    modes = [c.strip() for c in args.contacts.split(",") if c.strip()]
-    bad = set(modes) - {"near", "all"}
-    if bad:
-        parser.error(f"--contacts has {sorted(bad)}; allowed: near, all")
-    results = [run(mode, args.episodes, args.seed) for mode in modes]
+    choices = {"contacts": ("near", "all"), "walls": ("once", "every")}
+    picked = {}
+    for name, allowed in choices.items():
+        picked[name] = [c.strip() for c in getattr(args, name).split(",") if c.strip()]
+        bad = set(picked[name]) - set(allowed)
+        if bad or not picked[name]:
+            parser.error(f"--{name} has {sorted(bad)}; allowed: {', '.join(allowed)}")
+    results = [
+        run(contacts, args.episodes, args.seed, walls)
+        for contacts in picked["contacts"]
+        for walls in picked["walls"]
+    ]
     for r in results:
-        print(f"\n## contacts={r['contacts']}: {r['episodes']} episodes, seed {args.seed}\n")
+        print(
+            f"\n## contacts={r['contacts']}, walls={r['walls']}: {r['episodes']} episodes, "
+            f"seed {args.seed}\n"
+        )
         print(
             f"{r['decisions']} decisions in {r['wall_s']} s: {r['decisions_per_s']} decisions/s, "
             f"{r['sim_s_per_wall_s']} sim s per wall s; {r['mj_steps']} MuJoCo steps, "
@@ -207,8 +224,9 @@ def main() -> None:
             print(f"\nnear-contact pair selections etc.: {r['near_contacts']}")
     if len(results) == 2:
         a, b = results
+        label = "contacts" if a["contacts"] != b["contacts"] else "walls"
         print(
-            f"\n{a['contacts']} / {b['contacts']}: decisions/s x"
+            f"\n{label} {a[label]} / {b[label]}: decisions/s x"
             f"{a['decisions_per_s'] / b['decisions_per_s']:.2f}, MuJoCo step time x"
             f"{b['us_per_mj_step'] / a['us_per_mj_step']:.2f} faster"
         )
