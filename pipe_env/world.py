@@ -18,6 +18,9 @@ contact parameters, and switches the world body's automatic collisions off; it r
 pairs before the geoms can have moved by the reach, and falls back to automatic collisions if the
 pool is too small. The contacts are the same as the automatic ones (tests compare them).
 
+The wall geoms never move: MuJoCo poses them once, not at every physics step (its sleeping is
+on, with every moving body kept awake; see :func:`_static_walls_posed_once`).
+
 Open ends do not exist: every leaf of a network is a closure with an end wall, so rays cannot
 escape. Callers can add bodies (a robot) through the ``customize`` hook before compilation.
 """
@@ -217,7 +220,7 @@ def _static_walls_posed_once(spec: mujoco.MjSpec) -> None:
 
     With sleeping enabled, MuJoCo computes the poses of geoms on static bodies (the world
     body: every wall piece) once and skips them in the kinematics of later steps; with
-    ~1,300 wall geoms that was about a third of an mj_step. Every moving body tree (the
+    ~1,300 wall geoms that was about 40 % of an mj_step. Every moving body tree (the
     robot) is kept awake (``mjSLEEP_NEVER``), so nothing else changes: the dynamics are
     bit-for-bit those without sleeping (a test compares trajectories).
     """
