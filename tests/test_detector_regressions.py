@@ -168,6 +168,47 @@ def test_noisy_tee_far_along_its_run_is_placed_by_the_hole_in_the_wall():
         assert abs(o.diameter - t.diameter) < 0.005
 
 
+@pytest.mark.parametrize(
+    ("distance", "seed", "params"),
+    [
+        # 35 deg at the free fit: held at 45 deg from the same reference point, the branch
+        # missed the few returns through the opening (the held fit did not move; 3.3 cm off)
+        (0.4, 35, {"diameter": 0.1, "branch_diameter": 0.066, "direction": 0.36}),
+        # held at 45 deg from where its hole is, it fits them nearly as well: 2.5 cm -> 0.6 cm
+        (0.325, 24, {"diameter": 0.075, "branch_diameter": 0.074, "direction": -0.48}),
+    ],
+)
+def test_noisy_wye_far_along_its_run_is_held_at_45_deg_where_its_hole_is(
+    distance: float, seed: int, params: dict
+) -> None:
+    # range noise, a run that goes on: the returns through the opening leave the deflection
+    # and the reference point trading against each other, a standard angle is the estimate
+    scan, truth, d = scan_layout(
+        "y_junction", distance, sensor="ydlidar_x4", seed=seed, entry="run", **params
+    )
+    det = detect(scan, d)
+    assert det.diagnostics.get("standard_angles") == 1, det.describe()
+    _assert_ways_within(det, truth, 2, 0.02, None, 5.0, 5.0)  # the thesis requirements
+
+
+def test_a_deflection_halfway_between_two_standard_angles_tries_both():
+    # (ydlidar_x4) a 90 deg tee's branch seen at 67.5 deg through a far opening: 45 deg, the
+    # first of the two nearest, did not fit, and 90 deg was never tried (22.5 deg and 2.6 cm
+    # off; its direction, from a dozen returns, stays 5.4 deg off)
+    scan, truth, d = scan_layout(
+        "t_junction",
+        0.375,
+        sensor="ydlidar_x4",
+        seed=68,
+        diameter=0.1,
+        branch_diameter=0.066,
+        direction=0.61,
+        entry="run",
+    )
+    det = detect(scan, d)
+    _assert_ways_within(det, truth, 2, 0.02, None, 5.0)
+
+
 def test_noisy_bend_far_away_does_not_turn_back():
     # a single way on with no run going on is a bend (at most 90 deg): the few noisy returns
     # through a far opening once settled on a 150 deg deflection 10 cm beyond the bend
