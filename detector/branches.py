@@ -720,12 +720,11 @@ def _standard_angles(
         starts = []
         # (a free deflection resting on the limits of any branch fit measured nothing: no
         # hole to keep; a hole's own bounds, a few degrees either side, are measured ones)
-        on_bound = any(
+        if run_radius is not None and not any(
             x[i] <= DEFLECTION_LIMITS[0] + math.radians(1.0)
             or x[i] >= DEFLECTION_LIMITS[1] - math.radians(1.0)
             for i in idx
-        )
-        if run_radius is not None and not on_bound:
+        ):
             shift = float(
                 np.mean(
                     [
