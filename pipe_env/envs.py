@@ -64,6 +64,7 @@ from pipe_env.network import PipeNetwork
 from pipe_env.plant import (
     BACK_OUT,
     Decision,
+    EdgeState,
     KinematicPlant,
     Outcome,
     drivable,
@@ -71,7 +72,16 @@ from pipe_env.plant import (
     match_option,
     option_vector,
 )
-from pipe_env.routing import MAX_TURN, edge_geodesic, edge_length, locate, route, turn_angle
+from pipe_env.routing import (
+    MAX_TURN,
+    EdgePosition,
+    edge_geodesic,
+    edge_length,
+    edge_position,
+    locate,
+    route,
+    turn_angle,
+)
 from pipe_env.sensing_model import DETECTORS, error_model_for
 from pipe_env.way_log import WayLog
 
@@ -392,9 +402,14 @@ class _DecisionEnv(gym.Env):
                 return None, events
             if outcome.status != "done":
                 events["auto_" + outcome.status] = True
+                self.plant.decision = dec
                 if outcome.status == "jammed":
                     self._count_jam(events, "auto_jammed", outcome.note)
-                self.plant.decision = dec
+                    if not self.terminated:
+                        # the robot backed off the structure and decides on fresh sweeps (as
+                        # after a jam on a way the agent chose)
+                        dec, _ = self.plant.resense()
+                        self._after_sensing(dec)
                 self.decision_points.append(dec.pose.position)
                 return dec, events
         self.truncated = True  # a pathological chain of single ways: stop, it is not an outcome
@@ -743,17 +758,40 @@ class PipeExploreEnv(_DecisionEnv):
         super()._record(outcome)
         if outcome.status == "back_out":
             return  # reversing over pipe already seen
-        waypoints = outcome.path
+        # (the kinematic plant's path holds edge states; the physical plant's, sensor
+        # positions along the driven path, m)
+        waypoints = [
+            w
+            if isinstance(w, EdgeState)
+            else edge_position(self.network, self.network.centreline.nearest(w))
+            for w in outcome.path
+        ]
         for a, b in zip(waypoints[:-1], waypoints[1:]):
             if a.run_id == b.run_id:
                 self._cover(a.run_id, min(a.s, b.s), max(a.s, b.s))
-            else:  # through a fitting: to its centre on one run, from it on the next
-                ra = self.network.run_by_id[a.run_id]
-                end_a = edge_length(self.network, ra.id) if a.towards == ra.b else 0.0
-                self._cover(ra.id, min(a.s, end_a), max(a.s, end_a))
-                rb = self.network.run_by_id[b.run_id]
-                start_b = 0.0 if b.towards == rb.b else edge_length(self.network, rb.id)
-                self._cover(rb.id, min(b.s, start_b), max(b.s, start_b))
+                continue
+            crossing = self._crossing(a, b)
+            if crossing is None:  # (not neighbouring runs: nothing known in between)
+                continue
+            # through a fitting: to its centre on one run, from it on the next
+            left, entered = crossing
+            ra = self.network.run_by_id[a.run_id]
+            end_a = edge_length(self.network, ra.id) if left == ra.b else 0.0
+            self._cover(ra.id, min(a.s, end_a), max(a.s, end_a))
+            rb = self.network.run_by_id[b.run_id]
+            start_b = edge_length(self.network, rb.id) if entered == rb.b else 0.0
+            self._cover(rb.id, min(b.s, start_b), max(b.s, start_b))
+
+    def _crossing(
+        self, a: EdgeState | EdgePosition, b: EdgeState | EdgePosition
+    ) -> tuple[str, str] | None:
+        """The fittings through which a path leaves ``a``'s run and enters ``b``'s: from the
+        headings of edge states, else the fitting the two runs share (``None``: none)."""
+        ra, rb = self.network.run_by_id[a.run_id], self.network.run_by_id[b.run_id]
+        if isinstance(a, EdgeState) and isinstance(b, EdgeState):
+            return a.towards, (rb.a if b.towards == rb.b else rb.b)
+        shared = [n for n in (ra.a, ra.b) if n in (rb.a, rb.b)]
+        return (shared[0], shared[0]) if shared else None
 
     def _cover(self, run_id: str, a: float, b: float) -> None:
         spans = self.covered.setdefault(run_id, [])

@@ -149,7 +149,7 @@ class PhysicalPlant:
         #: odometer: forward distance
         self.junctions: list[tuple[float, str, float]] = []
         self._odometer = 0.0
-        self._start_diameter = self.clamped_diameter
+        self._start_diameter = self.read_clamp()
         self._decision_diameter = self._start_diameter
 
     def pose(self) -> Pose:
@@ -163,6 +163,13 @@ class PhysicalPlant:
 
     @property
     def clamped_diameter(self) -> float:
+        """The clamp encoders' reading (m) taken at the last decision (at the start before
+        any): reading it draws no noise, so observing or rendering leaves the run as it is."""
+        return self._decision_diameter
+
+    def read_clamp(self) -> float:
+        """A fresh reading of the clamp encoders (m, with their noise, from the plant's
+        generator)."""
         return float(self.robot.clamped_diameter(self.rng))
 
     @property
@@ -351,7 +358,7 @@ class PhysicalPlant:
 
     def _decision(self, why: str | None) -> Decision:
         pose = self.pose()
-        self._decision_diameter = self.clamped_diameter
+        self._decision_diameter = self.read_clamp()
         node, entry, truth = self._truth(pose)
         if why == "blind":
             dist = truth[0].distance if truth else 0.0
@@ -407,7 +414,7 @@ class PhysicalPlant:
                 )
             return self._back_out(dec)
         odometer_at_decision = self._odometer
-        sequence = for_option(choice, incoming_diameter=self.clamped_diameter)
+        sequence = for_option(choice, incoming_diameter=self.read_clamp())
         outcome = self.executor.run(sequence, rng=self.rng)
         self._account(outcome, out)
         self._odometer += abs(float(outcome.travelled))

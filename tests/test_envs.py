@@ -328,3 +328,57 @@ def test_explore_is_deterministic_across_processes() -> None:
         assert proc.returncode == 0, proc.stderr
         out.add(proc.stdout.strip())
     assert len(out) == 1
+
+
+def test_an_automatic_way_that_jams_is_sensed_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The environment took a single way by itself and it jammed: the robot backed off and
+    the agent decides on fresh sweeps (the estimate that jammed is not offered again, where
+    the fast fidelity would jam on it once more)."""
+    from pipe_env.plant import KinematicPlant
+
+    resensed = []
+    original = KinematicPlant.resense
+
+    def counting(self: KinematicPlant):  # noqa: ANN202
+        resensed.append(self.decision)
+        return original(self)
+
+    monkeypatch.setattr(KinematicPlant, "resense", counting)
+    env = gym.make("pipenav/PipeNav-v0", detector="improved", lidar="ydlidar_x4")
+    obs, info = env.reset(seed=0)
+    assert info["auto_jammed"]
+    assert len(resensed) == 1
+    offered = env.unwrapped.decision
+    assert offered is not resensed[0] and offered.options
+
+
+def test_full_fidelity_run_is_unchanged_by_rendering() -> None:
+    """Observing or rendering reads the clamp encoders without drawing from the plant's
+    random generator: the physical run stays the same."""
+    net = layouts.t_junction(0.1, direction=0.0, distance=0.4).with_goals([[0, 0.5, 0]])
+    runs = []
+    for renders in (0, 3):
+        env = gym.make(
+            "pipenav/PipeNav-v0",
+            network=net,
+            fidelity="full",
+            detector="improved",
+            render_mode="ansi",
+        )
+        obs, info = env.reset(seed=0)
+        for _ in range(renders):
+            env.render()
+        obs, reward, term, trunc, info = env.step(0)
+        runs.append((obs["proprio"].tobytes(), obs["goal"].tobytes(), reward, info["travelled"]))
+    assert runs[0] == runs[1]
+
+
+def test_explore_env_runs_in_full_fidelity() -> None:
+    """The physical plant's path is sensor positions: coverage maps them onto the network."""
+    net = layouts.t_junction(0.1, direction=0.0, distance=0.3)
+    env = gym.make("pipenav/PipeExplore-v0", network=net, fidelity="full", detector="ground_truth")
+    obs, info = env.reset(seed=0)
+    assert 0.0 < info["coverage"] < 1.0
+    covered = info["covered"]
+    obs, reward, term, trunc, info = env.step(int(np.flatnonzero(info["action_mask"])[0]))
+    assert info["covered"] > covered and info["reward_terms"]["coverage"] > 0.0
