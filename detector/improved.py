@@ -125,6 +125,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.axis_fit import (
+    RADIUS_DEAD_BAND,
     _common_wall_fit,
     _intact,
     _pose_moved,
@@ -189,6 +190,15 @@ GENTLE_START_MARGIN = 0.01
 #: any polish) than under the refined one: the refinement was laid into the arc, the given
 #: pose stands (under range noise both fit to the noise, and the ratio stays near 1).
 TORUS_POSE_RATIO = 1.5
+#: A reducer under the given pose fitting its returns this many times more closely (rms) than
+#: the structure found under a refined pose: the refinement leaned onto the taper, the given
+#: pose stands (:func:`_taper_pose_check`).
+TAPER_POSE_RATIO = 1.25
+#: ... when the structure under the refined pose is a reducer, or a turn whose fit keeps less
+#: than this fraction of its returns.
+TAPER_POSE_POOR_SUPPORT = 0.6
+#: ... and the given pose's reducer keeps at least this fraction of its returns.
+TAPER_POSE_MIN_SUPPORT = 0.9
 
 
 # --------------------------------------------------------------------------- main entry
@@ -357,6 +367,12 @@ def detect_improved(
             if redone is not None:
                 big_r, det = redone
             redone = _torus_pose_check(cloud, det, config, diag_pose, recheck)
+            if redone is not None:
+                big_r, det = redone
+            redone = _taper_pose_check(cloud, det, config, diag_pose, recheck)
+            if redone is not None:
+                big_r, det = redone
+            redone = _taper_radius_check(cloud, det, config, diag_pose, r_clamped, big_r)
             if redone is not None:
                 big_r, det = redone
         det = _with_ring_holes(cloud, big_r, det, config)
@@ -643,6 +659,104 @@ def _torus_pose_check(
     cloud.restore(chosen, xyz_chosen)
     cloud.floor = floor
     return None
+
+
+def _fit_rms(det: Detection) -> float | None:
+    """How closely the model of ``det`` fits its returns (rms, m): a reducer's taper, a turn's
+    or junction's axes; ``None`` for the others."""
+    key = "reducer_rms" if det.kind == "reducer" else "fit_rms"
+    rms = det.diagnostics.get(key)
+    return float(rms) if rms is not None else None
+
+
+def _taper_pose_check(
+    cloud: PipeCloud,
+    det: Detection,
+    cfg: ImprovedConfig,
+    diag_pose: dict[str, Any],
+    given: GivenPose,
+) -> tuple[float, Detection] | None:
+    """Under range noise the first centimetres of a gentle taper lie within the wall
+    tolerance, so the wall the pose was chosen on runs onto it, and an axis refined there leans
+    onto its near side (0.3-4 deg): the narrower pipe comes out too wide (60-77 mm for 55), or
+    the taper's far side passes for a turn that fits half its returns. When the pose moved
+    from the given one and found a reducer, or a turn or junction keeping less than
+    ``TAPER_POSE_POOR_SUPPORT`` of its returns, detect again under the given pose: its reducer
+    stands when it keeps ``TAPER_POSE_MIN_SUPPORT`` of its returns and fits them at least
+    ``TAPER_POSE_RATIO`` times as closely (rms). ``(radius, detection)`` then, else ``None``
+    (the cloud keeps its pose)."""
+    pose0, xyz0, big_r, wall_until = given.pose, given.xyz, given.radius, given.wall_until
+    rms = _fit_rms(det)
+    if rms is None or det.diagnostics.get("start_recheck"):
+        return None
+    if det.kind != "reducer":
+        support = det.diagnostics.get("fit_support", 0) / max(
+            det.diagnostics.get("fit_points", 1), 1
+        )
+        if support >= TAPER_POSE_POOR_SUPPORT:
+            return None
+    chosen, xyz_chosen, floor = cloud.pose, cloud.xyz_v, cloud.floor
+    if not _pose_moved(chosen, pose0, big_r):
+        return None
+    cloud.restore(pose0, xyz0)
+    radius, redone = _detect_again(
+        cloud,
+        cfg,
+        diag_pose,
+        {"axis_pass": 0},
+        big_r,
+        wall_until,
+        floor,
+        lambda r: _wall_count(cloud, r, cfg, pose0, wall_until)[3],
+    )
+    rms0 = _fit_rms(redone)
+    if (
+        redone.kind == "reducer"
+        and rms0 is not None
+        and redone.diagnostics.get("axisymmetric_support", 0.0) >= TAPER_POSE_MIN_SUPPORT
+        and rms0 * TAPER_POSE_RATIO <= rms
+    ):
+        redone.diagnostics["taper_pose_check"] = {"chosen_rms": rms, "given_rms": rms0}
+        return radius, redone
+    cloud.restore(chosen, xyz_chosen)
+    cloud.floor = floor
+    return None
+
+
+def _taper_radius_check(
+    cloud: PipeCloud,
+    det: Detection,
+    cfg: ImprovedConfig,
+    diag_pose: dict[str, Any],
+    r_clamped: float,
+    big_r: float,
+) -> tuple[float, Detection] | None:
+    """Under range noise the first centimetres of a gentle contraction lie within the wall
+    tolerance, and the pipe radius measured on the wall up to where the returns leave it takes
+    them in: it comes out short (by up to 3.5 mm in a 100 mm pipe), and the taper's fitted start
+    moves on (1-3 cm). Measure the radius again on the wall before the fitted start (the
+    clamp's reading ``r_clamped``, m, when too little wall lies there) and detect again.
+    ``(radius, detection)`` when the radius changed and the structure is still a reducer, else
+    ``None`` (the detection under radius ``big_r`` stands)."""
+    if det.kind != "reducer" or not det.options or det.diagnostics.get("start_recheck"):
+        return None
+    opt = det.options[0]
+    if opt.diameter >= 2.0 * big_r:  # (a widening: its start is where the beams leave the wall)
+        return None
+    u_cap = opt.distance - GENTLE_START_MARGIN
+    probe: dict[str, Any] = {}
+    radius = _wall_radius(cloud, r_clamped, cfg, u_cap, probe)
+    if abs(radius - big_r) < RADIUS_DEAD_BAND:
+        return None
+    # (the pose and the tolerance floor stand: only the radius is measured again)
+    kept = {k: v for k, v in det.diagnostics.items() if k.startswith(("axis_", "tolerance_"))}
+    radius, redone = _detect_again(
+        cloud, cfg, diag_pose, kept, r_clamped, u_cap, None, lambda _: 0.0
+    )
+    if redone.kind != "reducer":
+        return None
+    redone.diagnostics["taper_radius_check"] = {"radius_before": big_r, "radius": radius}
+    return radius, redone
 
 
 # --------------------------------------------------------------------------- classification
