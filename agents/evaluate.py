@@ -47,18 +47,22 @@ class EvalResult:
 
 
 class SequentialNetworks(gym.Wrapper):
-    """Resets its environment on the given networks in order (cycling), for evaluations that
-    must see exactly those networks whatever calls ``reset``."""
+    """Resets its environment on the given networks in order (cycling), episode ``i`` on
+    ``networks[i]`` with seed ``first_seed + i`` whatever calls ``reset`` (a scripted loop, or
+    sb3's automatic resets, which pass no seed): every agent evaluated meets the same networks
+    with the same sensing noise."""
 
-    def __init__(self, env: gym.Env, networks: list[PipeNetwork]) -> None:
+    def __init__(self, env: gym.Env, networks: list[PipeNetwork], first_seed: int) -> None:
         super().__init__(env)
         self.networks = networks
+        self.first_seed = first_seed
         self.index = 0
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         network = self.networks[self.index % len(self.networks)]
+        episode_seed = self.first_seed + self.index
         self.index += 1
-        return self.env.reset(seed=seed, options={**(options or {}), "network": network})
+        return self.env.reset(seed=episode_seed, options={**(options or {}), "network": network})
 
     def action_masks(self) -> np.ndarray:
         return self.env.unwrapped.action_masks()
@@ -145,13 +149,13 @@ def evaluate(
         NetworkConfig.from_dict(config) if isinstance(config, dict) else (config or NetworkConfig())
     )
     networks = held_out_networks(cfg, n_episodes, pool_seed)
-    env = SequentialNetworks(gym.make(env_id, network_config=cfg, **kwargs), networks)
+    env = SequentialNetworks(gym.make(env_id, network_config=cfg, **kwargs), networks, pool_seed)
     t0 = time.perf_counter()
     if agent in SCRIPTED_AGENTS:
         actor: Any = make_agent(agent, env)
         infos = []
-        for i in range(n_episodes):
-            obs, info = env.reset(seed=pool_seed + i)
+        for _ in range(n_episodes):
+            obs, info = env.reset()
             actor.reset()
             done = False
             while not done:
@@ -159,7 +163,7 @@ def evaluate(
                 done = term or trunc
             infos.append(info)
     elif str(agent).endswith(".zip") and Path(agent).exists():
-        infos = _evaluate_policy(agent, env, n_episodes, pool_seed)
+        infos = _evaluate_policy(agent, env, n_episodes)
     else:
         raise ValueError(
             f"agent {agent!r} is neither a scripted agent {sorted(SCRIPTED_AGENTS)} "
@@ -169,7 +173,9 @@ def evaluate(
     return _summarise(agent, infos, time.perf_counter() - t0)
 
 
-def _evaluate_policy(path: str, env: gym.Env, n_episodes: int, seed: int) -> list[dict]:
+def _evaluate_policy(path: str, env: gym.Env, n_episodes: int) -> list[dict]:
+    """sb3-contrib's ``evaluate_policy`` (masks on, deterministic) on ``env``, a
+    :class:`SequentialNetworks` that seeds each episode itself; the final info of each."""
     import torch
     from sb3_contrib import MaskablePPO
     from sb3_contrib.common.maskable.evaluation import evaluate_policy
@@ -178,7 +184,6 @@ def _evaluate_policy(path: str, env: gym.Env, n_episodes: int, seed: int) -> lis
     torch.set_num_threads(1)
     model = MaskablePPO.load(str(path), device="cpu")
     venv = DummyVecEnv([lambda: env])
-    venv.seed(seed)
     finals: list[dict] = []
 
     def keep_final_info(local: dict, _global: dict) -> None:
