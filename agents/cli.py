@@ -1,7 +1,9 @@
 """The ``pipenav`` command line.
 
 Subcommands are thin: each parses its arguments and calls the library function that owns the
-job. ``pipenav <command> --help`` documents each one.
+job. ``pipenav <command> --help`` documents each one. Bad input (an unknown choice, a missing or
+unreadable file, a value out of range) is reported as one ``error: ...`` line with exit code 2,
+never a traceback.
 
 - ``demo``: the main job on the embedded default: one closed-loop episode (drive, scan, detect,
   decide, act) with a report and plots;
@@ -14,9 +16,12 @@ job. ``pipenav <command> --help`` documents each one.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
+import math
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -28,12 +33,57 @@ def _print(*args: Any) -> None:
     print(*args, flush=True)
 
 
+def _int_at_least(minimum: int) -> Callable[[str], int]:
+    """An argparse type: an int >= ``minimum`` (argparse reports anything else as a usage
+    error naming the option)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = minimum - 1
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{text!r} is not allowed; use an int >= {minimum}")
+        return value
+
+    return parse
+
+
+def _positive_float(text: str) -> float:
+    """An argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"{text!r} is not allowed; use a number > 0")
+    return value
+
+
+def _out_dir(path: str, option: str = "--out") -> Path | None:
+    """Create the output folder ``path``; None (after printing the error) if it cannot be."""
+    out = Path(path)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        _print(f"error: {option} {path!r} cannot be created ({exc})")
+        return None
+    return out
+
+
 # ------------------------------------------------------------------------------- demo
 def _demo(args: argparse.Namespace) -> int:
-    from agents.episodes import run_episode, save_episode_plots
+    from agents.episodes import DEMO_CONFIG, run_episode, save_episode_plots
+    from pipe_env.generator import NetworkConfig
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        NetworkConfig.from_dict({**DEMO_CONFIG, "n_fittings": args.fittings})
+    except ValueError as exc:
+        _print(f"error: --fittings {args.fittings}: {exc}")
+        return EXIT_USAGE
+    out = _out_dir(args.out)
+    if out is None:
+        return EXIT_USAGE
     log = run_episode(
         seed=args.seed,
         agent=args.agent,
@@ -46,7 +96,8 @@ def _demo(args: argparse.Namespace) -> int:
     )
     files = save_episode_plots(log, out)
     report = dict(log["summary"])
-    report["files"] = sorted({"episode.json", "report.json", *files})
+    # the files of this folder: the episode's own (log, render) and the plots
+    report["files"] = sorted({"episode.json", "report.json", *log["files"], *files})
     (out / "report.json").write_text(json.dumps(report, indent=2))
     _print(json.dumps(report, indent=2))
     return 0
@@ -71,6 +122,7 @@ def _scenarios_list(args: argparse.Namespace) -> int:
 
 
 def _scenarios_run(args: argparse.Namespace) -> int:
+    from rich.markup import escape
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
     from agents.scenario_runner import run_and_report, tasks_of
@@ -83,6 +135,9 @@ def _scenarios_run(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     if not found:
         _print(f"error: no scenario matches {args.glob!r}")
+        return EXIT_USAGE
+    if args.backend == "ray" and importlib.util.find_spec("ray") is None:
+        _print("error: --backend ray needs Ray: install the optional extra 'pipenav[ray]'")
         return EXIT_USAGE
     seeds = args.seed if args.seed else None
     total = len(tasks_of(found, seeds))
@@ -97,9 +152,9 @@ def _scenarios_run(args: argparse.Namespace) -> int:
 
         def done(r: Any) -> None:
             mark = "[green]PASS[/green]" if r.passed else "[red]FAIL[/red]"
-            progress.console.print(
-                f"{mark} {r.scenario} [seed={r.seed}] ({sum(r.timings.values()):.1f} s)"
-            )
+            # names and "[seed=N]" are text, not rich markup
+            text = f"{r.scenario} [seed={r.seed}] ({sum(r.timings.values()):.1f} s)"
+            progress.console.print(f"{mark} {escape(text)}")
             progress.advance(task)
 
         results = run_and_report(found, seeds, args.jobs, args.backend, args.junit, args.json, done)
@@ -114,9 +169,15 @@ def _scenarios_run(args: argparse.Namespace) -> int:
 
 # ---------------------------------------------------------------------- train / eval
 def _train(args: argparse.Namespace) -> int:
+    import yaml
+
     from agents.train import DEFAULT_CONFIG, TrainConfig, train
 
-    cfg = TrainConfig.from_yaml(args.config or DEFAULT_CONFIG)
+    try:
+        cfg = TrainConfig.from_yaml(args.config or DEFAULT_CONFIG)
+    except (OSError, ValueError, TypeError, yaml.YAMLError) as exc:
+        _print(f"error: --config {args.config!r}: {exc}")
+        return EXIT_USAGE
     if args.minutes is not None:
         cfg.max_minutes = args.minutes
     if args.timesteps is not None:
@@ -128,17 +189,35 @@ def _train(args: argparse.Namespace) -> int:
 
 def _eval(args: argparse.Namespace) -> int:
     from agents.evaluate import evaluate
+    from agents.scripted import SCRIPTED_AGENTS
     from agents.train import DEFAULT_CONFIG, TrainConfig
+    from pipe_env.generator import NetworkConfig
 
+    agent = str(args.agent)
+    if agent not in SCRIPTED_AGENTS and not (agent.endswith(".zip") and Path(agent).is_file()):
+        _print(
+            f"error: agent {agent!r} is neither a scripted agent {sorted(SCRIPTED_AGENTS)} "
+            "nor an existing model .zip"
+        )
+        return EXIT_USAGE
     # default: the training distribution of the packaged config
     kwargs: dict[str, Any] = dict(TrainConfig.from_yaml(DEFAULT_CONFIG).env_kwargs)
     kwargs.update(detector=args.detector, fidelity=args.fidelity)
     if args.network_config:
         try:
-            kwargs["network_config"] = json.loads(args.network_config)
+            config = json.loads(args.network_config)
         except json.JSONDecodeError as exc:
             _print(f"error: --network-config is not JSON ({exc})")
             return EXIT_USAGE
+        if not isinstance(config, dict):
+            _print(f"error: --network-config must be a JSON object, got {args.network_config!r}")
+            return EXIT_USAGE
+        try:
+            NetworkConfig.from_dict(config)
+        except (TypeError, ValueError) as exc:
+            _print(f"error: --network-config: {exc}")
+            return EXIT_USAGE
+        kwargs["network_config"] = config
     result = evaluate(args.agent, args.episodes, env_kwargs=kwargs)
     _print(json.dumps(result.to_dict(), indent=2))
     if args.json:
@@ -178,15 +257,27 @@ def _bench(args: argparse.Namespace) -> int:
 def _plot(args: argparse.Namespace) -> int:
     from agents.episodes import load_episode, save_episode_plots
 
-    log = load_episode(args.episode)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        log = load_episode(args.episode)
+    except ValueError as exc:
+        _print(f"error: {exc}")
+        return EXIT_USAGE
+    out = _out_dir(args.out)
+    if out is None:
+        return EXIT_USAGE
     for f in save_episode_plots(log, out, which=args.what):
         _print(out / f)
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from agents.scripted import SCRIPTED_AGENTS
+    from pipe_env.envs import FIDELITIES
+    from pipe_env.lidar import PRESETS
+    from pipe_env.sensing_model import DETECTORS
+
+    agents = sorted(SCRIPTED_AGENTS)
+    lidars = sorted(PRESETS)
     parser = argparse.ArgumentParser(
         prog="pipenav", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -195,13 +286,13 @@ def build_parser() -> argparse.ArgumentParser:
     demo = sub.add_parser("demo", help="one closed-loop episode on the embedded default")
     demo.add_argument("--out", default="results/demo", help="output folder")
     demo.add_argument("--seed", type=int, default=7)
-    demo.add_argument("--fittings", type=int, default=6, help="fittings in the network")
-    demo.add_argument("--agent", default="route_planner")
-    demo.add_argument("--fidelity", default="full", choices=["full", "fast"])
     demo.add_argument(
-        "--detector", default="improved", choices=["improved", "thesis", "ground_truth"]
+        "--fittings", type=_int_at_least(1), default=6, help="fittings in the network"
     )
-    demo.add_argument("--lidar", default="ideal")
+    demo.add_argument("--agent", default="route_planner", choices=agents)
+    demo.add_argument("--fidelity", default="full", choices=FIDELITIES)
+    demo.add_argument("--detector", default="improved", choices=DETECTORS)
+    demo.add_argument("--lidar", default="ideal", choices=lidars)
     demo.add_argument("--no-render", action="store_true", help="skip the MuJoCo render")
     demo.set_defaults(func=_demo)
 
@@ -216,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--dir", default=None, help="a folder of scenario files (default: packaged)")
     run.add_argument("--junit", default=None, help="write JUnit XML here")
     run.add_argument("--json", default=None, help="write the JSON report here")
-    run.add_argument("--jobs", type=int, default=1)
+    run.add_argument("--jobs", type=_int_at_least(1), default=1, help="worker processes")
     run.add_argument("--backend", default="local", choices=["local", "ray"])
     run.add_argument(
         "--seed",
@@ -229,16 +320,18 @@ def build_parser() -> argparse.ArgumentParser:
     tr = sub.add_parser("train", help="train MaskablePPO from a YAML config")
     tr.add_argument("--config", default=None, help="YAML (default: the packaged one)")
     tr.add_argument("--out", default="runs/ppo")
-    tr.add_argument("--minutes", type=float, default=None, help="wall-clock budget override")
-    tr.add_argument("--timesteps", type=int, default=None)
+    tr.add_argument(
+        "--minutes", type=_positive_float, default=None, help="wall-clock budget override"
+    )
+    tr.add_argument("--timesteps", type=_int_at_least(1), default=None)
     tr.add_argument("--no-progress", action="store_true")
     tr.set_defaults(func=_train)
 
     ev = sub.add_parser("eval", help="evaluate an agent on held-out networks")
     ev.add_argument("agent", help="scripted agent name or a model .zip")
-    ev.add_argument("--episodes", type=int, default=200)
-    ev.add_argument("--detector", default="improved")
-    ev.add_argument("--fidelity", default="fast", choices=["full", "fast"])
+    ev.add_argument("--episodes", type=_int_at_least(1), default=200)
+    ev.add_argument("--detector", default="improved", choices=DETECTORS)
+    ev.add_argument("--fidelity", default="fast", choices=FIDELITIES)
     ev.add_argument(
         "--network-config",
         default=None,
@@ -252,9 +345,9 @@ def build_parser() -> argparse.ArgumentParser:
     dr.add_argument("--params", default="{}", help="layout parameters as JSON")
     dr.add_argument("--network", default=None, help="a network file (.json/.yaml)")
     dr.add_argument("--seed", type=int, default=0)
-    dr.add_argument("--fidelity", default="full", choices=["full", "fast"])
-    dr.add_argument("--detector", default="improved")
-    dr.add_argument("--lidar", default="ideal")
+    dr.add_argument("--fidelity", default="full", choices=FIDELITIES)
+    dr.add_argument("--detector", default="improved", choices=DETECTORS)
+    dr.add_argument("--lidar", default="ideal", choices=lidars)
     dr.add_argument("--out", default="results/drive", help="where scan images go headless")
     dr.set_defaults(func=_drive)
 

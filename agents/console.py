@@ -5,7 +5,8 @@ options it found as a table, the person picks one by key, and the robot executes
 motion-primitive sequence. With a display, a live matplotlib window shows the last scan (full
 fidelity) or the map; without one, the picture is written to ``--out`` after every decision.
 
-Keys: ``0``-``5`` choose a row, ``b`` backs out, ``m`` writes the map, ``q`` quits.
+Keys: ``0``-``5`` choose a row, ``b`` backs out, ``q`` quits; the end of the input (Ctrl-D, or
+a script of keys that runs out) also ends the session.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import Any
 
 import gymnasium as gym
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 import pipe_env  # noqa: F401  (registers the environment ids)
@@ -147,14 +149,19 @@ class OperatorConsole:
                 self.console.print(f"view: {where}")
             if done:
                 break
-            key = self.read(f"choose [0-{K_OPTIONS - 1}], b back out, q quit: ").strip().lower()
+            try:
+                key = self.read(f"choose [0-{K_OPTIONS - 1}], b back out, q quit: ")
+            except EOFError:
+                self.console.print("end of input: stopped")
+                return 0
+            key = key.strip().lower()
             if key in ("q", "quit", "exit"):
                 self.console.print("stopped by the operator")
                 return 0
             if key == "b":
                 key = str(K_OPTIONS - 1)
             if not key.isdigit() or not 0 <= int(key) < K_OPTIONS:
-                self.console.print(f"[yellow]'{key}' is not a choice[/yellow]")
+                self.console.print(f"[yellow]'{escape(key)}' is not a choice[/yellow]")
                 continue
             if not info["action_mask"][int(key)]:
                 self.console.print(f"[yellow]row {key} is not available here[/yellow]")

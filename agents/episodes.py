@@ -122,7 +122,8 @@ def load_episode(path: str | Path) -> dict[str, Any]:
 
 
 def save_episode_plots(log: dict[str, Any], out: str | Path, which: str = "all") -> list[str]:
-    """Write ``map.png`` and/or ``detection.png`` into ``out``; return the file names."""
+    """Write ``map.png`` and/or ``detection.png`` into ``out``; return the names of the files
+    written here (not those the episode itself wrote, listed in ``log["files"]``)."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -131,7 +132,7 @@ def save_episode_plots(log: dict[str, Any], out: str | Path, which: str = "all")
     from pipe_env.plotting import plot_network
 
     out = Path(out)
-    files = list(log.get("files", []))
+    files: list[str] = []
     if which in ("all", "map"):
         net = PipeNetwork.from_dict(log["network"])
         s = log["summary"]

@@ -700,6 +700,7 @@ def _run_detect(sc: Scenario, net: Any, seed: int) -> dict[str, Any]:
     """Sweep the sensor along the incoming centreline and detect at each distance."""
     import detector
     from pipe_env.lidar import RotatingLidar
+    from pipe_env.plant import option_errors
     from pipe_env.world import build_world
 
     spec, mis = sensor_settings(sc)
@@ -729,17 +730,8 @@ def _run_detect(sc: Scenario, net: Any, seed: int) -> dict[str, Any]:
             det = detector.detect(lidar.scan(pose, rng), diameter, method=sc.detector)
             options, kind = det.options, det.kind
         correct.append(float(kind == truth[0].kind))
-        from pipe_env.plant import match_option
-
-        for o in options:
-            k, _ = match_option(o, truth)
-            t = truth[k]
-            errors["distance"] = max(errors.get("distance", 0.0), abs(o.distance - t.distance))
-            errors["diameter"] = max(errors.get("diameter", 0.0), abs(o.diameter - t.diameter))
-            errors["angle"] = max(errors.get("angle", 0.0), abs(o.angle - t.angle))
-            if t.angle > math.radians(10):
-                dd = abs((o.direction - t.direction + math.pi) % (2 * math.pi) - math.pi)
-                errors["direction"] = max(errors.get("direction", 0.0), dd)
+        for key, err in option_errors(options, truth).items():
+            errors[key] = max(errors.get(key, 0.0), err)
     return {
         "classification": round(float(np.mean(correct)), 4),
         "scans": len(correct),

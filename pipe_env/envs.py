@@ -13,7 +13,8 @@ on (straight on first, then by roll direction); row ``K-1`` is always "back out"
 last junction passed, or to the start, and decide again). :meth:`action_masks` marks the rows the
 robot would attempt: a detected way on inside the robot's 57-125 mm range turning at most 90 deg,
 and back out. **A masked action** is not executed: the robot stays where it is, the same decision
-is offered again, the reward is ``reward_invalid`` and ``info["invalid_action"]`` is True.
+is offered again, the reward is ``reward_invalid + reward_time`` (the penalty plus the cost of a
+decision) and ``info["invalid_action"]`` is True.
 
 Observation (a flat ``Dict``, fixed shapes, finite bounds):
 
@@ -37,18 +38,26 @@ rewards new pipe length covered by the scans (m).
 Options (keyword arguments of ``gymnasium.make``): ``detector`` in ``"improved"``,
 ``"thesis"``, ``"ground_truth"``; ``fidelity`` ``"fast"`` (kinematic motion, modelled sensing;
 for RL iterations) or ``"full"`` (MuJoCo robot, rotating LiDAR, detector, executor); ``lidar``
-preset name or :class:`~pipe_env.lidar.LidarSpec` (full fidelity); ``network_config`` (a
-:class:`~pipe_env.generator.NetworkConfig` or its dict);
+preset name or :class:`~pipe_env.lidar.LidarSpec`: the simulated sensor in full fidelity, and in
+fast fidelity the sensor whose measured error model perturbs the options
+(:func:`~pipe_env.sensing_model.error_model_for` of the detector and the sensor);
+``network_config`` (a :class:`~pipe_env.generator.NetworkConfig` or its dict);
 ``network`` (a fixed network, dict or file path, instead of generating one per episode);
 ``misalignment`` (a Pose: the true sensor pose relative to its nominal mount, full fidelity);
 ``network_pool`` (draw episodes
 from a fixed, reproducible pool of that many generated networks, seeded by ``pool_seed``; use
-another ``pool_seed`` for held-out evaluation).
+another ``pool_seed`` for held-out evaluation); ``trigger_distance`` (stop this far before a
+structure's reference point to decide, in (0, 1] m); ``max_jams`` (end the episode after this
+many jams, an int >= 1); ``reward_invalid``, ``reward_jam``, ``reward_time`` (finite reward
+terms); ``reward_goal`` (PipeNav, in [0, 1000]); ``coverage_done`` (PipeExplore: the covered
+fraction of the reachable pipe that ends an episode, in (0, 1]). A bad value raises ValueError
+naming the environment, the argument, the value and what is allowed.
 """
 
 from __future__ import annotations
 
 import math
+import numbers
 from pathlib import Path
 from typing import Any
 
@@ -69,7 +78,7 @@ from pipe_env.plant import (
     Outcome,
     drivable,
     goal_edge_position,
-    match_option,
+    option_errors,
     option_vector,
 )
 from pipe_env.routing import (
@@ -114,6 +123,11 @@ _HIGH = np.array([1, 1, 1, 1, 1, 1, 1, 5.0, 0.3, 1, 1, math.pi, 1.0, 1.0, 1], dt
 MAX_TAKEN = 3
 
 
+#: Largest trigger distance allowed, m (the default, 0.2 m, is where the fast fidelity's
+#: detection error models were measured).
+MAX_TRIGGER_DISTANCE = 1.0
+
+
 def _as_network(value: PipeNetwork | dict | str | Path | None) -> PipeNetwork | None:
     if value is None or isinstance(value, PipeNetwork):
         return value
@@ -121,13 +135,66 @@ def _as_network(value: PipeNetwork | dict | str | Path | None) -> PipeNetwork | 
         return PipeNetwork.from_dict(value)
     if isinstance(value, (str, Path)):
         return PipeNetwork.load(value)
-    raise ValueError(f"network must be a PipeNetwork, a dict or a file path, got {type(value)}")
+    raise ValueError(f"network={value!r} is not allowed; use a PipeNetwork, a dict or a file path")
+
+
+class _ArgumentCheck:
+    """Checks the keyword arguments of ``gymnasium.make`` for one environment id.
+
+    Every error is a ValueError of the form ``"<env>: <name>=<value> is not allowed; use
+    <what is allowed>"``. Booleans are not accepted where numbers are expected.
+    """
+
+    def __init__(self, env: str) -> None:
+        self.env = env
+
+    def fail(self, name: str, value: Any, allowed: str) -> ValueError:
+        """The error for argument ``name`` given ``value`` (``allowed``: what may be given)."""
+        return ValueError(f"{self.env}: {name}={value!r} is not allowed; use {allowed}")
+
+    def number(
+        self,
+        name: str,
+        value: Any,
+        lo: float = -math.inf,
+        hi: float = math.inf,
+        lo_open: bool = False,
+        allowed: str = "a finite number",
+    ) -> float:
+        """``value`` as a finite float in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``)."""
+        ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+        v = float(value) if ok else math.nan
+        if not (math.isfinite(v) and (lo < v if lo_open else lo <= v) and v <= hi):
+            raise self.fail(name, value, allowed)
+        return v
+
+    def integer(self, name: str, value: Any, minimum: int) -> int:
+        """``value`` as an int >= ``minimum``."""
+        ok = isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+        if not (ok and int(value) >= minimum):
+            raise self.fail(name, value, f"an int >= {minimum}")
+        return int(value)
+
+    def flag(self, name: str, value: Any) -> bool:
+        """``value`` as a bool (True or False only)."""
+        if not isinstance(value, (bool, np.bool_)):
+            raise self.fail(name, value, "True or False")
+        return bool(value)
+
+    def choice(self, name: str, value: Any, allowed: tuple[Any, ...] | list[Any]) -> Any:
+        """``value``, one of ``allowed``."""
+        if not isinstance(value, str) or value not in allowed:
+            raise self.fail(name, value, f"one of {tuple(allowed)}")
+        return value
 
 
 class _DecisionEnv(gym.Env):
     """Shared machinery of the two environments (see module docstring)."""
 
     metadata = {"render_modes": ["rgb_array", "ansi"], "render_fps": 2}
+
+    #: The registered id without the namespace (named in argument errors).
+    env_name = "PipeNav-v0"
 
     def __init__(
         self,
@@ -148,48 +215,60 @@ class _DecisionEnv(gym.Env):
         network_pool: int | None = None,
         pool_seed: int = 0,
     ) -> None:
-        if detector not in DETECTORS:
-            raise ValueError(f"detector={detector!r} is not allowed; use one of {DETECTORS}")
-        if fidelity not in FIDELITIES:
-            raise ValueError(f"fidelity={fidelity!r} is not allowed; use one of {FIDELITIES}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode={render_mode!r} is not allowed; use one of "
-                f"{self.metadata['render_modes']}"
-            )
-        if isinstance(network_config, dict):
-            network_config = NetworkConfig.from_dict(network_config)
-        from pipe_env.lidar import LidarSpec, get_preset
+        from pipe_env.lidar import PRESETS, LidarSpec
 
-        if isinstance(lidar, str):
-            lidar = get_preset(lidar)
+        check = _ArgumentCheck(self.env_name)
+        self.detector = check.choice("detector", detector, DETECTORS)
+        self.fidelity = check.choice("fidelity", fidelity, FIDELITIES)
+        if render_mode is not None:
+            check.choice("render_mode", render_mode, self.metadata["render_modes"])
+        if isinstance(network_config, dict):
+            try:
+                network_config = NetworkConfig.from_dict(network_config)
+            except (TypeError, ValueError) as exc:
+                raise check.fail(
+                    "network_config", network_config, f"a valid NetworkConfig dict ({exc})"
+                ) from None
+        elif network_config is not None and not isinstance(network_config, NetworkConfig):
+            raise check.fail("network_config", network_config, "a NetworkConfig, its dict or None")
+        if isinstance(lidar, str) and lidar in PRESETS:
+            lidar = PRESETS[lidar]
         if not isinstance(lidar, LidarSpec):
-            raise ValueError(f"lidar={lidar!r} is not allowed; use a preset name or a LidarSpec")
-        if misalignment is not None and not isinstance(misalignment, Pose):
-            raise ValueError(
-                f"misalignment={misalignment!r} is not allowed; use a Pose (the "
-                "true sensor pose relative to its nominal mount) or None"
+            raise check.fail(
+                "lidar", lidar, f"a preset name in {tuple(sorted(PRESETS))} or a LidarSpec"
             )
+        if misalignment is not None and not isinstance(misalignment, Pose):
+            raise check.fail(
+                "misalignment",
+                misalignment,
+                "a Pose (the true sensor pose relative to its nominal mount) or None",
+            )
+        if network_pool is not None:
+            network_pool = check.integer("network_pool", network_pool, 1)
+        try:
+            self.fixed_network = _as_network(network)
+        except ValueError as exc:
+            raise ValueError(f"{self.env_name}: {exc}") from None
         self.network_config = network_config or NetworkConfig()
-        self.fixed_network = _as_network(network)
-        self.detector = detector
-        self.fidelity = fidelity
         self.lidar = lidar
         self.misalignment = misalignment
         self.render_mode = render_mode
-        self.trigger_distance = float(trigger_distance)
-        self.auto_single = bool(auto_single)
-        self.max_jams = int(max_jams)
-        self.scan_image = bool(scan_image)
-        self.reward_invalid = float(reward_invalid)
-        self.reward_jam = float(reward_jam)
-        self.reward_time = float(reward_time)
-        if network_pool is not None and not (isinstance(network_pool, int) and network_pool > 0):
-            raise ValueError(
-                f"network_pool={network_pool!r} is not allowed; use None or an int > 0"
-            )
+        self.trigger_distance = check.number(
+            "trigger_distance",
+            trigger_distance,
+            0.0,
+            MAX_TRIGGER_DISTANCE,
+            lo_open=True,
+            allowed=f"a number in (0, {MAX_TRIGGER_DISTANCE:g}] m",
+        )
+        self.auto_single = check.flag("auto_single", auto_single)
+        self.max_jams = check.integer("max_jams", max_jams, 1)
+        self.scan_image = check.flag("scan_image", scan_image)
+        self.reward_invalid = check.number("reward_invalid", reward_invalid)
+        self.reward_jam = check.number("reward_jam", reward_jam)
+        self.reward_time = check.number("reward_time", reward_time)
         self.network_pool = network_pool
-        self.pool_seed = int(pool_seed)
+        self.pool_seed = check.integer("pool_seed", pool_seed, 0)
         obs = {
             "options": spaces.Box(
                 np.tile(_LOW, (K_OPTIONS, 1)), np.tile(_HIGH, (K_OPTIONS, 1)), dtype=np.float32
@@ -434,21 +513,8 @@ class _DecisionEnv(gym.Env):
             "n_options": len(dec.options),
             "n_true": len(dec.truth),
         }
-        d_err, dia, ang, dirs = [], [], [], []
-        for o in dec.options:
-            k, _ = match_option(o, dec.truth)
-            t = dec.truth[k]
-            d_err.append(abs(o.distance - t.distance))
-            dia.append(abs(o.diameter - t.diameter))
-            ang.append(abs(o.angle - t.angle))
-            if t.angle > math.radians(10):
-                dirs.append(abs((o.direction - t.direction + math.pi) % (2 * math.pi) - math.pi))
-        errs.update(
-            distance=max(d_err),
-            diameter=max(dia),
-            angle=max(ang),
-            direction=max(dirs) if dirs else 0.0,
-        )
+        errs.update(option_errors(dec.options, dec.truth))
+        errs.setdefault("direction", 0.0)
         self.detection_errors.append(errs)
 
     # ------------------------------------------------------------ observation
@@ -620,6 +686,21 @@ class _DecisionEnv(gym.Env):
             self.plant.close()
 
     def __getstate__(self) -> dict:
+        """Picklable state; the renderer is dropped (rebuilt on the next render).
+
+        Raises:
+            TypeError: at full fidelity once an episode has started: the plant holds a live
+                MuJoCo simulation (model, data and sensors), which cannot be pickled. Vector
+                environments do not need it: subprocess workers build their environments
+                from the constructor arguments.
+        """
+        if self.fidelity == "full" and self.plant is not None:
+            raise TypeError(
+                f"{self.env_name}: a fidelity='full' environment holds a live MuJoCo simulation "
+                "after reset() and cannot be pickled mid-episode; pickle it before reset(), or "
+                "build it again from its constructor arguments (as subprocess vector "
+                "environments do)"
+            )
         state = self.__dict__.copy()
         state["_renderer"] = None
         state["_world_for_render"] = None
@@ -657,17 +738,14 @@ class PipeNavEnv(_DecisionEnv):
 
     def __init__(self, *args: Any, reward_goal: float = 10.0, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        if (
-            isinstance(reward_goal, bool)
-            or not isinstance(reward_goal, (int, float))
-            or not (0.0 <= reward_goal <= 1000.0)
-        ):
-            raise ValueError(
-                f"reward_goal={reward_goal!r} is not allowed; use a number in [0, 1000]"
-            )
-        self.reward_goal = float(reward_goal)
+        self.reward_goal = _ArgumentCheck(self.env_name).number(
+            "reward_goal", reward_goal, 0.0, 1000.0, allowed="a number in [0, 1000]"
+        )
         if self.fixed_network is None and self.network_config.n_goals < 1:
-            raise ValueError("PipeNav needs goals: network_config.n_goals must be >= 1")
+            raise ValueError(
+                f"{self.env_name}: network_config.n_goals={self.network_config.n_goals!r} is "
+                "not allowed; use an int >= 1 (PipeNav needs goals)"
+            )
 
     def _episode_reset(self) -> None:
         assert self.network is not None
@@ -711,14 +789,27 @@ class PipeNavEnv(_DecisionEnv):
 
 
 class PipeExploreEnv(_DecisionEnv):
-    """Inspect as much of the network as possible; reward = new pipe length covered (m)."""
+    """Inspect as much of the network as possible; reward = new pipe length covered (m).
+
+    Args (besides the shared ones of the module docstring):
+        coverage_done: covered fraction of the reachable pipe that ends the episode with
+            success, in (0, 1].
+        branch_view: how far the scans see into each pipe leaving the fitting ahead, m (>= 0).
+    """
+
+    env_name = "PipeExplore-v0"
 
     def __init__(
         self, *args: Any, coverage_done: float = 0.98, branch_view: float = 0.3, **kwargs: Any
     ) -> None:
         super().__init__(*args, **kwargs)
-        self.coverage_done = float(coverage_done)
-        self.branch_view = float(branch_view)
+        check = _ArgumentCheck(self.env_name)
+        self.coverage_done = check.number(
+            "coverage_done", coverage_done, 0.0, 1.0, lo_open=True, allowed="a number in (0, 1]"
+        )
+        self.branch_view = check.number(
+            "branch_view", branch_view, 0.0, allowed="a finite number >= 0 m"
+        )
 
     def _episode_reset(self) -> None:
         assert self.network is not None

@@ -153,18 +153,6 @@ def segment_distance(
     return norm3((p0 + d1 * s) - (q0 + d2 * t))
 
 
-def point_segment_projection(
-    point: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]
-) -> tuple[float, NDArray[np.float64]]:
-    """Arc length along a-b of the closest point to ``point`` and that closest point."""
-    d = b - a
-    length = norm3(d)
-    if length < 1e-15:
-        return 0.0, a.copy()
-    s = float(np.clip((point - a) @ d / length, 0.0, length))
-    return s, a + d * (s / length)
-
-
 @dataclass(frozen=True, eq=False)
 class Pose:
     """A rigid pose, world-from-body.

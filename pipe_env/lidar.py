@@ -6,12 +6,14 @@ plane geometry are defined in :mod:`detector.scan`.
 
 Ray casting backends (``RotatingLidar(..., backend=...)``):
 
-- ``"mujoco"`` (default): ``mujoco.mj_multiRay`` against the world's wall meshes (geom group
-  ``world.wall_group``), batched, on a sensing-only copy of those meshes
-  (:mod:`pipe_env.raycast_mujoco`). The meshes are faceted, so ranges carry the tessellation
-  error of :mod:`pipe_env.meshes` (a fraction of a millimetre radially).
-- ``"analytic"``: exact intersection with the network's cylinders, cones, planes and tori
-  (:mod:`pipe_env.raycast_analytic`), vectorised in numpy.
+- ``"mujoco"`` (the default of :class:`RotatingLidar` itself): ``mujoco.mj_multiRay`` against
+  the world's wall meshes (geom group ``world.wall_group``), batched, on a sensing-only copy of
+  those meshes (:mod:`pipe_env.raycast_mujoco`). The meshes are faceted, so ranges carry the
+  tessellation error of :mod:`pipe_env.meshes` (a fraction of a millimetre radially).
+- ``"analytic"`` (the default of the closed loop: the full-fidelity plant,
+  :class:`pipe_env.plant_full.PhysicalPlant`, argument ``lidar_backend``): exact intersection
+  with the network's cylinders, cones, planes and tori (:mod:`pipe_env.raycast_analytic`),
+  vectorised in numpy.
 
 Poses:
 

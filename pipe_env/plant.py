@@ -28,7 +28,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.options import StructureOption
-from pipe_env.geometry import Pose, clamp, direction_from_angles, frame_from_forward, norm3
+from pipe_env.geometry import (
+    Pose,
+    clamp,
+    direction_from_angles,
+    frame_from_forward,
+    norm3,
+    wrap_angle,
+)
 from pipe_env.ground_truth import options_at
 from pipe_env.network import ROBOT_DIAMETER_RANGE, PipeNetwork
 from pipe_env.routing import (
@@ -175,6 +182,36 @@ def match_option(chosen: StructureOption, truth: list[StructureOption]) -> tuple
     return k, sep[k]
 
 
+#: Roll-direction errors count only for ways turning more than this (rad): the direction of a
+#: nearly straight way is ill-defined.
+DIRECTION_ERROR_MIN_ANGLE = math.radians(10.0)
+
+
+def option_errors(options: list[StructureOption], truth: list[StructureOption]) -> dict[str, float]:
+    """Largest absolute errors of sensed ``options`` against the true ways they match.
+
+    Each option is compared with its closest true way (:func:`match_option`). Returns
+    ``distance`` and ``diameter`` (m) and ``angle`` (rad) when there are options, and
+    ``direction`` (rad, wrapped to [0, pi]) only when a matched true way turns by more than
+    ``DIRECTION_ERROR_MIN_ANGLE``. Empty when there are no options or no true ways.
+    """
+    if not options or not truth:
+        return {}
+    d_err, dia, ang, dirs = [], [], [], []
+    for o in options:
+        k, _ = match_option(o, truth)
+        t = truth[k]
+        d_err.append(abs(o.distance - t.distance))
+        dia.append(abs(o.diameter - t.diameter))
+        ang.append(abs(o.angle - t.angle))
+        if t.angle > DIRECTION_ERROR_MIN_ANGLE:
+            dirs.append(abs(wrap_angle(o.direction - t.direction)))
+    errs = {"distance": max(d_err), "diameter": max(dia), "angle": max(ang)}
+    if dirs:
+        errs["direction"] = max(dirs)
+    return errs
+
+
 class KinematicPlant:
     """Fast fidelity: kinematic motion on the centreline and modelled sensing.
 
@@ -185,7 +222,9 @@ class KinematicPlant:
         tolerance: what a primitive survives.
         speed: driving speed for simulated time, m/s.
         decision_time: simulated seconds spent sensing and confirming per structure.
-        odometry_noise: odometry position error per metre driven (std, m/m).
+        odometry_noise: odometry drift, m/sqrt(m): every motion of ``d`` metres adds an
+            independent N(0, (odometry_noise * sqrt(d))^2) error on each world axis (a random
+            walk: the drift's std grows with the square root of the distance driven).
         jam_time: simulated seconds a jam costs (stall, detection of it, reversing).
     """
 
@@ -415,7 +454,7 @@ class KinematicPlant:
             ("distance (late, fraction of D)", d_err, lim["distance_late"]),
             (
                 "direction",
-                abs(_wrap(choice.direction - true.direction)) * math.sin(true.angle),
+                abs(wrap_angle(choice.direction - true.direction)) * math.sin(true.angle),
                 lim["direction"],
             ),
             ("angle (under)", -a_err, lim["angle_under"]),
@@ -507,10 +546,6 @@ def goal_edge_position(network: PipeNetwork, goal: NDArray[np.float64]) -> EdgeP
     if key not in cache:
         cache[key] = edge_position(network, network.centreline.nearest(np.asarray(goal, float)))
     return cache[key]
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 def _world_vector(option: StructureOption, pose: Pose) -> NDArray[np.float64]:

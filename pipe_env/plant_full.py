@@ -39,8 +39,9 @@ from pipe_env.geometry import Pose
 from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
 from pipe_env.network import PipeNetwork
-from pipe_env.plant import BACK_OUT, Decision, Outcome, detection_record
-from pipe_env.routing import EdgePosition, edge_position, locate
+from pipe_env.plant import BACK_OUT, Decision, Outcome, detection_record, goal_edge_position
+from pipe_env.routing import EdgePosition, locate
+from pipe_env.sensing_model import DETECTORS
 
 #: Fewer valid returns than this in a sweep means the sensor cannot see the pipe ahead.
 BLIND_RETURNS = 60
@@ -107,10 +108,8 @@ class PhysicalPlant:
 
         if network.start_pose is None:
             raise ValueError("the network has no start_pose; the robot needs one")
-        if detector not in ("improved", "thesis", "ground_truth"):
-            raise ValueError(
-                f"detector {detector!r} is unknown; allowed: improved, thesis, ground_truth"
-            )
+        if detector not in DETECTORS:
+            raise ValueError(f"detector {detector!r} is unknown; allowed: {DETECTORS}")
         self.network = network
         self.detector = detector
         self.trigger_distance = float(trigger_distance)
@@ -157,7 +156,10 @@ class PhysicalPlant:
         return self.robot.sensor_pose()
 
     def odometry_pose(self) -> Pose:
-        """The sensor pose the robot believes (drift of ~1 % of the distance driven)."""
+        """The sensor pose the robot believes: the true pose plus the odometry drift. Every
+        motion of ``d`` metres adds an independent N(0, (0.01 m/sqrt(m) * sqrt(d))^2) error on
+        each world axis (a random walk: the drift's std grows with the square root of the
+        distance driven)."""
         p = self.pose()
         return Pose.trusted(p.position + self._odometry_error, p.rotation)
 
@@ -212,11 +214,10 @@ class PhysicalPlant:
         return node, entry, options_at(self.network, node, entry, pose)
 
     def _goal_edge(self, goal: Any) -> EdgePosition:
-        """A goal point (or its edge position) as an edge position."""
+        """A goal point (or its edge position) as an edge position (memoised per network)."""
         if isinstance(goal, EdgePosition):
             return goal
-        point = np.asarray(goal, dtype=float)
-        return edge_position(self.network, self.network.centreline.nearest(point))
+        return goal_edge_position(self.network, np.asarray(goal, dtype=float))
 
     def _goal_reached(self, goal: Any) -> bool:
         if goal is None:

@@ -266,10 +266,6 @@ class AnalyticBore:
         quadrics, tori = b.build()
         return cls(quadrics, tori, elements)
 
-    @property
-    def n_pieces(self) -> int:
-        return len(self.quadrics) + len(self.tori)
-
     # ------------------------------------------------------------------ queries
     def contains(self, points: ArrayLike) -> NDArray[np.bool_]:
         """(N,) True where a (N, 3) point lies inside the bore (closed set)."""

@@ -45,13 +45,6 @@ class Route:
     runs: tuple[str, ...]
     length: float
 
-    def next_run_after(self, node_id: str) -> str | None:
-        """The run the route leaves ``node_id`` by (None if the route does not pass it)."""
-        for n, r in zip(self.nodes, self.runs[1:]):
-            if n == node_id:
-                return r
-        return None
-
 
 def leg_length(network: PipeNetwork, node_id: str, run_id: str) -> float:
     """Centreline length (m) from a fitting centre to its port (long bend: half its arc)."""

@@ -4,8 +4,10 @@ An operator (or a policy) returning to a junction wants to know which ways were 
 The robot knows only its odometry, so the log keys decisions by odometry position: a decision
 within ``radius`` metres of a logged one is the same place, and a way whose outgoing axis (in
 the world frame, from the odometry heading) is within ``match_angle`` of a logged one is the
-same way. Backing out is logged as its own way. Odometry drifts by about 1 % of the distance
-driven, well inside the radius for the distances between revisits here.
+same way. Backing out is logged as its own way. Odometry drifts as a random walk: each motion of
+``d`` metres adds an independent N(0, (0.01 m/sqrt(m) * sqrt(d))^2) error per world axis, so
+the drift's std grows with the square root of the distance driven (about 3 cm per axis after
+10 m), well inside the radius for the distances between revisits here.
 """
 
 from __future__ import annotations

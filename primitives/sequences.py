@@ -146,7 +146,11 @@ def _refuse(option: StructureOption, config: RobotConfig) -> Sequence | None:
             "refuse",
             (
                 Stop(),
-                Halt("blocked", f"turn of {math.degrees(option.angle):.0f} deg exceeds 90 deg"),
+                Halt(
+                    "blocked",
+                    f"turn of {math.degrees(option.angle):.0f} deg exceeds the "
+                    f"{math.degrees(MAX_TURN_ATTEMPT):.0f} deg the robot attempts",
+                ),
             ),
         )
     return None

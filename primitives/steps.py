@@ -1,7 +1,7 @@
 """Low-level motion primitives: frozen dataclasses, the vocabulary of a sequence.
 
 Each primitive is plain data (SI units: metres, radians, m/s) that prints, serialises
-(:func:`step_to_dict` / :func:`step_from_dict`) and replays; :mod:`primitives.executor` gives it
+(:meth:`Step.to_dict` / :func:`step_from_dict`) and replays; :mod:`primitives.executor` gives it
 meaning on the robot:
 
 - :class:`Drive`: move the front ``distance`` metres along its heading (negative: reverse along
@@ -186,10 +186,6 @@ class Halt(Step):
 STEP_TYPES: dict[str, type[Step]] = {
     t.op: t for t in (Drive, Stop, Roll, Bend, Clamp, Unclamp, Centre, Scan, CheckHeading, Halt)
 }
-
-
-def step_to_dict(step: Step) -> dict[str, Any]:
-    return step.to_dict()
 
 
 def step_from_dict(d: dict[str, Any]) -> Step:

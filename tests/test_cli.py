@@ -98,6 +98,9 @@ def test_scenarios_run_passing_set_exits_zero_and_list(tiny_suite: Path) -> None
     proc = pipenav("scenarios", "run", "reach*", "--dir", str(tiny_suite))
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "2 passed, 0 failed" in proc.stdout
+    # progress lines keep "[seed=N]" (rich would take it for markup and drop it)
+    assert "PASS reach_branch [seed=0]" in proc.stdout
+    assert "PASS reach_branch [seed=1]" in proc.stdout
     listed = pipenav("scenarios", "list", "--dir", str(tiny_suite))
     assert listed.returncode == 0 and "reach_branch" in listed.stdout
 

@@ -150,20 +150,49 @@ def test_pickle_round_trip_continues_identically(env_id: str) -> None:
             break
 
 
+def test_full_fidelity_env_refuses_to_pickle_mid_episode() -> None:
+    """A live MuJoCo simulation cannot be pickled: a clear TypeError, not MuJoCo's own."""
+    net = layouts.t_junction(0.1, direction=0.0, distance=0.3).with_goals([[0, 0.5, 0]])
+    env = gym.make("pipenav/PipeNav-v0", network=net, fidelity="full", detector="ground_truth")
+    clone = pickle.loads(pickle.dumps(env))  # before reset: only the constructor's arguments
+    assert clone.unwrapped.fidelity == "full" and clone.unwrapped.plant is None
+    env.reset(seed=0)
+    with pytest.raises(TypeError, match=r"fidelity='full'.*cannot be pickled mid-episode"):
+        pickle.dumps(env)
+    env.close()
+
+
 @pytest.mark.parametrize("vectorization_mode", ["sync", "async"])
 def test_make_vec(vectorization_mode: str) -> None:
-    envs = gym.make_vec(
-        "pipenav/PipeNav-v0",
-        num_envs=2,
-        vectorization_mode=vectorization_mode,
-        network_config=SMALL,
-    )
-    obs, info = envs.reset(seed=[1, 2])
-    assert obs["options"].shape == (2, K_OPTIONS, len(OPTION_FEATURES))
-    for _ in range(5):
-        obs, reward, term, trunc, info = envs.step(np.full(2, K_OPTIONS - 1))
-        assert reward.shape == (2,)
-    envs.close()
+    """Sub-environments seeded differently differ, the same seeds reproduce, and each
+    sub-environment runs exactly as a single environment with its seed."""
+
+    def trace(seeds: list[int]) -> list[tuple]:
+        envs = gym.make_vec(
+            "pipenav/PipeNav-v0",
+            num_envs=2,
+            vectorization_mode=vectorization_mode,
+            network_config=SMALL,
+        )
+        obs, info = envs.reset(seed=seeds)
+        assert obs["options"].shape == (2, K_OPTIONS, len(OPTION_FEATURES))
+        out = [(obs["options"].copy(), obs["goal"].copy(), np.zeros(2))]
+        for _ in range(5):
+            obs, reward, term, trunc, info = envs.step(np.full(2, K_OPTIONS - 1))
+            assert reward.shape == (2,)
+            out.append((obs["options"].copy(), obs["goal"].copy(), reward.copy()))
+        envs.close()
+        return out
+
+    first, again = trace([1, 2]), trace([1, 2])
+    for (o1, g1, r1), (o2, g2, r2) in zip(first, again):
+        assert np.array_equal(o1, o2) and np.array_equal(g1, g2) and np.array_equal(r1, r2)
+    # seeds 1 and 2 draw different networks: the goals differ from the start
+    assert not np.array_equal(first[0][1][0], first[0][1][1])
+    single = gym.make("pipenav/PipeNav-v0", network_config=SMALL)
+    obs, _ = single.reset(seed=1)
+    assert np.array_equal(obs["options"], first[0][0][0])
+    assert np.array_equal(obs["goal"], first[0][1][0])
 
 
 def test_masks_reach_maskable_ppo_through_subproc_vec_env() -> None:
@@ -216,6 +245,66 @@ def test_explore_env_rewards_new_coverage_and_finishes() -> None:
     assert info["coverage"] >= 0.98 and info["is_success"]
 
 
+BAD_ARGUMENTS = [
+    ("PipeNav-v0", "network_config", "big", "a NetworkConfig, its dict or None"),
+    ("PipeNav-v0", "network_config", {"n_fittings": -1}, "n_fittings"),
+    ("PipeNav-v0", "pool_seed", "a", "an int >= 0"),
+    ("PipeNav-v0", "pool_seed", -1, "an int >= 0"),
+    ("PipeNav-v0", "max_jams", "x", "an int >= 1"),
+    ("PipeNav-v0", "max_jams", 0, "an int >= 1"),
+    ("PipeNav-v0", "max_jams", True, "an int >= 1"),
+    ("PipeNav-v0", "trigger_distance", "far", "a number in (0, 1] m"),
+    ("PipeNav-v0", "trigger_distance", -1.0, "a number in (0, 1] m"),
+    ("PipeNav-v0", "trigger_distance", 0.0, "a number in (0, 1] m"),
+    ("PipeNav-v0", "trigger_distance", 1.5, "a number in (0, 1] m"),
+    ("PipeNav-v0", "reward_jam", float("nan"), "a finite number"),
+    ("PipeNav-v0", "reward_invalid", float("inf"), "a finite number"),
+    ("PipeNav-v0", "reward_time", "cheap", "a finite number"),
+    ("PipeNav-v0", "reward_time", False, "a finite number"),
+    ("PipeNav-v0", "reward_goal", float("nan"), "a number in [0, 1000]"),
+    ("PipeNav-v0", "network_pool", True, "an int >= 1"),
+    ("PipeNav-v0", "network_pool", 0, "an int >= 1"),
+    ("PipeNav-v0", "auto_single", "no", "True or False"),
+    ("PipeNav-v0", "scan_image", 1, "True or False"),
+    ("PipeNav-v0", "detector", "oracle", "one of ('improved', 'thesis', 'ground_truth')"),
+    ("PipeNav-v0", "fidelity", "medium", "one of ('fast', 'full')"),
+    ("PipeNav-v0", "lidar", "foo", "a preset name in ('ideal', 'ls02', 'ydlidar_x4')"),
+    ("PipeNav-v0", "network", 3, "a PipeNetwork, a dict or a file path"),
+    ("PipeExplore-v0", "coverage_done", 5.0, "a number in (0, 1]"),
+    ("PipeExplore-v0", "coverage_done", 0.0, "a number in (0, 1]"),
+    ("PipeExplore-v0", "branch_view", -0.1, "a finite number >= 0 m"),
+    ("PipeExplore-v0", "trigger_distance", -1.0, "a number in (0, 1] m"),
+]
+
+
+@pytest.mark.parametrize(("env", "name", "value", "allowed"), BAD_ARGUMENTS)
+def test_bad_make_arguments_are_rejected_naming_the_argument(
+    env: str, name: str, value: object, allowed: str
+) -> None:
+    with pytest.raises(ValueError) as err:
+        gym.make(f"pipenav/{env}", **{name: value})
+    message = str(err.value)
+    assert message.startswith(f"{env}: {name}={value!r} is not allowed; use ")
+    assert allowed in message
+
+
+def test_good_make_arguments_are_kept() -> None:
+    from pipe_env.generator import NetworkConfig
+
+    env = gym.make(
+        "pipenav/PipeNav-v0",
+        network_config=NetworkConfig(n_fittings=6),
+        trigger_distance=1,
+        max_jams=np.int64(2),
+        reward_jam=-1,
+        network_pool=5,
+        pool_seed=np.int64(3),
+    ).unwrapped
+    assert env.trigger_distance == 1.0 and isinstance(env.trigger_distance, float)
+    assert env.max_jams == 2 and type(env.max_jams) is int
+    assert env.reward_jam == -1.0 and env.network_pool == 5 and env.pool_seed == 3
+
+
 def test_goal_greedy_and_bad_options_are_rejected() -> None:
     with pytest.raises(ValueError, match="detector='oracle' is not allowed"):
         gym.make("pipenav/PipeNav-v0", detector="oracle")
@@ -250,6 +339,24 @@ def test_noisy_ninety_degree_ways_stay_drivable(monkeypatch: pytest.MonkeyPatch)
     assert drivable(replace(o, angle=np.radians(93.0)))
     assert not drivable(replace(o, angle=np.radians(135.0)))
     assert not drivable(replace(o, diameter=0.050))
+
+
+def test_the_mask_and_the_full_fidelity_refusal_share_the_turn_limit() -> None:
+    """A way sensed beyond the turn the robot attempts is masked, and the sequence built for
+    it halts naming that limit (100 deg: 90 deg fittings plus sensing noise)."""
+    from detector.options import StructureOption
+    from pipe_env.plant import drivable
+    from primitives.sequences import MAX_TURN_ATTEMPT, for_option
+    from primitives.steps import Halt
+
+    limit = round(np.degrees(MAX_TURN_ATTEMPT))
+    near = StructureOption("bend", 0.2, 0.1, direction=0.0, angle=np.radians(limit - 1))
+    beyond = StructureOption("bend", 0.2, 0.1, direction=0.0, angle=np.radians(limit + 5))
+    assert drivable(near) and not any(isinstance(s, Halt) for s in for_option(near).steps)
+    assert not drivable(beyond)
+    halts = [s for s in for_option(beyond).steps if isinstance(s, Halt)]
+    assert len(halts) == 1 and halts[0].status == "blocked"
+    assert halts[0].reason == f"turn of {limit + 5} deg exceeds the {limit} deg the robot attempts"
 
 
 def test_goal_just_past_a_fitting_is_reached() -> None:

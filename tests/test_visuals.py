@@ -49,7 +49,14 @@ def test_demo_command_writes_report_and_images(tmp_path) -> None:
     )
     assert proc.returncode == 0, proc.stderr
     report = json.loads((out / "report.json").read_text())
-    assert report["decisions"] >= 0 and report["structures"] >= 1
+    # the embedded default (seed 7, 4 fittings): the robot decides at least once and the route
+    # planner reaches the goal
+    assert report["is_success"] is True
+    assert report["decisions"] >= 1 and report["structures"] >= 1
+    assert report["travelled_m"] > 0.0 and report["detections"] >= 1
+    assert {"episode.json", "report.json", "map.png", "detection.png", "render.png"} <= set(
+        report["files"]
+    )
     for name in report["files"]:
         if name.endswith(".png"):
             assert mpimg.imread(out / name).std() > 0.01, name  # a real picture, not blank
