@@ -10,7 +10,10 @@ sweeps, :mod:`detector.spatial`; Algorithm 1 for planes, :mod:`detector.planar`)
 from __future__ import annotations
 
 import math
+import operator
 from typing import Any
+
+import numpy as np
 
 from detector.detection import Detection
 from detector.improved import detect_improved
@@ -28,6 +31,8 @@ PLANAR_METHODS: tuple[str, ...] = ("thesis", "improved")
 def _check(scan: Any, clamped_diameter: Any) -> float:
     if not isinstance(scan, Scan):
         raise ValueError(f"scan must be a detector.scan.Scan, got {type(scan).__name__}")
+    if isinstance(clamped_diameter, (bool, np.bool_)):
+        raise ValueError(f"clamped_diameter must be a number in (0, 2] m, got {clamped_diameter!r}")
     try:
         d = float(clamped_diameter)
     except (TypeError, ValueError) as exc:
@@ -89,8 +94,21 @@ def detect_planar(
         sensor_in_pipe: known sensor pose in the pipe frame; ``None``: centred and aligned.
     """
     d = _check(scan, clamped_diameter)
-    if not -scan.n_planes <= plane < scan.n_planes:
-        raise ValueError(f"plane {plane} out of range for a scan of {scan.n_planes} planes")
+    try:
+        if isinstance(plane, (bool, np.bool_)):
+            raise TypeError
+        index = operator.index(plane)
+    except TypeError:
+        raise ValueError(
+            f"plane must be an integer index in [-{scan.n_planes}, {scan.n_planes - 1}], "
+            f"got {plane!r}"
+        ) from None
+    if not -scan.n_planes <= index < scan.n_planes:
+        raise ValueError(
+            f"plane must be in [-{scan.n_planes}, {scan.n_planes - 1}] for a scan of "
+            f"{scan.n_planes} planes, got {plane!r}"
+        )
+    plane = index
     if method == "thesis":
         return detect_planar_thesis(scan, d, plane=plane, sensor_in_pipe=sensor_in_pipe, **options)
     if method == "improved":

@@ -24,9 +24,11 @@ from detector.pipe_cloud import (
     _azimuth_coverage,
     _confidence,
     _pct,
+    _radius_mode,
+    _robust_line,
     _subsample,
 )
-from detector.robust import mad_sigma, robust_gauss_newton, tukey_weights
+from detector.robust import mad_sigma, robust_gauss_newton
 
 #: Returns of a widening this much (m; or three times their noise) short of the wider pipe's
 #: radius lie on its cone, not on the wider pipe.
@@ -131,7 +133,7 @@ def _axisymmetric(
     else:
         u_cross = u * big_r / np.maximum(r, 1e-9)  # where the beams crossed the wall radius
     u_first = float(_pct(u_cross, 1))
-    r2 = _radius_mode(r, r.size)
+    r2 = _radius_mode(r)
     # the start of a taper is one kink in r(u): it needs a denser sample than the other fits
     sub = _subsample(np.arange(u.size), 2 * cfg.fit_points)
     us, rs = u[sub], r[sub]
@@ -284,7 +286,7 @@ def _widening_start(
     if n_cone >= 20 and float(_pct(ec, 95) - _pct(ec, 5)) > max(6.0 * noise, CONE_MIN_RISE):
         # (near its start the cone lies within the noise of the wall: the line alone places
         # the start, bounded by the beams' crossings)
-        a_u, b_u = _robust_line(ec, uc)  # u = a + b e: the start at e = 0
+        a_u, b_u = _robust_line(ec, uc, 1e-18, 1e-4)  # u = a + b e: the start at e = 0
         # (a cone: returns on one line to within their noise)
         if math.isfinite(a_u) and b_u > 0.0:
             scatter = mad_sigma(ec - (uc - a_u) / b_u)
@@ -388,35 +390,3 @@ def _full_rings(p: NDArray[np.float64]) -> NDArray[np.bool_]:
     for sel in _rings(p):
         keep |= sel
     return keep
-
-
-def _radius_mode(r: NDArray, n: int) -> float:
-    """Most frequent radius: 1 mm histogram peak refined by the median of its neighbourhood."""
-    bins = np.floor(r / 0.001).astype(np.int64)
-    lo = int(bins.min())
-    cnt = np.bincount(bins - lo)
-    smooth = np.convolve(cnt, np.ones(3), mode="same")
-    peak = (int(np.argmax(smooth)) + lo + 0.5) * 0.001
-    near = np.abs(r - peak) <= 0.002
-    return float(_pct(r[near], 50.0)) if near.any() else float(peak)
-
-
-def _robust_line(x: NDArray, y: NDArray) -> tuple[float, float]:
-    """Robust fit ``y = a + b x`` (Tukey IRLS)."""
-    w = np.ones_like(x)
-    a, b = float(_pct(y, 50.0)), 0.0
-    for _ in range(6):
-        sw = w.sum()
-        if sw <= 0:
-            break
-        xm = float((w * x).sum() / sw)
-        ym = float((w * y).sum() / sw)
-        sxx = float((w * (x - xm) ** 2).sum())
-        if sxx <= 1e-18:
-            break
-        b = float((w * (x - xm) * (y - ym)).sum() / sxx)
-        a = ym - b * xm
-        res = y - (a + b * x)
-        s = max(mad_sigma(res), 1e-4)
-        w = tukey_weights(res, 4.685 * s)
-    return a, b

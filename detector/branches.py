@@ -22,7 +22,7 @@ from detector.detection import Detection
 from detector.grid import label_regions
 from detector.improved_config import ImprovedConfig
 from detector.long_bend import _fit_torus, _spread_along_axis
-from detector.options import StructureOption, option_order
+from detector.options import StructureOption, option_order, wrap_angle
 from detector.pipe_cloud import (
     ANNEAL,
     COST_TOL,
@@ -102,7 +102,7 @@ def _find_lobes(
     merged: list[Lobe] = []
     for lb in lobes:
         for mg in merged:
-            if abs(_wrap(lb.roll - mg.roll)) < math.radians(45.0):
+            if abs(wrap_angle(lb.roll - mg.roll)) < math.radians(45.0):
                 mg.mask = mg.mask | lb.mask
                 p = cloud.points(mg.mask)
                 mg.roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
@@ -140,10 +140,6 @@ def _split_all_round(
     if parts.size < 2:
         return [(mask, n)]
     return [(labels == k, int(counts[k])) for k in parts.tolist()]
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 # --------------------------------------------------------------------------- outgoing pipes
@@ -398,7 +394,7 @@ def _branches(
     # side of the incoming axis). Two cylinders fitted to the nearer of them take in the
     # scatter of a noisy opening's rim between them, and lean apart by several degrees for it.
     own = None
-    opposite = n_l == 2 and abs(_wrap(lobes[0].roll - lobes[1].roll)) > math.radians(150)
+    opposite = n_l == 2 and abs(wrap_angle(lobes[0].roll - lobes[1].roll)) > math.radians(150)
     if opposite and not any_roll:
         p_near = p_all[lobe_idx.size :]
         side = np.stack(
@@ -705,7 +701,7 @@ def _standard_angles(
         diag["standard_angle_lr"] = float(lr)
         # (held at the standard angle, the branch must stay where it was: a fit that turns it
         # about the run's axis to make up for the deflection rests on too few returns)
-        turned = max(abs(_wrap(float(x_s[2 + 3 * k] - x[2 + 3 * k]))) for k in range(n_b))
+        turned = max(abs(wrap_angle(float(x_s[2 + 3 * k] - x[2 + 3 * k]))) for k in range(n_b))
         return lr <= SNAP_LR * n_held and turned <= SNAP_MAX_TURN
 
     Fit = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
@@ -860,10 +856,8 @@ def _hole_prior(
         cost += c0 * c0 * np.minimum(1.0, 0.25 * excess * excess)
         cost = np.where(ths > 0.5 * math.pi + 1e-6, cost / 0.7, cost)  # forward branches first
         j = int(np.argmin(cost))
-        best = (float(cost[j]), float(ths[j]), float(ell_t[j]))
-        assert best is not None
-        thetas.append(best[1])
-        ells.append(best[2])
+        thetas.append(float(ths[j]))
+        ells.append(float(ell_t[j]))
         slack.append(max(0.25 * big_r, 0.5 * step))
         holes.append((centre, half, slack[-1], rho))
     ell = float(np.mean(ells))

@@ -66,8 +66,12 @@ class Detection:
         if self.kind not in KINDS:
             raise ValueError(f"Detection.kind must be one of {KINDS}, got {self.kind!r}")
         opts = list(self.options)
-        if not all(isinstance(o, StructureOption) for o in opts):
-            raise ValueError("Detection.options must be StructureOption instances")
+        for k, o in enumerate(opts):
+            if not isinstance(o, StructureOption):
+                raise ValueError(
+                    f"Detection.options must be StructureOption instances, got "
+                    f"{type(o).__name__} at index {k}"
+                )
         if self.kind == "straight" and opts:
             raise ValueError("a straight detection has no options")
         if self.kind != "straight" and not opts:
@@ -83,10 +87,6 @@ class Detection:
     def straight(cls, confidence: float = 1.0, **diagnostics: Any) -> Detection:
         """A straight-pipe detection."""
         return cls("straight", [], confidence, diagnostics)
-
-    @property
-    def is_structure(self) -> bool:
-        return self.kind != "straight"
 
     @property
     def distance(self) -> float:

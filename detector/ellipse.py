@@ -53,11 +53,6 @@ class Ellipse:
         """semi_minor / semi_major in (0, 1]."""
         return self.semi_minor / self.semi_major
 
-    @property
-    def major_axis(self) -> NDArray[np.float64]:
-        """Unit vector along the major axis."""
-        return np.array([math.cos(self.orientation), math.sin(self.orientation)])
-
     def points(self, n: int = 100) -> NDArray[np.float64]:
         """(n, 2) points on the ellipse, for plots and tests."""
         t = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)

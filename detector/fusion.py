@@ -256,7 +256,10 @@ class StructureTracker:
         if pos.shape != (3,) or not np.all(np.isfinite(pos)):
             raise ValueError(f"sensor_position must be 3 finite numbers, got {pos!r}")
         if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
-            raise ValueError("sensor_rotation must be a finite 3x3 matrix")
+            raise ValueError(
+                f"sensor_rotation must be a finite 3x3 matrix, got shape {rot.shape}"
+                + ("" if rot.shape != (3, 3) else f" with non-finite entries {rot.tolist()}")
+            )
         if not isinstance(detection, Detection):
             raise ValueError(f"detection must be a Detection, got {type(detection).__name__}")
         self._last_pose = (pos, rot)

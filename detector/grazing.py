@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.grid import label_regions
+from detector.options import wrap_angle
 from detector.robust import robust_gauss_newton
 
 #: A return counts as entering an opening when it lies this far (m) beyond the wall line
@@ -138,7 +139,7 @@ def find_ring_holes(
         phi = np.arctan2(xyz[2, rows, cols], xyz[1, rows, cols])
         centre = math.atan2(float(np.sin(phi).sum()), float(np.cos(phi).sum()))
         for c, rs, cs in groups:
-            if abs(_wrap(centre - c)) < math.radians(45.0):
+            if abs(wrap_angle(centre - c)) < math.radians(45.0):
                 rs.append(rows)
                 cs.append(cols)
                 break
@@ -154,7 +155,7 @@ def find_ring_holes(
             continue
         for k, (other, r_o, c_o) in enumerate(fitted):
             if (
-                abs(_wrap(hole.roll - other.roll)) < math.radians(45.0)
+                abs(wrap_angle(hole.roll - other.roll)) < math.radians(45.0)
                 and abs(hole.position - other.position) < big_r
             ):
                 rows, cols = np.concatenate([r_o, rows]), np.concatenate([c_o, cols])
@@ -186,10 +187,6 @@ def _accepted(
     if n_rows * 2.0 * math.pi / g > MAX_ROLL_SPAN:
         return None  # (almost) all around: a widening, not a side hole
     return _fit_far_side(xyz[:, rows, cols], big_r)
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _fit_far_side(p: NDArray[np.float64], big_r: float) -> RingHole | None:
@@ -238,6 +235,6 @@ def _fit_far_side(p: NDArray[np.float64], big_r: float) -> RingHole | None:
             continue
         entry = float(np.median(u * big_r / np.maximum(r, 1e-9)))
         best = RingHole(
-            float(x[0]), float(x[1]), _wrap(float(x[2])), int(u.size), rms, entry, theta
+            float(x[0]), float(x[1]), wrap_angle(float(x[2])), int(u.size), rms, entry, theta
         )
     return best

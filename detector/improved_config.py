@@ -7,7 +7,8 @@ Lengths in metres, angles in radians.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import numbers
+from dataclasses import dataclass, fields
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,40 @@ class ImprovedConfig:
     radius_lr_per_branch: float = 12.0
     max_radius_correction: float = 0.003
     far_wall_min_lean: float = 0.15
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            kind, low, low_included, high, allowed = _ALLOWED[f.name]
+            ok = isinstance(value, numbers.Integral if kind is int else numbers.Real)
+            ok = ok and not isinstance(value, bool)
+            if ok:
+                v = kind(value)
+                ok = math.isfinite(v) and (v >= low if low_included else v > low) and v <= high
+            if not ok:
+                raise ValueError(f"ImprovedConfig.{f.name} must be {allowed}, got {value!r}")
+            object.__setattr__(self, f.name, kind(value))
+
+
+#: Allowed values of each :class:`ImprovedConfig` field: (type, lower bound, lower bound
+#: allowed, upper bound, description).
+_ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
+    "tol_floor": (float, 0.0, False, 1.0, "a number in (0, 1] m"),
+    "axis_slope": (float, 0.0, True, 1.0, "a number in [0, 1] (m per m)"),
+    "noise_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "min_lobe_points": (int, 1, True, math.inf, "an integer >= 1"),
+    "min_region_rows": (int, 1, True, math.inf, "an integer >= 1"),
+    "min_anomaly_points": (int, 1, True, math.inf, "an integer >= 1"),
+    "horizon": (float, 0.0, False, 100.0, "a number in (0, 100] m"),
+    "fit_points": (int, 10, True, math.inf, "an integer >= 10"),
+    "axis_points": (int, 10, True, math.inf, "an integer >= 10"),
+    "prior_offset": (float, 0.0, False, 1.0, "a number in (0, 1] m"),
+    "prior_tilt": (float, 0.0, False, math.pi / 2, "a number in (0, pi/2] rad"),
+    "straight_on_coverage": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "radius_lr_per_branch": (float, 0.0, True, math.inf, "a finite number >= 0"),
+    "max_radius_correction": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "far_wall_min_lean": (float, 0.0, True, 100.0, "a number in [0, 100] (radii)"),
+}
 
 
 DEFAULT_CONFIG = ImprovedConfig()

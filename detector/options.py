@@ -21,15 +21,15 @@ be compared field by field. Definitions follow DESIGN.md (SI units in the API):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+import numbers
+from dataclasses import dataclass
 from typing import Any
 
 KINDS: tuple[str, ...] = ("straight", "reducer", "closure", "bend", "junction")
-#: Kinds that are a structure (everything but a straight pipe).
-STRUCTURE_KINDS: tuple[str, ...] = KINDS[1:]
 
 
-def _wrap(a: float) -> float:
+def wrap_angle(a: float) -> float:
+    """``a`` (radians) wrapped to (-pi, pi]."""
     w = math.fmod(a + math.pi, 2.0 * math.pi)
     if w <= 0.0:
         w += 2.0 * math.pi
@@ -53,8 +53,12 @@ class StructureOption:
             raise ValueError(f"StructureOption.kind must be one of {KINDS}, got {self.kind!r}")
         for name in ("distance", "diameter", "direction", "angle", "confidence", "bend_radius"):
             value = getattr(self, name)
-            if not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ValueError(f"StructureOption.{name} must be a finite number, got {value!r}")
+            ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
+            if not ok or not math.isfinite(value):
+                raise ValueError(
+                    f"StructureOption.{name} must be a finite real number (not a bool), "
+                    f"got {value!r}"
+                )
             object.__setattr__(self, name, float(value))
         if self.diameter < 0.0:
             raise ValueError(f"StructureOption.diameter must be >= 0 m, got {self.diameter}")
@@ -64,15 +68,12 @@ class StructureOption:
             raise ValueError(f"StructureOption.bend_radius must be >= 0 m, got {self.bend_radius}")
         if not 0.0 <= self.confidence <= 1.0:
             raise ValueError(f"StructureOption.confidence must be in [0, 1], got {self.confidence}")
-        object.__setattr__(self, "direction", _wrap(self.direction))
+        object.__setattr__(self, "direction", wrap_angle(self.direction))
 
     @property
     def is_straight_on(self) -> bool:
         """True for a way on that continues (nearly) along the current axis (angle < 10 deg)."""
         return self.angle < math.radians(10.0)
-
-    def with_confidence(self, confidence: float) -> StructureOption:
-        return replace(self, confidence=confidence)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -116,6 +117,6 @@ def option_order(option: StructureOption) -> tuple[int, float]:
 def direction_name(direction: float) -> str:
     """Nearest of eight compass-like names for a roll direction (0 = left, pi/2 = up)."""
     names = ["left", "up-left", "up", "up-right", "right", "down-right", "down", "down-left"]
-    k = int(round(_wrap(direction) / (math.pi / 4.0))) % 8
-    deg = round(math.degrees(_wrap(direction)))
+    k = int(round(wrap_angle(direction) / (math.pi / 4.0))) % 8
+    deg = round(math.degrees(wrap_angle(direction)))
     return f"{names[k]} ({deg + 0:+d} deg)"

@@ -1,7 +1,8 @@
 """A scan's returns in the pipe frame (:class:`PipeCloud`) and the small helpers every part of
 the improved detector (:mod:`detector.improved`) shares: the scan pattern's grid and beam
 directions (cached), the returns' wall tolerance, percentiles and even subsamples, azimuth
-coverage, the sizes of labelled regions, a fit's confidence, and when the robust fits stop.
+coverage, the sizes of labelled regions, a fit's confidence, the most frequent radius, a robust
+straight line, and when the robust fits stop (the improved planar method shares some of them).
 
 Lengths in metres, angles in radians.
 """
@@ -16,7 +17,8 @@ from numpy.typing import NDArray
 
 from detector.grid import build_grid
 from detector.improved_config import ImprovedConfig
-from detector.scan import Scan
+from detector.robust import mad_sigma, tukey_weights
+from detector.scan import Scan, corrected_ranges, radial_noise
 from detector.transforms import SensorInPipe
 
 #: Fits stop when no parameter moves by more than this (metres, radians): far below the
@@ -190,10 +192,10 @@ def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedCon
     ok[src_missing] = False  # (... and are dropped here)
     cell = np.flatnonzero(ok)
     pb = src[cell]
-    ranges = np.maximum(scan.ranges.reshape(-1)[pb] - range_bias, 0.0)
+    ranges = corrected_ranges(scan.ranges.reshape(-1)[pb], range_bias)
     local = np.take(dirs, cell, axis=1)
     local *= ranges
-    if scan.n_planes > 1 and float(np.ptp(scan.nominal_positions, axis=0).max()) > 1e-9:
+    if _moves(scan):
         # continuous sweep: express every plane in the last plane's sensor frame (odometry)
         plane = pb // scan.n_beams
         world = np.einsum("nij,jn->in", scan.nominal_rotations[plane], local)
@@ -213,23 +215,22 @@ def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedCon
         k0, k1 = 0, 1
     shape = (g, k1 - k0)
     cell = row * shape[1] + (col - k0)
-    spec = scan.spec or {}
-    sig = float(spec.get("noise_sigma", 0.0))
-    sig_rel = float(spec.get("noise_sigma_rel", 0.0))
-    res = float(spec.get("range_resolution", 0.0))
-    jitter = float(spec.get("angular_jitter", 0.0))
-    if sig_rel != 0.0:
-        sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
-    else:  # (the same numbers, without the per-return terms that vanish)
-        sigma_range = np.full(ranges.size, math.sqrt(sig**2 + (res**2) / 12.0))
-    sigma_r = sigma_range * tr[0]
-    if jitter != 0.0:
-        sigma_r += ranges * jitter * tr[1]
+    sigma_range, sigma_r = radial_noise(scan.spec, ranges, tr[0], tr[1])
     cloud = PipeCloud(
         wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose, beam_step
     )
     cloud.set_pose(pose)
     return cloud
+
+
+def _moves(scan: Scan) -> bool:
+    """Does the believed (nominal) sensor pose change during the sweep (position or
+    orientation)? Then the planes are motion-compensated into the last plane's frame."""
+    if scan.n_planes < 2:
+        return False
+    if float(np.ptp(scan.nominal_positions, axis=0).max()) > 1e-9:
+        return True
+    return float(np.ptp(scan.nominal_rotations, axis=0).max()) > 1e-9
 
 
 def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
@@ -317,6 +318,52 @@ def _azimuth_uniformity(p: NDArray, bins: int = 12) -> float:
     return float(cnt.min()) / med if med > 0 else 0.0
 
 
-def _confidence(n_support: int, rms: float, tol: float) -> float:
-    c = (1.0 - math.exp(-n_support / 30.0)) * math.exp(-((rms / max(tol, 1e-6)) ** 2) / 4.0)
+def _confidence(n_support: int, rms: float, tol: float, n_scale: float = 30.0) -> float:
+    """Confidence in [0, 1] of a fit to ``n_support`` returns with residual ``rms`` against
+    the tolerance ``tol`` (m): it saturates with the support (``1 - exp(-n / n_scale)``) and
+    falls as the rms approaches the tolerance."""
+    c = (1.0 - math.exp(-n_support / n_scale)) * math.exp(-((rms / max(tol, 1e-6)) ** 2) / 4.0)
     return float(min(1.0, max(0.0, c)))
+
+
+def _radius_mode(r: NDArray[np.float64]) -> float:
+    """Most frequent radius (m): 1 mm histogram peak refined by the median of its
+    neighbourhood (2 mm either side)."""
+    bins = np.floor(r / 0.001).astype(np.int64)
+    lo = int(bins.min())
+    cnt = np.bincount(bins - lo)
+    smooth = np.convolve(cnt, np.ones(3), mode="same")
+    peak = (int(np.argmax(smooth)) + lo + 0.5) * 0.001
+    near = np.abs(r - peak) <= 0.002
+    return float(_pct(r[near], 50.0)) if near.any() else float(peak)
+
+
+def _robust_line(
+    x: NDArray[np.float64], y: NDArray[np.float64], sxx_floor: float, sigma_floor: float
+) -> tuple[float, float]:
+    """Robust fit ``y = a + b x`` (Tukey IRLS, 6 iterations): ``(a, b)``.
+
+    Args:
+        x, y: (n,) the points.
+        sxx_floor: the fit stops (keeping the last line; ``(median(y), 0)`` at first) when the
+            weighted spread ``sum w (x - mean x)^2`` is no larger, units of ``x`` squared.
+        sigma_floor: smallest robust standard deviation of the residuals for the Tukey cut-off,
+            units of ``y``.
+    """
+    w = np.ones_like(x)
+    a, b = float(_pct(y, 50.0)), 0.0
+    for _ in range(6):
+        sw = w.sum()
+        if sw <= 0:
+            break
+        xm = float((w * x).sum() / sw)
+        ym = float((w * y).sum() / sw)
+        sxx = float((w * (x - xm) ** 2).sum())
+        if sxx <= sxx_floor:
+            break
+        b = float((w * (x - xm) * (y - ym)).sum() / sxx)
+        a = ym - b * xm
+        res = y - (a + b * x)
+        s = max(mad_sigma(res), sigma_floor)
+        w = tukey_weights(res, 4.685 * s)
+    return a, b

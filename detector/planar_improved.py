@@ -5,7 +5,8 @@ size as the diameter, this method fits lines, using the clamped diameter:
 
 1. **Plane frame.** The plane's returns are mapped into the pipe frame (known pose, else centred
    and aligned) and expressed as ``(u, v)``: ``u`` along the pipe axis, ``v`` signed across it
-   in the plane (positive on the ``beta > 0`` side, roll ``alpha``).
+   in the plane (positive on the ``beta > 0`` side: the plane's sideways direction, roll
+   ``alpha`` in the sensor frame, taken into the pipe frame with the pose).
 2. **Walls.** A robust line is fitted to the wall returns of each side (``|v|`` near the clamped
    radius, before the structure); their mean offset and slope give the in-plane sensor offset
    and tilt, which are removed (the thesis assumes both zero).
@@ -36,9 +37,10 @@ from numpy.typing import NDArray
 
 from detector.detection import Detection
 from detector.options import StructureOption
+from detector.pipe_cloud import _confidence, _radius_mode, _robust_line
 from detector.robust import mad_sigma, robust_gauss_newton, tukey_cost, tukey_weights
-from detector.scan import Scan
-from detector.transforms import SensorInPipe
+from detector.scan import Scan, corrected_ranges, radial_noise, spec_value
+from detector.transforms import SensorInPipe, option_direction
 
 #: Fewest beyond returns on a side for an opening.
 MIN_OPENING_POINTS = 3
@@ -79,38 +81,20 @@ def robust_tls_line(
     return c, d, rms, w
 
 
-def _robust_yx(x: NDArray, y: NDArray) -> tuple[float, float]:
-    """Robust ``y = a + b x`` (Tukey IRLS); ``(median(y), 0)`` when ``x`` does not vary."""
-    w = np.ones_like(x)
-    a, b = float(np.median(y)), 0.0
-    for _ in range(6):
-        sw = float(w.sum())
-        if sw <= 0.0:
-            break
-        xm = float((w * x).sum() / sw)
-        ym = float((w * y).sum() / sw)
-        sxx = float((w * (x - xm) ** 2).sum())
-        if sxx <= 1e-12:
-            break
-        b = float((w * (x - xm) * (y - ym)).sum() / sxx)
-        a = ym - b * xm
-        res = y - (a + b * x)
-        w = tukey_weights(res, 4.685 * max(mad_sigma(res), 2e-4))
-    return a, b
-
-
-def _radius_mode(r: NDArray) -> float:
-    bins = np.floor(r / 0.001).astype(np.int64)
-    lo = int(bins.min())
-    cnt = np.convolve(np.bincount(bins - lo), np.ones(3), mode="same")
-    peak = (int(np.argmax(cnt)) + lo + 0.5) * 0.001
-    near = np.abs(r - peak) <= 0.002
-    return float(np.median(r[near])) if near.any() else peak
-
-
-def _confidence(n: int, rms: float, tol: float) -> float:
-    c = (1.0 - math.exp(-n / 10.0)) * math.exp(-((rms / max(tol, 1e-6)) ** 2) / 4.0)
-    return float(min(1.0, max(0.0, c)))
+def _plane_lateral(pose: SensorInPipe, alpha: float) -> NDArray[np.float64]:
+    """Unit pipe-frame direction across the pipe axis in the scan plane at servo angle
+    ``alpha`` (radians): the plane's sideways direction (the ``beta > 0`` side, sensor frame)
+    rotated into the pipe frame and made perpendicular to the axis."""
+    e_sensor = np.array([0.0, math.cos(alpha), math.sin(alpha)])
+    e = pose.rotation @ e_sensor
+    e[0] = 0.0
+    n = float(np.linalg.norm(e))
+    if n < 1e-6:
+        raise ValueError(
+            f"scan plane at {alpha:.3f} rad is perpendicular to the pipe axis under the given "
+            "sensor pose; it has no direction across the axis"
+        )
+    return e / n
 
 
 def detect_planar_improved(
@@ -162,20 +146,17 @@ def _detect(
     diag["plane_angle"] = alpha
     valid = scan.valid[plane]
     beta = scan.beam_angles[valid]
-    ranges = scan.ranges[plane][valid] - float((scan.spec or {}).get("bias", 0.0))
+    ranges = corrected_ranges(scan.ranges[plane][valid], spec_value(scan.spec, "bias", 0.0))
     diag["n_points"] = int(beta.size)
     if beta.size < MIN_ANOMALY_POINTS:
         diag["reason"] = "too few returns"
         return Detection.straight(confidence=0.0, **diag)
     pts = pose.to_pipe(scan.directions()[plane][valid] * ranges[:, None])
-    e_lat = np.array([0.0, math.cos(alpha), math.sin(alpha)])
+    e_lat = _plane_lateral(pose, alpha)
     u = pts[:, 0].copy()
     v = pts @ e_lat
     # per-return radial tolerance from the sensor model
-    spec = scan.spec or {}
-    sig = math.hypot(float(spec.get("noise_sigma", 0.0)), float(spec.get("range_resolution", 0.0)))
-    sig_r = np.hypot(sig, float(spec.get("noise_sigma_rel", 0.0)) * ranges) * np.abs(np.sin(beta))
-    sig_r += ranges * float(spec.get("angular_jitter", 0.0)) * np.abs(np.cos(beta))
+    _, sig_r = radial_noise(scan.spec, ranges, np.abs(np.sin(beta)), np.abs(np.cos(beta)))
     tol = tol_floor + noise_k * sig_r
     # --- in-plane offset and tilt from the two walls
     if refine_axis:
@@ -187,7 +168,7 @@ def _detect(
                 um, vm = u[m][order], v[m][order]
                 um, vm = um[: max(6, int(0.6 * um.size))], vm[: max(6, int(0.6 * vm.size))]
                 if float(um[-1] - um[0]) > 0.02:
-                    fits.append((sgn, *_robust_yx(um, vm)))
+                    fits.append((sgn, *_robust_line(um, vm, 1e-12, 2e-4)))
         if len(fits) == 2:
             off = 0.5 * (fits[0][1] + fits[1][1])
             slope = 0.5 * (fits[0][2] + fits[1][2])
@@ -215,7 +196,7 @@ def _detect(
     if sides and not (
         len(sides) == 2 and inside.sum() < 0.3 * beyond.sum() and _parallel(u, v, sides)
     ):
-        return _openings(u, v, a, big_r, sides, inside, wall, alpha, tol_med, diag)
+        return _openings(u, v, a, big_r, sides, inside, wall, e_lat, pose, tol_med, diag)
     return _axisymmetric(u, a, big_r, inside, beyond, tol_med, diag)
 
 
@@ -236,7 +217,8 @@ def _openings(
     sides: list,
     inside: NDArray,
     wall: NDArray,
-    alpha: float,
+    e_lat: NDArray,
+    pose: SensorInPipe,
     tol: float,
     diag: dict[str, Any],
 ) -> Detection:
@@ -258,8 +240,11 @@ def _openings(
         big_l, theta, rho, rms, n_sup = fit
         if not (math.isfinite(big_l) and -0.5 <= big_l <= 3.0):
             continue
-        conf = _confidence(n_sup, rms, max(tol, 1e-3))
-        direction = alpha if sgn > 0 else alpha + math.pi
+        conf = _confidence(n_sup, rms, max(tol, 1e-3), n_scale=10.0)
+        # roll of the outgoing axis (in the plane, towards this side), in the sensor frame
+        _, direction = option_direction(
+            np.array([math.cos(theta), *(sgn * math.sin(theta) * e_lat[1:])]), pose
+        )
         options.append(StructureOption("bend", big_l, 2.0 * rho, direction, theta, conf))
         dists.append(big_l)
         confs.append(conf)
@@ -358,7 +343,7 @@ def _axisymmetric(
         on = np.abs(um - u_med) <= 0.003 + 2.0 * tol
         if on.mean() >= 0.8 and float(np.min(am[on])) < 0.5 * big_r:
             up = um[on]
-            conf = _confidence(int(on.sum()), float(np.std(up)), 0.003 + 2.0 * tol)
+            conf = _confidence(int(on.sum()), float(np.std(up)), 0.003 + 2.0 * tol, n_scale=10.0)
             opt = StructureOption("closure", float(np.mean(up)), 0.0, 0.0, 0.0, conf)
             return Detection("closure", [opt], conf, diag)
     r2 = _radius_mode(am)
@@ -371,12 +356,12 @@ def _axisymmetric(
     taper = (am > lo) & (am < hi)
     big_l = float(np.min(um))
     if taper.sum() >= 3:
-        a0, b0 = _robust_yx(um[taper], am[taper])
+        a0, b0 = _robust_line(um[taper], am[taper], 1e-12, 2e-4)
         if abs(b0) > 1e-3:
             cand = (big_r - a0) / b0
             if math.isfinite(cand) and abs(cand - big_l) < 0.2:
                 big_l = float(cand)
     diag.update(reducer_r2=r2, taper_points=int(taper.sum()))
-    conf = _confidence(int(m.sum()), 0.0, tol)
+    conf = _confidence(int(m.sum()), 0.0, tol, n_scale=10.0)
     opt = StructureOption("reducer", max(0.0, big_l), 2.0 * r2, 0.0, 0.0, conf)
     return Detection("reducer", [opt], conf, diag)

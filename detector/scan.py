@@ -19,6 +19,9 @@ detected without the simulator.
 from __future__ import annotations
 
 import json
+import math
+import numbers
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,6 +30,19 @@ import numpy as np
 from numpy.typing import NDArray
 
 SCAN_FORMAT_VERSION = 1
+
+#: Entries of ``Scan.spec`` the detector reads (the ``LidarSpec`` fields of the same names),
+#: with their unit and the values allowed: ``">= 0"`` a finite number >= 0, ``"finite"`` any
+#: finite number, ``"> 0"`` a number > 0 (``inf``: unlimited).
+SPEC_NUMBERS: dict[str, tuple[str, str]] = {
+    "noise_sigma": ("m", ">= 0"),
+    "noise_sigma_rel": ("", ">= 0"),
+    "range_resolution": ("m", ">= 0"),
+    "angular_jitter": ("rad", ">= 0"),
+    "bias": ("m", "finite"),
+    "min_range": ("m", ">= 0"),
+    "max_range": ("m", "> 0"),
+}
 
 
 def beam_directions(plane_angles: NDArray, beam_angles: NDArray) -> NDArray[np.float64]:
@@ -91,16 +107,28 @@ class Scan:
             if arr.shape != shape:
                 raise ValueError(f"Scan.{name} must have shape {shape}, got {arr.shape}")
             if name != "valid" and not np.all(np.isfinite(arr)):
-                raise ValueError(f"Scan.{name} must be finite")
+                k = _first(~np.isfinite(arr))
+                raise ValueError(f"Scan.{name} must be finite, got {float(arr[k])} at index {k}")
             object.__setattr__(self, name, arr)
         valid = self.valid
         if np.any(np.isnan(r)):
-            raise ValueError("Scan.ranges contains NaN; use inf with valid=False for no return")
-        if np.any(valid & ~np.isfinite(r)) or np.any(~valid & np.isfinite(r)):
-            raise ValueError("Scan.valid must be True exactly where ranges are finite")
+            k = _first(np.isnan(r))
+            raise ValueError(
+                f"Scan.ranges must not be NaN, got nan at (plane, beam) {k}; use inf with "
+                "valid=False for no return"
+            )
+        mismatch = valid != np.isfinite(r)
+        if np.any(mismatch):
+            k = _first(mismatch)
+            raise ValueError(
+                f"Scan.valid must be True exactly where ranges are finite, got valid="
+                f"{bool(valid[k])} with range {float(r[k])} at (plane, beam) {k}"
+            )
         if np.any(r[valid] < 0):
-            raise ValueError("Scan.ranges must be non-negative")
+            k = _first(r < 0)
+            raise ValueError(f"Scan.ranges must be >= 0 m, got {float(r[k])} at (plane, beam) {k}")
         object.__setattr__(self, "ranges", r)
+        _check_spec(self.spec)
 
     @property
     def n_planes(self) -> int:
@@ -147,7 +175,10 @@ class Scan:
     def plane(self, index: int) -> Scan:
         """A single-plane scan (for the 2D algorithm)."""
         if not -self.n_planes <= index < self.n_planes:
-            raise ValueError(f"plane index {index} out of range for {self.n_planes} planes")
+            raise ValueError(
+                f"plane index must be in [-{self.n_planes}, {self.n_planes - 1}] for a scan of "
+                f"{self.n_planes} planes, got {index}"
+            )
         sl = slice(index, index + 1) if index != -1 else slice(-1, None)
         return Scan(
             self.ranges[sl],
@@ -209,6 +240,89 @@ class Scan:
             spec = json.loads(str(z["spec"]))
             meta = json.loads(str(z["metadata"]))
         return cls(**arrays, spec=spec, metadata=meta)
+
+
+def _first(mask: NDArray[np.bool_]) -> tuple[int, ...]:
+    """Index (as a tuple of ints) of the first True element of ``mask``."""
+    return tuple(int(i) for i in np.unravel_index(int(np.argmax(mask)), mask.shape))
+
+
+def _check_spec(spec: Any) -> None:
+    """Reject a ``Scan.spec`` that is not a dictionary, or whose entries in
+    :data:`SPEC_NUMBERS` are not numbers in their allowed range."""
+    if spec is None:
+        return
+    if not isinstance(spec, Mapping):
+        raise ValueError(f"Scan.spec must be a dict (a LidarSpec as a dict), got {spec!r}")
+    for key, (unit, allowed) in SPEC_NUMBERS.items():
+        if key not in spec:
+            continue
+        value = spec[key]
+        ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
+        if ok:
+            v = float(value)
+            if allowed == ">= 0":
+                ok = math.isfinite(v) and v >= 0.0
+            elif allowed == "finite":
+                ok = math.isfinite(v)
+            else:
+                ok = v > 0.0  # (inf allowed, NaN not)
+        if not ok:
+            u = f" {unit}" if unit else ""
+            what = {
+                ">= 0": f"a finite number >= 0{u}",
+                "finite": f"a finite number ({unit})",
+                "> 0": f"a number > 0{u} (inf: unlimited)",
+            }[allowed]
+            raise ValueError(f"Scan.spec[{key!r}] must be {what}, got {value!r}")
+
+
+def spec_value(spec: Mapping[str, Any] | None, key: str, default: float) -> float:
+    """The number ``spec[key]`` (checked by :class:`Scan`), or ``default`` when absent."""
+    if not spec:
+        return default
+    return float(spec.get(key, default))
+
+
+def corrected_ranges(ranges: NDArray[np.float64], bias: float) -> NDArray[np.float64]:
+    """Measured ranges (m) without the sensor's constant ``bias`` (m), clamped at 0 m."""
+    return np.maximum(ranges - bias, 0.0)
+
+
+def radial_noise(
+    spec: Mapping[str, Any] | None,
+    ranges: NDArray[np.float64],
+    sin_beta: NDArray[np.float64],
+    cos_beta: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Standard deviation of each return's range and of its distance across the pipe axis.
+
+    The sensor model of ``spec`` (:data:`SPEC_NUMBERS`): gaussian range noise ``noise_sigma``
+    (m) and ``noise_sigma_rel`` x range, and quantisation to ``range_resolution`` (m), a
+    uniform error of variance ``resolution^2 / 12``; the range error moves a return across
+    the axis by ``|sin beta|`` of it; the beam-angle jitter ``angular_jitter`` (rad) moves it
+    by ``range x jitter x |cos beta|``.
+
+    Args:
+        spec: the scan's sensor description (``Scan.spec``); absent entries count as 0.
+        ranges: (N,) corrected ranges (:func:`corrected_ranges`), metres.
+        sin_beta, cos_beta: (N,) ``|sin|`` and ``|cos|`` of each return's beam angle.
+
+    Returns:
+        ``(sigma_range, sigma_radial)``, both (N,) metres.
+    """
+    sig = spec_value(spec, "noise_sigma", 0.0)
+    sig_rel = spec_value(spec, "noise_sigma_rel", 0.0)
+    res = spec_value(spec, "range_resolution", 0.0)
+    jitter = spec_value(spec, "angular_jitter", 0.0)
+    if sig_rel != 0.0:
+        sigma_range = np.sqrt(sig**2 + (sig_rel * ranges) ** 2 + (res**2) / 12.0)
+    else:  # (the same numbers, without the per-return terms that vanish)
+        sigma_range = np.full(ranges.size, math.sqrt(sig**2 + (res**2) / 12.0))
+    sigma_r = sigma_range * sin_beta
+    if jitter != 0.0:
+        sigma_r += ranges * jitter * cos_beta
+    return sigma_range, sigma_r
 
 
 def _json_default(value: Any) -> Any:

@@ -10,9 +10,10 @@ Frames (REP-103, as in :mod:`detector.scan`):
   and aligned (thesis assumptions i and iii) the two frames coincide.
 
 :class:`SensorInPipe` holds the sensor pose in the pipe frame (``position`` of the sensor
-origin, ``rotation`` pipe-from-sensor); ``to_pipe`` maps sensor points into the pipe frame
-and ``direction_to_sensor`` maps a direction back, so option directions (atan2(z, y)) are
-reported in the sensor frame as DESIGN.md defines them. Units: metres and radians.
+origin, ``rotation`` pipe-from-sensor); ``to_pipe`` maps sensor points into the pipe frame, and
+:func:`option_direction` expresses an outgoing axis found in the pipe frame as the option's
+angle and its direction (atan2(z, y) in the sensor frame, as DESIGN.md defines them). Units:
+metres and radians.
 """
 
 from __future__ import annotations
@@ -103,8 +104,13 @@ class SensorInPipe:
             raise ValueError(f"SensorInPipe.position must be 3 finite numbers, got {p!r}")
         if r.shape != (3, 3) or not np.all(np.isfinite(r)):
             raise ValueError(f"SensorInPipe.rotation must be a finite 3x3 matrix, got {r!r}")
-        if float(np.abs(r.T @ r - _EYE3).max()) > 1e-6 or _det3(r) < 0:
-            raise ValueError("SensorInPipe.rotation must be a proper rotation matrix")
+        ortho = float(np.abs(r.T @ r - _EYE3).max())
+        det = _det3(r)
+        if ortho > 1e-6 or det < 0:
+            raise ValueError(
+                "SensorInPipe.rotation must be a proper rotation matrix (R^T R = I within 1e-6, "
+                f"det R = +1), got max |R^T R - I| = {ortho:.3g} and det R = {det:.6g}"
+            )
         object.__setattr__(self, "position", p)
         object.__setattr__(self, "rotation", r)
 
@@ -166,10 +172,6 @@ class SensorInPipe:
         p = np.asarray(points, dtype=float)
         return (p - self.position) @ self.rotation
 
-    def direction_to_sensor(self, vector: ArrayLike) -> NDArray[np.float64]:
-        """A pipe-frame direction expressed in the sensor frame."""
-        return np.asarray(vector, dtype=float) @ self.rotation
-
     def compose(self, inner: SensorInPipe) -> SensorInPipe:
         """``self`` maps frame A to the pipe frame; ``inner`` maps the sensor to frame A."""
         return SensorInPipe.trusted(
@@ -196,11 +198,3 @@ def option_direction(axis_pipe: ArrayLike, pose: SensorInPipe) -> tuple[float, f
     y_axis = pose.rotation[:, 1]
     z_axis = pose.rotation[:, 2]
     return angle, math.atan2(float(perp @ z_axis), float(perp @ y_axis))
-
-
-def cylindrical(points: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray]:
-    """(axial u, radius r, azimuth phi) of pipe-frame points; phi = atan2(z, y)."""
-    u = points[:, 0]
-    r = np.sqrt(np.square(points[:, 1]) + np.square(points[:, 2]))
-    phi = np.arctan2(points[:, 2], points[:, 1])
-    return u, r, phi

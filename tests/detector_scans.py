@@ -49,6 +49,20 @@ def scan_layout(
     return scan, net.structures_ahead(true_pose), net.runs[0].diameter
 
 
+def continuous_scan(layout: str, pose_at, sensor: str = "ideal", seed: int = 0, **params):
+    """(scan, network) of a continuous sweep while the body moves: ``pose_at(s)`` gives the
+    body's pose relative to the layout's start at the fraction ``s`` in [0, 1) of the sweep."""
+    net, world = _world(layout, tuple(sorted(params.items())))
+    lid = RotatingLidar(world, sensor, mode="continuous")
+    start = net.start_pose.position
+
+    def body(t: float) -> Pose:
+        p = pose_at(t / lid.sweep_duration)
+        return Pose(start + p.position, p.rotation)
+
+    return lid.scan(body, np.random.default_rng(seed)), net
+
+
 def wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import math
 import sys
 from pathlib import Path
 
@@ -51,3 +52,33 @@ def test_other_layouts_have_no_arc() -> None:
         bench.arc_end_seen(bench.Case("closure", "closure", {"diameter": 0.1}, d), 0.3, scan)
         is None
     )
+
+
+def test_thesis_bend_row_is_the_same_case_for_every_sensor(monkeypatch, tmp_path) -> None:
+    # the tables compare one geometry across sensors; the 31-position approach of figure 5.2
+    # runs apart from them (its records in no table)
+    calls: list[tuple[str, str, float, int, bool]] = []
+
+    def run_case(self, case, sensor, distances, table, misalignment=None, keep=False, rng=None):
+        direction = case.params.get("direction")
+        calls.append((case.group, sensor, direction, len(distances), keep))
+        for method in bench.METHODS:
+            self.timings[method].append(0.001)
+        return []
+
+    monkeypatch.setattr(bench.Runner, "run_case", run_case)
+    monkeypatch.setattr(bench, "planar_study", lambda rng, distances: ("", []))
+    monkeypatch.setattr(bench, "misalignment_study", lambda *a, **k: ("", []))
+    monkeypatch.setattr(bench, "clamp_error_study", lambda *a, **k: "")
+    monkeypatch.setattr(bench, "straight_false_alarms", lambda *a, **k: "")
+    monkeypatch.setattr(bench, "long_bend_study", lambda *a, **k: "")
+    monkeypatch.setattr(bench, "plots", lambda *a, **k: [])
+    monkeypatch.setattr(bench, "overall_table", lambda *a, **k: "")
+    monkeypatch.setattr(bench, "summarise", lambda *a, **k: "")
+    bench.main(["--out", str(tmp_path)])
+    group = "thesis: mitre bend 90 deg"
+    rows = [c for c in calls if c[0] == group and not c[4]]
+    assert sorted(c[1] for c in rows) == ["ideal", "ls02", "ydlidar_x4"]
+    assert all(c[2] == pytest.approx(math.radians(136)) and c[3] == 13 for c in rows), rows
+    (sweep,) = [c for c in calls if c[0] == group and c[4]]
+    assert sweep[1:4] == ("ideal", pytest.approx(math.pi), 31)

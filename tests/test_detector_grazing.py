@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from detector import grazing
 from detector.grazing import find_ring_holes
 
 R = 0.0285
@@ -69,10 +70,22 @@ def test_straight_run_has_no_hole() -> None:
     assert find_ring_holes(xyz, valid, sig, True, R, before=2.0, beam_step=STEP) == []
 
 
-@pytest.mark.parametrize("all_around", [True])
-def test_bump_all_around_is_no_side_hole(all_around: bool) -> None:
-    xyz, valid, sig = _grid(0.4, R, 0.0, all_around=all_around)
+def test_bump_all_around_is_no_side_hole() -> None:
+    xyz, valid, sig = _grid(0.4, R, 0.0, all_around=True)
     assert find_ring_holes(xyz, valid, sig, True, R, before=2.0, beam_step=STEP) == []
+
+
+def test_roll_span_guard_rejects_a_bump_all_around(monkeypatch: pytest.MonkeyPatch) -> None:
+    # a far-side fit that accepts every bump: only the roll-span guard can reject one
+    def fit_anything(p: np.ndarray, big_r: float) -> grazing.RingHole:
+        return grazing.RingHole(0.4, big_r, 0.0, int(p.shape[1]), 0.0, 0.4)
+
+    monkeypatch.setattr(grazing, "_fit_far_side", fit_anything)
+    xyz, valid, sig = _grid(0.4, R, 0.0, all_around=True)
+    assert find_ring_holes(xyz, valid, sig, True, R, before=2.0, beam_step=STEP) == []
+    # (a bump over part of the circumference passes the guard)
+    xyz, valid, sig = _grid(0.4, R, 1.0)
+    assert len(find_ring_holes(xyz, valid, sig, True, R, before=2.0, beam_step=STEP)) == 1
 
 
 def test_holes_past_the_limit_are_left_out() -> None:

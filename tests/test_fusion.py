@@ -65,7 +65,23 @@ def test_nearer_scans_weigh_more():
         s = tr.update(bend(0.40 - x), np.array([x, 0, 0]), EYE)  # reference at 0.40
     ref = s.reference_world[0]
     assert abs(ref - 0.40) < abs(ref - 0.43)
-    assert abs(ref - 0.40) < 0.005  # 1/d^2: the 40 cm scan counts ~1/10 of a 14 cm one
+    # weight 1/d^4: the 43 cm scan counts ~1/70 of a 14 cm one (1/d^2 would leave 1 mm)
+    assert abs(ref - 0.40) < 0.0005
+
+
+def test_scan_weight_falls_with_the_fourth_power_of_the_distance():
+    # the case of the module docstring: a few scans from about 45 cm place the structure 2 cm
+    # too far, then scans from 20 cm see it right. Weighted 1/d^4 the far scans together
+    # weigh 1/35 of the near ones and the fused reference point is 0.6 mm off; 1/d^2 would
+    # leave it 2.9 mm off (1/d: 5.8 mm), enough to jam a turn into a small branch.
+    tr = StructureTracker()
+    for x in (0.0, 0.01, 0.02):
+        tr.update(bend(0.47 - x), np.array([x, 0, 0]), EYE)  # reference at 0.47
+    for x in (0.25, 0.26, 0.27):
+        s = tr.update(bend(0.45 - x), np.array([x, 0, 0]), EYE)  # reference at 0.45
+    err = s.reference_world[0] - 0.45
+    assert s.confirmed
+    assert 0.0 < err < 0.0015, err
 
 
 def test_handover_keeps_the_confirmed_estimate_and_propagates_it_by_odometry():
