@@ -795,3 +795,29 @@ def test_noisy_taper_radius_is_measured_before_the_taper(distance: float, within
         det = detect(scan, d)
         assert det.kind == "reducer", det.describe()
         assert abs(det.options[0].distance - truth[0].distance) < within, det.describe()
+
+
+@pytest.mark.parametrize("distance", [0.35, 0.30])
+def test_noisy_short_taper_is_fitted_apart_from_the_end_wall_seen_through_it(
+    distance: float,
+) -> None:
+    """A 9 cm reducer from 75 to 58.6 mm, 30-35 cm ahead of a ydlidar_x4: beyond the taper the
+    narrower pipe's wall grazes out of sight, and the next returns are the end wall a metre
+    ahead. The fit with those returns, a long shallow taper reaching for them, left a minimum
+    that the taper's own returns could not pull the refit out of: the start came out 7-40 cm
+    late. The refit starts afresh from the returns left."""
+    for seed in (0, 1, 2):
+        scan, truth, d = scan_layout(
+            "reducer",
+            distance,
+            "ydlidar_x4",
+            seed=seed,
+            diameter_in=0.075,
+            diameter_out=0.0586,
+            taper_length=0.0915,
+        )
+        det = detect(scan, d)
+        assert det.kind == "reducer", det.describe()
+        (o,) = det.options
+        assert abs(o.distance - truth[0].distance) < 0.015, det.describe()
+        assert abs(o.diameter - truth[0].diameter) < 0.003, det.describe()
