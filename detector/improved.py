@@ -199,6 +199,9 @@ TAPER_POSE_RATIO = 1.25
 TAPER_POSE_POOR_SUPPORT = 0.6
 #: ... and the given pose's reducer keeps at least this fraction of its returns.
 TAPER_POSE_MIN_SUPPORT = 0.9
+#: A turn under the given pose may keep this much less of a share of its returns than the
+#: junction found under a pose refined on a short wall (:func:`_short_wall_pose_check`).
+SHORT_WALL_SHARE_SLACK = 0.02
 
 
 # --------------------------------------------------------------------------- main entry
@@ -370,6 +373,9 @@ def detect_improved(
             if redone is not None:
                 big_r, det = redone
             redone = _taper_pose_check(cloud, det, config, diag_pose, recheck)
+            if redone is not None:
+                big_r, det = redone
+            redone = _short_wall_pose_check(cloud, det, config, diag_pose, recheck)
             if redone is not None:
                 big_r, det = redone
             redone = _taper_radius_check(cloud, det, config, diag_pose, r_clamped, big_r)
@@ -689,12 +695,8 @@ def _taper_pose_check(
     rms = _fit_rms(det)
     if rms is None or det.diagnostics.get("start_recheck"):
         return None
-    if det.kind != "reducer":
-        support = det.diagnostics.get("fit_support", 0) / max(
-            det.diagnostics.get("fit_points", 1), 1
-        )
-        if support >= TAPER_POSE_POOR_SUPPORT:
-            return None
+    if det.kind != "reducer" and _fit_share(det) >= TAPER_POSE_POOR_SUPPORT:
+        return None
     chosen, xyz_chosen, floor = cloud.pose, cloud.xyz_v, cloud.floor
     if not _pose_moved(chosen, pose0, big_r):
         return None
@@ -721,6 +723,64 @@ def _taper_pose_check(
     cloud.restore(chosen, xyz_chosen)
     cloud.floor = floor
     return None
+
+
+def _short_wall_pose_check(
+    cloud: PipeCloud,
+    det: Detection,
+    cfg: ImprovedConfig,
+    diag_pose: dict[str, Any],
+    given: GivenPose,
+) -> tuple[float, Detection] | None:
+    """A structure right ahead of a sensor with a long minimum range leaves a few centimetres
+    of wall in view (a mitre bend 10 cm ahead of a ydlidar_x4, 12 cm): an axis refined on them
+    takes in the outgoing pipe's first returns and moves 5-7 mm off the centre, and the bend's
+    far side then reads as a second way on (a pipe across). When the pose moved from the given
+    one on less than ``SHORT_WALL_VIEW`` of wall and found a turn or a junction, detect again
+    under the given pose: its turn or junction stands when it has no more ways on and fits its
+    returns at least as closely (rms), keeping as large a share of them (less
+    ``SHORT_WALL_SHARE_SLACK``). ``(radius,
+    detection)`` then, else ``None`` (the cloud keeps its pose)."""
+    pose0, xyz0, big_r, wall_until = given.pose, given.xyz, given.radius, given.wall_until
+    rms = _fit_rms(det)
+    span = det.diagnostics.get("axis_span")
+    if det.kind not in ("bend", "junction") or rms is None or span is None:
+        return None
+    if span >= SHORT_WALL_VIEW or det.diagnostics.get("axis_pass", 0) == 0:
+        return None
+    chosen, xyz_chosen, floor = cloud.pose, cloud.xyz_v, cloud.floor
+    if not _pose_moved(chosen, pose0, big_r):
+        return None
+    cloud.restore(pose0, xyz0)
+    radius, redone = _detect_again(
+        cloud,
+        cfg,
+        diag_pose,
+        {"axis_pass": 0},
+        big_r,
+        wall_until,
+        floor,
+        lambda r: _wall_count(cloud, r, cfg, pose0, wall_until)[3],
+    )
+    rms0 = _fit_rms(redone)
+    if (
+        redone.kind in ("bend", "junction")
+        and rms0 is not None
+        and len(redone.options) <= len(det.options)
+        and rms0 <= rms
+        and _fit_share(redone) >= _fit_share(det) - SHORT_WALL_SHARE_SLACK
+    ):
+        redone.diagnostics["short_wall_pose_check"] = {"chosen_rms": rms, "given_rms": rms0}
+        return radius, redone
+    cloud.restore(chosen, xyz_chosen)
+    cloud.floor = floor
+    return None
+
+
+def _fit_share(det: Detection) -> float:
+    """The share of its returns a turn's or junction's fit keeps (0 when unknown)."""
+    g = det.diagnostics
+    return float(g.get("fit_support", 0)) / max(float(g.get("fit_points", 1)), 1.0)
 
 
 def _taper_radius_check(
