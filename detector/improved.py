@@ -635,10 +635,37 @@ def _torus_pose_check(
     one and the bend's torus fits the returns under the given pose at most ``TORUS_POSE_RATIO``
     times as loosely (rms), the given pose and its detection stand. ``(radius, detection)``
     then, else ``None`` (the cloud keeps its pose)."""
-    pose0, xyz0, big_r, wall_until = given.pose, given.xyz, given.radius, given.wall_until
     rms = det.diagnostics.get("torus_rms")
     if det.kind != "bend" or det.diagnostics.get("model") != "torus" or rms is None:
         return None
+
+    def stands(redone: Detection) -> float | None:
+        rms0 = redone.diagnostics.get("torus_rms")
+        ok = (
+            redone.kind == det.kind
+            and redone.diagnostics.get("model") == "torus"
+            and rms0 is not None
+            and rms0 * TORUS_POSE_RATIO <= rms
+        )
+        return rms0 if ok else None
+
+    return _given_pose_again(cloud, cfg, diag_pose, given, "torus_pose_check", rms, stands)
+
+
+def _given_pose_again(
+    cloud: PipeCloud,
+    cfg: ImprovedConfig,
+    diag_pose: dict[str, Any],
+    given: GivenPose,
+    check: str,
+    chosen_rms: float,
+    stands: Callable[[Detection], float | None],
+) -> tuple[float, Detection] | None:
+    """Detect again under the given pose when the chosen pose moved from it: ``(radius,
+    detection)`` when ``stands(detection)`` gives the given pose's fit rms (m; ``None``: the
+    chosen pose stands), recorded with ``chosen_rms`` under ``check`` in its diagnostics; else
+    ``None`` with the cloud back under the chosen pose."""
+    pose0, xyz0, big_r, wall_until = given.pose, given.xyz, given.radius, given.wall_until
     chosen, xyz_chosen, floor = cloud.pose, cloud.xyz_v, cloud.floor
     if not _pose_moved(chosen, pose0, big_r):
         return None
@@ -653,14 +680,9 @@ def _torus_pose_check(
         floor,
         lambda r: _wall_count(cloud, r, cfg, pose0, wall_until)[3],
     )
-    rms0 = redone.diagnostics.get("torus_rms")
-    if (
-        redone.kind == det.kind
-        and redone.diagnostics.get("model") == "torus"
-        and rms0 is not None
-        and rms0 * TORUS_POSE_RATIO <= rms
-    ):
-        redone.diagnostics["torus_pose_check"] = {"chosen_rms": rms, "given_rms": rms0}
+    given_rms = stands(redone)
+    if given_rms is not None:
+        redone.diagnostics[check] = {"chosen_rms": chosen_rms, "given_rms": given_rms}
         return radius, redone
     cloud.restore(chosen, xyz_chosen)
     cloud.floor = floor
@@ -691,38 +713,23 @@ def _taper_pose_check(
     stands when it keeps ``TAPER_POSE_MIN_SUPPORT`` of its returns and fits them at least
     ``TAPER_POSE_RATIO`` times as closely (rms). ``(radius, detection)`` then, else ``None``
     (the cloud keeps its pose)."""
-    pose0, xyz0, big_r, wall_until = given.pose, given.xyz, given.radius, given.wall_until
     rms = _fit_rms(det)
     if rms is None or det.diagnostics.get("start_recheck"):
         return None
     if det.kind != "reducer" and _fit_share(det) >= TAPER_POSE_POOR_SUPPORT:
         return None
-    chosen, xyz_chosen, floor = cloud.pose, cloud.xyz_v, cloud.floor
-    if not _pose_moved(chosen, pose0, big_r):
-        return None
-    cloud.restore(pose0, xyz0)
-    radius, redone = _detect_again(
-        cloud,
-        cfg,
-        diag_pose,
-        {"axis_pass": 0},
-        big_r,
-        wall_until,
-        floor,
-        lambda r: _wall_count(cloud, r, cfg, pose0, wall_until)[3],
-    )
-    rms0 = _fit_rms(redone)
-    if (
-        redone.kind == "reducer"
-        and rms0 is not None
-        and redone.diagnostics.get("axisymmetric_support", 0.0) >= TAPER_POSE_MIN_SUPPORT
-        and rms0 * TAPER_POSE_RATIO <= rms
-    ):
-        redone.diagnostics["taper_pose_check"] = {"chosen_rms": rms, "given_rms": rms0}
-        return radius, redone
-    cloud.restore(chosen, xyz_chosen)
-    cloud.floor = floor
-    return None
+
+    def stands(redone: Detection) -> float | None:
+        rms0 = _fit_rms(redone)
+        ok = (
+            redone.kind == "reducer"
+            and rms0 is not None
+            and redone.diagnostics.get("axisymmetric_support", 0.0) >= TAPER_POSE_MIN_SUPPORT
+            and rms0 * TAPER_POSE_RATIO <= rms
+        )
+        return rms0 if ok else None
+
+    return _given_pose_again(cloud, cfg, diag_pose, given, "taper_pose_check", rms, stands)
 
 
 def _short_wall_pose_check(
@@ -741,40 +748,25 @@ def _short_wall_pose_check(
     returns at least as closely (rms), keeping as large a share of them (less
     ``SHORT_WALL_SHARE_SLACK``). ``(radius,
     detection)`` then, else ``None`` (the cloud keeps its pose)."""
-    pose0, xyz0, big_r, wall_until = given.pose, given.xyz, given.radius, given.wall_until
     rms = _fit_rms(det)
     span = det.diagnostics.get("axis_span")
     if det.kind not in ("bend", "junction") or rms is None or span is None:
         return None
     if span >= SHORT_WALL_VIEW or det.diagnostics.get("axis_pass", 0) == 0:
         return None
-    chosen, xyz_chosen, floor = cloud.pose, cloud.xyz_v, cloud.floor
-    if not _pose_moved(chosen, pose0, big_r):
-        return None
-    cloud.restore(pose0, xyz0)
-    radius, redone = _detect_again(
-        cloud,
-        cfg,
-        diag_pose,
-        {"axis_pass": 0},
-        big_r,
-        wall_until,
-        floor,
-        lambda r: _wall_count(cloud, r, cfg, pose0, wall_until)[3],
-    )
-    rms0 = _fit_rms(redone)
-    if (
-        redone.kind in ("bend", "junction")
-        and rms0 is not None
-        and len(redone.options) <= len(det.options)
-        and rms0 <= rms
-        and _fit_share(redone) >= _fit_share(det) - SHORT_WALL_SHARE_SLACK
-    ):
-        redone.diagnostics["short_wall_pose_check"] = {"chosen_rms": rms, "given_rms": rms0}
-        return radius, redone
-    cloud.restore(chosen, xyz_chosen)
-    cloud.floor = floor
-    return None
+
+    def stands(redone: Detection) -> float | None:
+        rms0 = _fit_rms(redone)
+        ok = (
+            redone.kind in ("bend", "junction")
+            and rms0 is not None
+            and len(redone.options) <= len(det.options)
+            and rms0 <= rms
+            and _fit_share(redone) >= _fit_share(det) - SHORT_WALL_SHARE_SLACK
+        )
+        return rms0 if ok else None
+
+    return _given_pose_again(cloud, cfg, diag_pose, given, "short_wall_pose_check", rms, stands)
 
 
 def _fit_share(det: Detection) -> float:
