@@ -1,9 +1,9 @@
 """The ``pipenav`` command line.
 
 Subcommands are thin: each parses its arguments and calls the library function that owns the
-job. ``pipenav <command> --help`` documents each one. Bad input (an unknown choice, a missing or
-unreadable file, a value out of range) is reported as one ``error: ...`` line with exit code 2,
-never a traceback.
+job. ``pipenav <command> --help`` documents each one. Bad arguments (an unknown choice, a
+missing or unreadable input file, a value out of range, an output folder that cannot be
+created) are reported as one ``error: ...`` line with exit code 2.
 
 - ``demo``: the main job on the embedded default: one closed-loop episode (drive, scan, detect,
   decide, act) with a report and plots;

@@ -206,20 +206,20 @@ def _axisymmetric(
             r_end = float(_pct(r[far], 98.0))
             if float(_pct(r[far], 90.0)) < big_r - tol_med:
                 us, rs = us[~far_s], rs[~far_s]
-                # (from two starts, the lower robust cost kept: the first fit's start and
-                # length with the plateau from the farthest returns left, on the narrower pipe
-                # (the first fit, pulled onto the end wall, can hold the plateau at the end
-                # wall's bound); and afresh, as the first fit started: the first fit's long
-                # shallow taper reaching for the end wall can leave a minimum that the taper's
-                # own returns cannot pull the refit out of, a 9 cm taper 30 cm ahead starting
-                # 40 cm late)
+                # (from two starts, the lower robust cost kept, both with the plateau from the
+                # farthest returns left, on the narrower pipe (the first fit, pulled onto the
+                # end wall, can hold the plateau at the end wall's bound): the first fit's
+                # start and length; and the first returns off the wall with a length from the
+                # returns left, since the first fit's long shallow taper reaching for the end
+                # wall can leave a minimum that the taper's own returns cannot pull the refit
+                # out of: a 9 cm taper 30 cm ahead came out starting 40 cm late)
                 u_rest, r_rest = u[~far], r[~far]
                 r2_far = min(
                     max(float(_pct(r_rest[u_rest >= _pct(u_rest, 90.0)], 50.0)), r_end), big_r
                 )
                 t_fresh = max(0.01, float(_pct(u_rest, 30)) - u_first)
                 best = None
-                for start in ((x[0], x[1], r2_far), (u_first, t_fresh, r2_far)):
+                for k, start in enumerate(((x[0], x[1], r2_far), (u_first, t_fresh, r2_far))):
                     fit = robust_gauss_newton(
                         None,
                         np.array(start),
@@ -237,6 +237,7 @@ def _axisymmetric(
                     cost = tukey_cost(fit[1], c_fin)
                     if best is None or cost < best[0]:
                         best = (cost, fit)
+                        diag["reducer_refit_start"] = ("first fit", "returns left")[k]
                 x, res, w = best[1]
                 diag["reducer_end_wall_radius"] = r_end
     support = float((w > 0.1).mean())

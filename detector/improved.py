@@ -24,7 +24,12 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    ending 1 cm before its start (over one set of returns for every candidate pose) and the
    structure fitted again under it. The pipe's radius is measured from the wall (the wall just
    beyond the nearest returns, then the wall before the structure), within 3 mm of the clamp
-   reading: the clamp's encoders read the diameter to a millimetre or two. When fewer returns
+   reading: the clamp's encoders read the diameter to a millimetre or two; a contraction's
+   radius again on the wall before its fitted start, or the clamp's reading when too little
+   wall lies there (under range noise the taper's first centimetres pass for wall). A pose
+   refined onto a gentle taper under range noise, or onto the few centimetres of wall a long
+   minimum range leaves before a turn, gives way to the given pose when the structure fits
+   more closely under it. When fewer returns
    than a region needs leave the wall tolerance under the given pose, or else under the refined
    axis, the scan is straight pipe and nothing else runs (the common case in a run).
 2. **Classification.** Each return's radial residual ``r - D/2`` is compared with a per-point
@@ -68,7 +73,9 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    of them; the polish refines the bend, the unpolished fit decides whether there is one).
    An arc that starts right ahead fills the view with curved wall, and an axis refined on the
    nearest wall-like returns is laid into it: when the torus fits the returns 1.5 times as
-   closely under the given pose, the given pose stands.
+   closely under the given pose, the given pose stands (as it does for a reducer fitting 1.25
+   times as closely, and for a turn right ahead found on less than 5 cm of wall that fits as
+   closely with no more ways on).
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
    circumference; its option has the clamped diameter. Its side branches are no wider than the
@@ -692,6 +699,8 @@ def _given_pose_again(
 def _fit_rms(det: Detection) -> float | None:
     """How closely the model of ``det`` fits its returns (rms, m): a reducer's taper, a turn's
     or junction's axes; ``None`` for the others."""
+    if det.kind not in ("reducer", "bend", "junction"):
+        return None
     key = "reducer_rms" if det.kind == "reducer" else "fit_rms"
     rms = det.diagnostics.get(key)
     return float(rms) if rms is not None else None
@@ -754,6 +763,8 @@ def _short_wall_pose_check(
         return None
     if span >= SHORT_WALL_VIEW or det.diagnostics.get("axis_pass", 0) == 0:
         return None
+    if det.diagnostics.get("start_recheck") or det.diagnostics.get("model") == "torus":
+        return None  # (chosen again on the wall before its arc; a torus has its own check)
 
     def stands(redone: Detection) -> float | None:
         rms0 = _fit_rms(redone)
@@ -801,7 +812,8 @@ def _taper_radius_check(
     if abs(radius - big_r) < RADIUS_DEAD_BAND:
         return None
     # (the pose and the tolerance floor stand: only the radius is measured again)
-    kept = {k: v for k, v in det.diagnostics.items() if k.startswith(("axis_", "tolerance_"))}
+    records = ("axis_", "tolerance_", "taper_pose_check", "short_wall_pose_check")
+    kept = {k: v for k, v in det.diagnostics.items() if k.startswith(records)}
     radius, redone = _detect_again(
         cloud, cfg, diag_pose, kept, r_clamped, u_cap, None, lambda _: 0.0
     )
