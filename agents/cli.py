@@ -71,6 +71,18 @@ def _out_dir(path: str, option: str = "--out") -> Path | None:
     return out
 
 
+def _out_file(path: str | None, option: str) -> bool:
+    """Can the output file ``path`` be written (its folder created, no folder in its place)?
+    True when no file is asked for; False after printing the error."""
+    if path is None:
+        return True
+    target = Path(path)
+    if target.is_dir():
+        _print(f"error: {option} {path!r} is a folder; give a file name")
+        return False
+    return _out_dir(str(target.parent), option) is not None
+
+
 # ------------------------------------------------------------------------------- demo
 def _demo(args: argparse.Namespace) -> int:
     from agents.episodes import DEMO_CONFIG, run_episode, save_episode_plots
@@ -139,6 +151,8 @@ def _scenarios_run(args: argparse.Namespace) -> int:
     if args.backend == "ray" and importlib.util.find_spec("ray") is None:
         _print("error: --backend ray needs Ray: install the optional extra 'pipenav[ray]'")
         return EXIT_USAGE
+    if not (_out_file(args.junit, "--junit") and _out_file(args.json, "--json")):
+        return EXIT_USAGE
     seeds = args.seed if args.seed else None
     total = len(tasks_of(found, seeds))
     with Progress(
@@ -169,8 +183,10 @@ def _scenarios_run(args: argparse.Namespace) -> int:
 
 # ---------------------------------------------------------------------- train / eval
 def _train(args: argparse.Namespace) -> int:
+    import gymnasium as gym
     import yaml
 
+    import pipe_env  # noqa: F401  (registers the environment ids)
     from agents.train import DEFAULT_CONFIG, TrainConfig, train
 
     try:
@@ -182,6 +198,13 @@ def _train(args: argparse.Namespace) -> int:
         cfg.max_minutes = args.minutes
     if args.timesteps is not None:
         cfg.total_timesteps = args.timesteps
+    try:  # (the environment's own argument checks, before the workers start)
+        gym.make(cfg.env_id, **cfg.env_kwargs).close()
+    except (ValueError, TypeError, gym.error.Error) as exc:
+        _print(f"error: --config {args.config or DEFAULT_CONFIG!s}: env_kwargs: {exc}")
+        return EXIT_USAGE
+    if _out_dir(args.out) is None:
+        return EXIT_USAGE
     summary = train(cfg, args.out, progress_bar=not args.no_progress)
     _print(json.dumps(summary, indent=2))
     return 0
@@ -218,6 +241,8 @@ def _eval(args: argparse.Namespace) -> int:
             _print(f"error: --network-config: {exc}")
             return EXIT_USAGE
         kwargs["network_config"] = config
+    if not _out_file(args.json, "--json"):
+        return EXIT_USAGE
     result = evaluate(args.agent, args.episodes, env_kwargs=kwargs)
     _print(json.dumps(result.to_dict(), indent=2))
     if args.json:

@@ -62,6 +62,35 @@ def test_bad_training_config_is_a_usage_error(
     assert "n_envs=0 is not allowed" in text
 
 
+def test_bad_output_paths_are_usage_errors(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Output files and folders are checked before any work starts."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    cases = [
+        (["eval", "goal_greedy", "--episodes", "1", "--json", str(tmp_path)], "is a folder"),
+        (["eval", "goal_greedy", "--json", str(blocker / "out.json")], "cannot be created"),
+        (["scenarios", "run", "tee_*", "--junit", str(tmp_path)], "is a folder"),
+        (["train", "--out", str(blocker / "run")], "cannot be created"),
+    ]
+    for argv, expected in cases:
+        code, text = run_cli(argv, capsys)
+        assert code == EXIT_USAGE, text
+        assert "error: " in text and expected in text and "Traceback" not in text, text
+
+
+def test_training_config_with_bad_env_kwargs_is_a_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The environment's argument checks run before the training workers start."""
+    config = tmp_path / "run.yaml"
+    config.write_text("env_kwargs:\n  trigger_distance: -1.0\n")
+    code, text = run_cli(["train", "--config", str(config)], capsys)
+    assert code == EXIT_USAGE, text
+    assert "env_kwargs: PipeNav-v0: trigger_distance=-1.0 is not allowed" in text, text
+
+
 def test_plot_reports_only_the_files_it_wrote(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
