@@ -551,6 +551,15 @@ def _gentle_start(det: Detection) -> float | None:
     return None
 
 
+def _pose_diagnostics(diag_pose: dict[str, Any], axis_info: dict[str, Any]) -> dict[str, Any]:
+    """The diagnostics of the first pose choice with its pose, radius and floor entries
+    replaced by ``axis_info`` (a detection again starts from them)."""
+    skip = ("axis_", "wall_radius", "tolerance_floor")
+    sub = {k: v for k, v in diag_pose.items() if not k.startswith(skip)}
+    sub.update(axis_info)
+    return sub
+
+
 def _detect_again(
     cloud: PipeCloud,
     cfg: ImprovedConfig,
@@ -566,9 +575,7 @@ def _detect_again(
     measured on the wall before ``wall_until`` (m), and for a noiseless wall (a tolerance
     ``floor`` was set) the floor from the wall's scatter (``wall_rms(radius)``, m, when the
     radius fit measured none). Returns ``(radius, detection)``."""
-    skip = ("axis_", "wall_radius", "tolerance_floor")
-    sub = {k: v for k, v in diag_pose.items() if not k.startswith(skip)}
-    sub.update(axis_info)
+    sub = _pose_diagnostics(diag_pose, axis_info)
     radius = _wall_radius(cloud, big_r, cfg, wall_until, sub)
     if floor is not None:
         rms = sub.get("wall_radius_rms")
@@ -807,16 +814,15 @@ def _taper_radius_check(
     if opt.diameter >= 2.0 * big_r:  # (a widening: its start is where the beams leave the wall)
         return None
     u_cap = opt.distance - GENTLE_START_MARGIN
-    probe: dict[str, Any] = {}
-    radius = _wall_radius(cloud, r_clamped, cfg, u_cap, probe)
-    if abs(radius - big_r) < RADIUS_DEAD_BAND:
-        return None
     # (the pose and the tolerance floor stand: only the radius is measured again)
     records = ("axis_", "tolerance_", "taper_pose_check", "short_wall_pose_check")
-    kept = {k: v for k, v in det.diagnostics.items() if k.startswith(records)}
-    radius, redone = _detect_again(
-        cloud, cfg, diag_pose, kept, r_clamped, u_cap, None, lambda _: 0.0
+    sub = _pose_diagnostics(
+        diag_pose, {k: v for k, v in det.diagnostics.items() if k.startswith(records)}
     )
+    radius = _wall_radius(cloud, r_clamped, cfg, u_cap, sub)
+    if abs(radius - big_r) < RADIUS_DEAD_BAND:
+        return None
+    redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
     if redone.kind != "reducer":
         return None
     redone.diagnostics["taper_radius_check"] = {"radius_before": big_r, "radius": radius}
