@@ -407,9 +407,8 @@ class _DecisionEnv(gym.Env):
             events["jammed"] = True
             if self.jams >= self.max_jams:
                 self.terminated = True
-            else:  # the robot backed off the structure and senses it again
-                self.decision, _ = self.plant.resense()
-                self._after_sensing(self.decision)
+            else:
+                self.decision = self._sense_again_after_jam()
         elif outcome.status == "blocked":
             events["blocked"] = True
         elif outcome.status == "goal":
@@ -485,15 +484,19 @@ class _DecisionEnv(gym.Env):
                 if outcome.status == "jammed":
                     self._count_jam(events, "auto_jammed", outcome.note)
                     if not self.terminated:
-                        # the robot backed off the structure and decides on fresh sweeps (as
-                        # after a jam on a way the agent chose)
-                        dec, _ = self.plant.resense()
-                        self._after_sensing(dec)
+                        dec = self._sense_again_after_jam()
                 self.decision_points.append(dec.pose.position)
                 return dec, events
         self.truncated = True  # a pathological chain of single ways: stop, it is not an outcome
         events["truncated_auto"] = True
         return None, events
+
+    def _sense_again_after_jam(self) -> Decision:
+        """The robot backed off the structure that jammed it (on a way the agent chose or
+        one the environment took by itself) and decides on fresh sweeps."""
+        dec, _ = self.plant.resense()
+        self._after_sensing(dec)
+        return dec
 
     def _count_jam(self, events: dict[str, Any], key: str, note: str) -> None:
         self.jams += 1
