@@ -25,6 +25,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from detector.atomic import atomic_write_text
+
 EXIT_FAILED = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -111,7 +113,7 @@ def _demo(args: argparse.Namespace) -> int:
     report = dict(log["summary"])
     # the files of this folder: the episode's own (log, render) and the plots
     report["files"] = sorted({"episode.json", "report.json", *log["files"], *files})
-    (out / "report.json").write_text(json.dumps(report, indent=2))
+    atomic_write_text(out / "report.json", json.dumps(report, indent=2))
     _print(json.dumps(report, indent=2))
     return 0
 
@@ -284,7 +286,7 @@ def _eval(args: argparse.Namespace) -> int:
     result = evaluate(args.agent, args.episodes, env_kwargs=kwargs)
     _print(json.dumps(result.to_dict(), indent=2))
     if args.json:
-        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2))
+        atomic_write_text(args.json, json.dumps(result.to_dict(), indent=2))
     return 0
 
 

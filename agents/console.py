@@ -27,6 +27,7 @@ from rich.table import Table
 import pipe_env  # noqa: F401  (registers the environment ids)
 from detector.options import direction_name
 from pipe_env.envs import K_OPTIONS
+from pipe_env.plotting import save_figure
 
 
 class OperatorConsole:
@@ -134,7 +135,7 @@ class OperatorConsole:
             ax.set_title("map (fast fidelity has no scans)")
         self.out.mkdir(parents=True, exist_ok=True)
         target = self.out / "view.png"
-        fig.savefig(target, dpi=90)
+        save_figure(fig, target, dpi=90)
         if self.live:
             plt.pause(0.01)
         return target

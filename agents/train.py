@@ -17,6 +17,8 @@ from typing import Any
 
 import yaml
 
+from detector.atomic import atomic_open, atomic_write_text
+
 DEFAULT_CONFIG = Path(__file__).with_name("configs") / "maskable_ppo.yaml"
 VEC_ENVS = ("subproc", "dummy")
 
@@ -96,7 +98,7 @@ def train(cfg: TrainConfig, out: str | Path, progress_bar: bool = True) -> dict[
     torch.set_num_threads(cfg.torch_threads)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "config.yaml").write_text(yaml.safe_dump(asdict(cfg), sort_keys=False))
+    atomic_write_text(out / "config.yaml", yaml.safe_dump(asdict(cfg), sort_keys=False))
     vec_cls = SubprocVecEnv if cfg.vec_env == "subproc" and cfg.n_envs > 1 else DummyVecEnv
     venv = vec_cls(make_env_fns(cfg))
     from agents.evaluate import VALIDATION_POOL_SEED
@@ -152,7 +154,8 @@ def train(cfg: TrainConfig, out: str | Path, progress_bar: bool = True) -> dict[
         tb_log_name="maskable_ppo",
     )
     wall = time.monotonic() - t0
-    model.save(out / "final_model.zip")
+    with atomic_open(out / "final_model.zip", "wb") as handle:
+        model.save(handle)
     venv.close()
     summary = {
         "timesteps": int(model.num_timesteps),
@@ -161,5 +164,5 @@ def train(cfg: TrainConfig, out: str | Path, progress_bar: bool = True) -> dict[
         "final_model": str(out / "final_model.zip"),
         "best_model": str(out / "best" / "best_model.zip"),
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2))
     return summary

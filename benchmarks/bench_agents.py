@@ -34,6 +34,7 @@ import torch
 import pipe_env  # noqa: F401
 from agents.evaluate import EVAL_POOL_SEED, evaluate, random_valid_episode
 from agents.train import DEFAULT_CONFIG, TrainConfig, train
+from detector.atomic import atomic_write_text
 from pipe_env.envs import pool_network
 
 torch.set_num_threads(1)
@@ -197,7 +198,7 @@ def main() -> None:
             f"{gap['ground_truth']['success_rate'] - gap['improved']['success_rate']:+.3f}"
         )
     if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=2))
+        atomic_write_text(args.json, json.dumps(report, indent=2))
 
 
 if __name__ == "__main__":

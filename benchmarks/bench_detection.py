@@ -55,12 +55,14 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from detector import detect, detect_planar  # noqa: E402
+from detector.atomic import atomic_write_text  # noqa: E402
 from detector.detection import Detection  # noqa: E402
 from detector.options import StructureOption  # noqa: E402
 from detector.scan import Scan  # noqa: E402
 from pipe_env import layouts  # noqa: E402
 from pipe_env.geometry import Pose  # noqa: E402
 from pipe_env.lidar import RotatingLidar  # noqa: E402
+from pipe_env.plotting import save_figure  # noqa: E402
 from pipe_env.world import build_world  # noqa: E402
 
 METHODS = ("thesis", "improved")
@@ -724,7 +726,7 @@ def plots(out: Path, series_3d: list, sweep: list, planar: list) -> list[str]:
     )
     fig.tight_layout()
     p = out / "fig_5_2_estimates_vs_position.png"
-    fig.savefig(p, dpi=110)
+    save_figure(fig, p, dpi=110)
     plt.close(fig)
     written.append(str(p))
     # figure 5.3: misalignment sweep
@@ -763,7 +765,7 @@ def plots(out: Path, series_3d: list, sweep: list, planar: list) -> list[str]:
     fig.suptitle("Misalignment sweep (cf. thesis fig. 5.3): 90 deg bend, X junction, closure")
     fig.tight_layout()
     p = out / "fig_5_3_misalignment.png"
-    fig.savefig(p, dpi=110)
+    save_figure(fig, p, dpi=110)
     plt.close(fig)
     written.append(str(p))
     return written
@@ -857,7 +859,7 @@ def main(argv: list[str] | None = None) -> int:
         f"threads={os.environ.get('OMP_NUM_THREADS', 'default')})\n"
     )
     report = header + "\n\n".join(sections) + "\n"
-    (out / "report.md").write_text(report)
+    atomic_write_text(out / "report.md", report)
     print(report)
     for f in figs:
         print("wrote", f)

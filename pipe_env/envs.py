@@ -376,11 +376,21 @@ class _DecisionEnv(gym.Env):
     def step(self, action: int):
         if self.plant is None:
             raise RuntimeError("call reset() before step()")
+        # only integers of the action space: int() would turn 0.9, '1', b'1' or True into one
+        if isinstance(action, np.ndarray) and action.shape == () and action.dtype.kind in "iu":
+            action = action.item()
+        if (
+            isinstance(action, (bool, np.bool_))
+            or not isinstance(action, (numbers.Integral, np.integer))
+            or not 0 <= int(action) < K_OPTIONS
+        ):
+            raise ValueError(
+                f"action {action!r} ({type(action).__name__}) is not allowed; allowed: an "
+                f"integer (Python or numpy) in Discrete({K_OPTIONS}), 0..{K_OPTIONS - 1}"
+            )
         action = int(action)
         if self.terminated or self.truncated:  # e.g. a goal reached before any decision
             return self._finish_step({}, {"after_termination": True})
-        if not 0 <= action < K_OPTIONS:
-            raise ValueError(f"action {action} is outside Discrete({K_OPTIONS})")
         mask = self.action_masks()
         terms: dict[str, float] = {"time": self.reward_time}
         events: dict[str, Any] = {"jammed": False, "blocked": False, "invalid_action": False}

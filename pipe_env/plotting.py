@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -129,6 +129,17 @@ def save_network_plot(network: PipeNetwork, filename: str | Path, **kwargs: obje
     fig = plot_network(network, **kwargs)  # type: ignore[arg-type]
     out = Path(filename)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=120)
+    save_figure(fig, out, dpi=120)
     plt.close(fig)
+    return out
+
+
+def save_figure(fig: Any, filename: str | Path, **kwargs: Any) -> Path:
+    """``fig.savefig`` written atomically (format from the suffix: png, svg, pdf, ...)."""
+    from detector.atomic import atomic_open
+
+    out = Path(filename)
+    kwargs.setdefault("format", out.suffix.lstrip(".").lower() or "png")
+    with atomic_open(out, "wb") as handle:
+        fig.savefig(handle, **kwargs)
     return out

@@ -151,8 +151,15 @@ class Outcome:
 
     def save(self, path: str | Path) -> None:
         """Save status and telemetry as an ``.npz`` file."""
+        from detector.atomic import atomic_open
+
+        target = str(path) if str(path).endswith(".npz") else f"{path}.npz"
+        with atomic_open(target, "wb") as handle:
+            self._savez(handle)
+
+    def _savez(self, handle: Any) -> None:
         np.savez(
-            path,
+            handle,
             status=np.array(self.status),
             reason=np.array(self.reason),
             travelled=np.array(self.travelled),
@@ -181,7 +188,9 @@ class Outcome:
         ax[0].set_title(f"{self.sequence}: {self.status} {self.reason}")
         fig.tight_layout()
         if path is not None:
-            fig.savefig(path)
+            from pipe_env.plotting import save_figure
+
+            save_figure(fig, path)
         return fig
 
 
