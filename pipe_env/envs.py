@@ -341,6 +341,13 @@ class _DecisionEnv(gym.Env):
             self._start_episode(given or self._new_network())
             if self.decision is not None or given is not None or self.fixed_network is not None:
                 break
+        if self.decision is None and self.success and (given or self.fixed_network) is not None:
+            which = "options['network']" if given is not None else "network"
+            raise ValueError(
+                f"{self.env_name}: {which}: the goal is reached inside reset(), before the "
+                "first decision (the start drives to it through single ways only); allowed: a "
+                "goal beyond the first junction or closure ahead of the start"
+            )
         info = self._info(self._reset_events, {})
         return self._observation(), info
 
