@@ -499,9 +499,9 @@ def discover(pattern: str = "*", directory: str | Path | None = None) -> list[Sc
 # ----------------------------------------------------------------------------- building
 def build_network(sc: Scenario) -> Any:
     """The scenario's network with its start and goal overrides applied."""
-    from pipe_env.geometry import Pose
     from pipe_env.layouts import make_layout
     from pipe_env.network import PipeNetwork
+    from pipe_env.network_io import NetworkSpecError, parse_pose
 
     spec = sc.data["network"]
     try:
@@ -519,7 +519,11 @@ def build_network(sc: Scenario) -> Any:
         else:
             net = PipeNetwork.from_dict(copy.deepcopy(spec["inline"]))
         if "start" in sc.data:
-            net = net.with_start(Pose.from_dict(sc.data["start"]))
+            try:
+                net = net.with_start(parse_pose(sc.data["start"], "start"))
+            except NetworkSpecError as exc:
+                key, _, problem = str(exc).partition(": ")
+                raise _fail(sc.source, key, problem) from None
         if "goal" in sc.data:
             net = net.with_goals([_goal_point(net, sc.data["goal"], sc.source)])
         net.validate()

@@ -150,7 +150,9 @@ class _ArgumentCheck:
 
     def fail(self, name: str, value: Any, allowed: str) -> ValueError:
         """The error for argument ``name`` given ``value`` (``allowed``: what may be given)."""
-        return ValueError(f"{self.env}: {name}={value!r} is not allowed; use {allowed}")
+        shown = repr(value)
+        shown = shown if len(shown) <= 100 else shown[:97] + "..."
+        return ValueError(f"{self.env}: {name}={shown} is not allowed; use {allowed}")
 
     def number(
         self,
@@ -163,7 +165,10 @@ class _ArgumentCheck:
     ) -> float:
         """``value`` as a finite float in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``)."""
         ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
-        v = float(value) if ok else math.nan
+        try:
+            v = float(value) if ok else math.nan
+        except OverflowError:  # an int too large for a float
+            v = math.nan
         if not (math.isfinite(v) and (lo < v if lo_open else lo <= v) and v <= hi):
             raise self.fail(name, value, allowed)
         return v

@@ -522,7 +522,10 @@ class _Builder:
             if r is not None:
                 candidates.append(tuple(float(v) for v in point))
         if len(candidates) < self.cfg.n_goals:
-            raise _PlacementFailed("too few reachable goals")
+            raise _PlacementFailed(
+                "too few reachable goals (a goal must need a decision: the closure that the "
+                "start reaches through bends and reducers alone does not count)"
+            )
         pick = self.rng.choice(len(candidates), size=self.cfg.n_goals, replace=False)
         return [candidates[int(i)] for i in sorted(pick)]
 

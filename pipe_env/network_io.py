@@ -29,6 +29,7 @@ __all__ = [
     "finite_json",
     "load_network",
     "network_from_text",
+    "parse_pose",
     "parse_spec",
     "save_network",
 ]
@@ -127,40 +128,46 @@ def _plain_metadata(value: Any, path: str, depth: int = 0) -> Any:
     raise _fail(path, value, "finite numbers, strings, booleans, null, lists, mappings")
 
 
-def _start(value: Any) -> Pose:
+def parse_pose(value: Any, path: str = "start") -> Pose:
+    """A pose from ``{position, forward[, up]}`` or ``{position, rotation}``; errors name
+    ``path`` and its fields."""
+    return _start(value, path)
+
+
+def _start(value: Any, path: str = "start") -> Pose:
     from pipe_env.geometry import Pose, frame_from_forward
 
-    st = _mapping(value, "start", START_KEYS, ("position",))
-    position = np.array(_vector(st["position"], "start.position"))
+    st = _mapping(value, path, START_KEYS, ("position",))
+    position = np.array(_vector(st["position"], f"{path}.position"))
     if "rotation" in st:
         if "forward" in st or "up" in st:
             raise NetworkSpecError(
-                "start: give either 'rotation' or 'forward' (and optionally 'up'), not both"
+                f"{path}: give either 'rotation' or 'forward' (and optionally 'up'), not both"
             )
         rows = st["rotation"]
         if not isinstance(rows, (list, tuple, np.ndarray)) or len(rows) != 3:
-            raise _fail("start.rotation", rows, "a 3x3 rotation matrix (3 rows of 3 numbers)")
-        rot = np.array([_vector(r, f"start.rotation[{i}]", 3, "-") for i, r in enumerate(rows)])
+            raise _fail(f"{path}.rotation", rows, "a 3x3 rotation matrix (3 rows of 3 numbers)")
+        rot = np.array([_vector(r, f"{path}.rotation[{i}]", 3, "-") for i, r in enumerate(rows)])
         try:
             return Pose(position, rot)
         except ValueError:
             raise _fail(
-                "start.rotation", rows, "a proper rotation matrix (orthonormal, det +1)"
+                f"{path}.rotation", rows, "a proper rotation matrix (orthonormal, det +1)"
             ) from None
     if "forward" not in st:
-        raise NetworkSpecError("start.forward: missing; give 'forward' (or 'rotation')")
-    forward = np.array(_vector(st["forward"], "start.forward", 3, "a direction"))
-    up = None if st.get("up") is None else np.array(_vector(st["up"], "start.up", 3, "-"))
+        raise NetworkSpecError(f"{path}.forward: missing; give 'forward' (or 'rotation')")
+    forward = np.array(_vector(st["forward"], f"{path}.forward", 3, "a direction"))
+    up = None if st.get("up") is None else np.array(_vector(st["up"], f"{path}.up", 3, "-"))
     if not np.linalg.norm(forward) > 1e-9:
-        raise _fail("start.forward", st["forward"], "a non-zero direction")
+        raise _fail(f"{path}.forward", st["forward"], "a non-zero direction")
     if up is not None and not np.linalg.norm(np.cross(forward, up)) > 1e-9 * max(
         1.0, float(np.linalg.norm(forward) * np.linalg.norm(up))
     ):
-        raise _fail("start.up", st["up"], "a non-zero direction not parallel to 'forward'")
+        raise _fail(f"{path}.up", st["up"], "a non-zero direction not parallel to 'forward'")
     try:
         return Pose.trusted(position, frame_from_forward(forward, up))
     except (ValueError, ArithmeticError):
-        raise _fail("start.forward", st["forward"], "a non-zero direction") from None
+        raise _fail(f"{path}.forward", st["forward"], "a non-zero direction") from None
 
 
 def parse_spec(d: Any, validate: bool = True) -> PipeNetwork:
