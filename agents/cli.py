@@ -113,7 +113,11 @@ def _demo(args: argparse.Namespace) -> int:
     report = dict(log["summary"])
     # the files of this folder: the episode's own (log, render) and the plots
     report["files"] = sorted({"episode.json", "report.json", *log["files"], *files})
-    atomic_write_text(out / "report.json", json.dumps(report, indent=2))
+    from pipe_env.network_io import finite_json
+
+    atomic_write_text(
+        out / "report.json", json.dumps(finite_json(report), indent=2, allow_nan=False)
+    )
     _print(json.dumps(report, indent=2))
     return 0
 
@@ -286,7 +290,11 @@ def _eval(args: argparse.Namespace) -> int:
     result = evaluate(args.agent, args.episodes, env_kwargs=kwargs)
     _print(json.dumps(result.to_dict(), indent=2))
     if args.json:
-        atomic_write_text(args.json, json.dumps(result.to_dict(), indent=2))
+        from pipe_env.network_io import finite_json
+
+        atomic_write_text(
+            args.json, json.dumps(finite_json(result.to_dict()), indent=2, allow_nan=False)
+        )
     return 0
 
 

@@ -22,6 +22,7 @@ from agents.scripted import make_agent
 from detector.atomic import atomic_write_text
 from pipe_env.generator import NetworkConfig
 from pipe_env.network import PipeNetwork
+from pipe_env.network_io import finite_json
 from pipe_env.plotting import save_figure
 
 #: The embedded default of the demo: a small 3D network with junctions and a loop.
@@ -106,7 +107,7 @@ def run_episode(
     env.close()
     if out is not None:
         Path(out).mkdir(parents=True, exist_ok=True)
-        atomic_write_text(Path(out) / "episode.json", json.dumps(log))
+        atomic_write_text(Path(out) / "episode.json", json.dumps(finite_json(log), allow_nan=False))
     return log
 
 

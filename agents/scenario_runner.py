@@ -43,6 +43,7 @@ from agents.scenarios import (
     run_scenario,
 )
 from detector.atomic import atomic_open, atomic_write_text
+from pipe_env.network_io import finite_json
 
 JSON_SCHEMA_VERSION = 1
 #: The test hook's environment variable (see :func:`_injected_fault`).
@@ -435,20 +436,6 @@ def write_json(
     }
     atomic_write_text(path, json.dumps(finite_json(doc), indent=2, allow_nan=False))
     return doc
-
-
-def finite_json(value: Any) -> Any:
-    """``value`` with numpy values made plain and non-finite floats replaced by None, so that
-    ``json.dumps(..., allow_nan=False)`` accepts it."""
-    if isinstance(value, dict):
-        return {str(k): finite_json(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [finite_json(v) for v in value]
-    if hasattr(value, "tolist"):
-        return finite_json(value.tolist())
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 def write_junit(results: Sequence[ScenarioResult], path: str | Path, strict: bool = False) -> None:

@@ -18,6 +18,7 @@ from typing import Any
 import yaml
 
 from detector.atomic import atomic_open, atomic_write_text
+from pipe_env.network_io import finite_json
 
 DEFAULT_CONFIG = Path(__file__).with_name("configs") / "maskable_ppo.yaml"
 VEC_ENVS = ("subproc", "dummy")
@@ -164,5 +165,7 @@ def train(cfg: TrainConfig, out: str | Path, progress_bar: bool = True) -> dict[
         "final_model": str(out / "final_model.zip"),
         "best_model": str(out / "best" / "best_model.zip"),
     }
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2))
+    atomic_write_text(
+        out / "summary.json", json.dumps(finite_json(summary), indent=2, allow_nan=False)
+    )
     return summary

@@ -185,3 +185,27 @@ def test_generated_networks_never_put_the_goal_where_reset_reaches_it(seed: int)
     env.reset(seed=0, options={"network": net})
     assert env.unwrapped.decision is not None
     assert not math.isnan(float(env.unwrapped.jams))
+
+
+# ------------------------------------------------------------------ scenario files
+@pytest.mark.parametrize(
+    ("extra", "key"),
+    [
+        ({"start": {"position": [10**400, 0, 0], "forward": [1, 0, 0]}}, "start.position"),
+        ({"goal": [10**400, 0, 0]}, "goal"),
+        ({"criteria": {"max_detection_error": {"angle_deg": 10**400}}}, "criteria"),
+        ({"seeds": [10**30]}, "seeds"),
+        ({"timeout_s": 10**400}, "timeout_s"),
+    ],
+)
+def test_over_large_integers_in_a_scenario_are_named_errors(
+    tmp_path: Path, extra: dict, key: str
+) -> None:
+    import yaml
+
+    from agents.scenarios import ScenarioError, load_scenario
+
+    data = {"network": {"layout": "t_junction", "params": {"diameter": 0.1}}, **extra}
+    (tmp_path / "big.yaml").write_text(yaml.safe_dump(data))
+    with pytest.raises(ScenarioError, match=rf"big.yaml: key '{key}"):
+        load_scenario(tmp_path / "big.yaml")
