@@ -49,10 +49,11 @@ def soak_full(episodes: int, every: int, seed: int = 0) -> list[tuple[int, float
     )
     rng = np.random.default_rng(seed)
     marks = [(0, rss_mb())]
+    print(f"full  episode     0/{episodes}: RSS {marks[0][1]:7.1f} MB (start)", flush=True)
     t0 = time.perf_counter()
     for ep in range(1, episodes + 1):
         random_valid_episode(env, rng, seed + ep)
-        if ep % every == 0 or ep == episodes:
+        if ep % every == 0 or ep in (1, episodes):
             gc.collect()
             marks.append((ep, rss_mb()))
             print(
@@ -91,7 +92,7 @@ def soak_fast(decisions: int, seed: int = 0) -> list[tuple[int, float]]:
 
 def growth(marks: list[tuple[int, float]]) -> tuple[float, float, float]:
     """(RSS after warm-up, RSS at the end, growth over the second half), MB."""
-    warm = marks[1][1] if len(marks) > 1 else marks[0][1]
+    warm = marks[2][1] if len(marks) > 2 else marks[-1][1]
     half = marks[len(marks) // 2][1]
     return warm, marks[-1][1], marks[-1][1] - half
 

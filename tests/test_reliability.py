@@ -209,3 +209,27 @@ def test_over_large_integers_in_a_scenario_are_named_errors(
     (tmp_path / "big.yaml").write_text(yaml.safe_dump(data))
     with pytest.raises(ScenarioError, match=rf"big.yaml: key '{key}"):
         load_scenario(tmp_path / "big.yaml")
+
+
+# ---------------------------------------------------------------------- atomic writes
+def test_figures_and_telemetry_are_written_atomically(tmp_path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pipe_env.plotting import save_figure
+    from primitives.executor import Outcome
+
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    save_figure(fig, tmp_path / "a.png", dpi=50)
+    save_figure(fig, tmp_path / "a.svg")
+    plt.close(fig)
+    assert (tmp_path / "a.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert b"<svg" in (tmp_path / "a.svg").read_bytes()[:400]
+    out = Outcome(telemetry={"times": np.arange(3.0)})
+    out.save(tmp_path / "run")
+    with np.load(tmp_path / "run.npz") as z:
+        assert z["status"] == "done" and z["times"].tolist() == [0.0, 1.0, 2.0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "a.svg", "run.npz"]
