@@ -175,7 +175,9 @@ def test_eval_and_plot_commands(tmp_path: Path) -> None:
 def test_bad_layout_parameters_and_values_are_usage_errors(tmp_path: Path) -> None:
     write(tmp_path, "too_wide", {"network": {"layout": "t_junction", "params": {"diameter": 0.5}}})
     proc = pipenav("scenarios", "run", "--dir", str(tmp_path))
-    assert proc.returncode == 2 and "Traceback" not in proc.stdout + proc.stderr
+    # a broken selected file is an error testcase of the run, not an abort
+    assert proc.returncode == 1 and "Traceback" not in proc.stdout + proc.stderr
+    assert "ERROR too_wide [seed=0]" in proc.stdout
     assert "too_wide.yaml: key 'network': layout parameter diameter=0.5 is outside" in proc.stdout
     (tmp_path / "too_wide.yaml").unlink()
     write(tmp_path, "unhashable", {"network": {"layout": [1]}, "sensor": {"preset": ["ideal"]}})
