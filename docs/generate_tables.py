@@ -74,12 +74,8 @@ OPTION_DOCS: dict[str, str] = {
     "auto_single": "take a single way on without asking the agent",
     "max_jams": "end the episode after this many jams",
     "scan_image": "add the `scan` range image to the observation",
-    "reward_invalid": "reward of a masked action (a no-op)",
-    "reward_jam": "reward per jam",
-    "reward_time": "reward per decision",
     "network_pool": "draw episodes from a reproducible pool of this many networks",
     "pool_seed": "seed of that pool (use another one for held-out evaluation)",
-    "reward_goal": "PipeNav: bonus for reaching the goal, in [0, 1000]",
     "coverage_done": "PipeExplore: covered fraction of the reachable pipe that ends the episode",
     "branch_view": "PipeExplore: how far the scans see into each pipe leaving a fitting, m",
 }
@@ -174,12 +170,15 @@ def _constructor_options() -> list[tuple[str, object, str]]:
 
 
 def options_table() -> str:
-    """Keyword options of ``gymnasium.make`` with their defaults (from the signatures)."""
+    """Keyword options of ``gymnasium.make`` with their defaults (from the signatures); the
+    reward options are in :func:`rewards_table`."""
     lines = [_row("option", "default", "meaning"), _row("---", "---", "---")]
     names = set()
+    rewards = {option for *_, option in REWARD_TERMS if option}
     for name, default, _ in _constructor_options():
         names.add(name)
-        lines.append(_row(f"`{name}`", _fmt(default), OPTION_DOCS[name]))
+        if name not in rewards:
+            lines.append(_row(f"`{name}`", _fmt(default), OPTION_DOCS[name]))
     unknown = set(OPTION_DOCS) - names
     if unknown:
         raise KeyError(f"OPTION_DOCS describes options the code does not have: {sorted(unknown)}")
