@@ -26,8 +26,8 @@ def _generator() -> ModuleType:
     return module
 
 
-def _blocks(language: str) -> list[str]:
-    return re.findall(rf"```{language}\n(.*?)```", TEXT, re.DOTALL)
+def _blocks(language: str, text: str = TEXT) -> list[str]:
+    return re.findall(rf"```{language}\n(.*?)```", text, re.DOTALL)
 
 
 def _commands() -> list[str]:
@@ -123,3 +123,13 @@ def test_code_and_docs_cite_the_design_at_its_path() -> None:
         for path in (ROOT / folder).rglob("*.py"):
             assert OLD_NAME not in path.read_text(encoding="utf-8"), path
     assert "docs/design.md" in TEXT
+
+
+@pytest.mark.parametrize("doc", ["design.md", "detector.md"])
+def test_docs_snippets_run_and_links_resolve(doc: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(ROOT)
+    text = (ROOT / "docs" / doc).read_text(encoding="utf-8")
+    for i, code in enumerate(_blocks("python", text)):
+        exec(compile(code, f"docs/{doc} python block {i}", "exec"), {"__name__": "__doc__"})
+    for target in re.findall(r"\]\(([^)#]+)", text):
+        assert (ROOT / "docs" / target).exists(), target
