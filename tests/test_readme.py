@@ -109,7 +109,8 @@ def test_links_and_example_scripts_exist() -> None:
 
 
 def test_readme_is_a_guide_not_a_notebook() -> None:
-    assert len(TEXT.splitlines()) <= 270  # ~250, with room for short sections
+    # the aim is ~250 lines; the ceiling leaves room for short sections, not for history
+    assert len(TEXT.splitlines()) <= 300
     for phrase in ("this round", "previous round", OLD_NAME):
         assert phrase not in TEXT
 
