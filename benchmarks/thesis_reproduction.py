@@ -254,7 +254,7 @@ def table_5_1(rng: np.random.Generator, sensor: str | None = None) -> dict[str, 
             if det.kind == "reducer":
                 o = det.options[0]
                 # the thesis method reports the end of the taper itself; the improved one its
-                # start (DESIGN.md's reference point) and the taper's fitted length
+                # start (the reference point of docs/design.md) and the taper's fitted length
                 end = o.distance + float(det.diagnostics.get("reducer_taper", 0.0))
                 est.add(m, "distance", _cm(end), _cm(before_end))
                 est.add(m, "diameter", _cm(o.diameter), _cm(params["diameter_out"]))
