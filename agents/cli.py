@@ -86,6 +86,7 @@ def _out_file(path: str | None, option: str) -> bool:
 # ------------------------------------------------------------------------------- demo
 def _demo(args: argparse.Namespace) -> int:
     from agents.episodes import DEMO_CONFIG, run_episode, save_episode_plots
+    from detector.atomic import atomic_write_text
     from pipe_env.generator import NetworkConfig
 
     try:
@@ -110,8 +111,12 @@ def _demo(args: argparse.Namespace) -> int:
     report = dict(log["summary"])
     # the files of this folder: the episode's own (log, render) and the plots
     report["files"] = sorted({"episode.json", "report.json", *log["files"], *files})
-    (out / "report.json").write_text(json.dumps(report, indent=2))
+    if log.get("render_skipped"):
+        report["render_skipped"] = log["render_skipped"]
+    atomic_write_text(out / "report.json", json.dumps(report, indent=2))
     _print(json.dumps(report, indent=2))
+    if log.get("render_skipped"):
+        _print(f"3D render skipped: {log['render_skipped']}")
     return 0
 
 

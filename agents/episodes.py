@@ -70,11 +70,15 @@ def run_episode(
     wall = time.perf_counter() - t0
     base = env.unwrapped
     files = []
+    render_skipped = None
     if render and out is not None:
-        from pipe_env.rendering import save_image
+        from pipe_env.rendering import RenderingUnavailable, save_image
 
-        save_image(env.render(), str(Path(out) / "render.png"))
-        files.append("render.png")
+        try:
+            save_image(env.render(), str(Path(out) / "render.png"))
+            files.append("render.png")
+        except RenderingUnavailable as exc:  # no OpenGL here: the rest of the episode stands
+            render_skipped = str(exc)
     log = {
         "network": base.network.to_dict(),
         "path": np.asarray(base.path).tolist(),
@@ -100,6 +104,7 @@ def run_episode(
             "detections": len(base.plant.detection_log),
         },
         "files": files,
+        "render_skipped": render_skipped,
     }
     env.close()
     if out is not None:
