@@ -63,3 +63,15 @@ def test_demo_command_writes_report_and_images(tmp_path, needs_gl: str) -> None:
             assert mpimg.imread(out / name).std() > 0.01, name  # a real picture, not blank
         else:
             json.loads((out / name).read_text())
+
+
+def test_network_plot_has_a_legend_for_its_markers() -> None:
+    import matplotlib.pyplot as plt
+
+    from pipe_env.plotting import plot_network
+
+    net = layouts.t_junction(0.1, direction=np.pi / 2).with_goals([[0, 0.5, 0]])
+    fig = plot_network(net, path=[[-0.4, 0, 0], [0, 0, 0]], decisions=[[0, 0, 0]])
+    labels = {t.get_text() for t in fig.legends[0].get_texts()}
+    plt.close(fig)
+    assert {"pipe bore", "tee", "closure", "start", "goal", "driven path", "decision"} == labels
