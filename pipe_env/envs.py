@@ -723,7 +723,11 @@ class _DecisionEnv(gym.Env):
         if self._renderer is None or self._renderer.world is not world:
             self._renderer = WorldRenderer(world, 480, 360)
         pose = self.plant.pose()
-        cam = self._renderer.camera("iso", target=pose.position, distance=0.9)
+        robot = getattr(self.plant, "robot", None)  # full fidelity: frame the whole robot
+        target = (
+            world.data.xpos[robot.body_ids].mean(axis=0) if robot is not None else pose.position
+        )
+        cam = self._renderer.camera("iso", target=target, distance=0.9)
         return self._renderer.render(cam, markers=[(pose.position, 0.03)])
 
     def close(self) -> None:
