@@ -129,7 +129,10 @@ def _choose() -> tuple[str, Any]:
             continue
         failure = _probe_in_subprocess(name)
         if failure is None:
-            return name, _context_class(name)
+            try:
+                return name, _context_class(name)
+            except (ImportError, AttributeError) as exc:  # PyOpenGL already on another platform
+                failure = f"works in a fresh process, not in this one ({exc})"
         why.append(f"{name}: {failure}")
     if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
         from mujoco.gl_context import GLContext
