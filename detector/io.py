@@ -79,6 +79,7 @@ DEFAULT_TOPICS = {
     "odom": "/odom",
     "truth": "/ground_truth/odom",
     "spec": "/lidar_spec",
+    "clamp": "/clamped_diameter",
 }
 STRING = "std_msgs/msg/String"
 #: The CSV columns (the pose columns are optional).
@@ -359,7 +360,9 @@ def read_scans(
     the first of each message), and on
     ``truth_topic`` the true sensor pose (simulation only). A topic left ``None`` is the one
     topic of its type (``DEFAULT_TOPICS`` among several). A ``std_msgs/msg/String`` on
-    ``/lidar_spec`` (written by :func:`write_rosbag`) gives the sensor description as JSON.
+    ``/lidar_spec`` (written by :func:`write_rosbag`) gives the sensor description as JSON;
+    a ``std_msgs/msg/Float64`` on ``/clamped_diameter`` (m) the clamp encoders' reading,
+    stored in each sweep's ``metadata["clamped_diameter"]`` (the last one before its end).
     Each LaserScan gets the servo angle at its header stamp, interpolated; sweeps are cut
     where the servo reverses or jumps back (or exceeds ``servo_range``).
 
@@ -594,6 +597,7 @@ def _read_bag(
     odom: list[tuple[float, NDArray, NDArray]] = []
     truth: list[tuple[float, NDArray, NDArray]] = []
     bag_spec: dict[str, Any] = {}
+    clamp: list[tuple[float, float]] = []
     try:
         with AnyReader([p], default_typestore=store) as reader:
             topics = reader.topics
@@ -619,7 +623,10 @@ def _read_bag(
             spec_topic = DEFAULT_TOPICS["spec"]
             if spec_topic not in topics or topics[spec_topic].msgtype != STRING:
                 spec_topic = None
-            wanted = {s_topic, v_topic, o_topic, t_topic, spec_topic} - {None}
+            c_topic = DEFAULT_TOPICS["clamp"]
+            if c_topic not in topics or topics[c_topic].msgtype != FLOAT64:
+                c_topic = None
+            wanted = {s_topic, v_topic, o_topic, t_topic, spec_topic, c_topic} - {None}
             conns = [c for c in reader.connections if c.topic in wanted]
             for conn, t_bag, raw in reader.messages(connections=conns):
                 msg = reader.deserialize(raw, conn.msgtype)
@@ -629,6 +636,8 @@ def _read_bag(
                     scans_raw.append((st if st > 0.0 else tb, msg))
                 elif conn.topic == v_topic:
                     servo.append(_servo_value(p, v_topic, msg, tb, servo_joint))
+                elif conn.topic == c_topic:
+                    clamp.append((tb, float(msg.data)))
                 elif conn.topic == spec_topic:
                     try:
                         bag_spec = dict(json.loads(msg.data))
@@ -658,10 +667,16 @@ def _read_bag(
     believed = _poses_at(t_scan, odom, mount_p, mount_r)
     true = _poses_at(t_scan, truth, np.zeros(3), np.eye(3)) if truth else believed
     out = []
+    clamp.sort()
     cuts = sweep_cuts(angles, servo_range)
     for g in cuts:
         if g.stop - g.start < min_planes and len(cuts) > 1:
             continue
+        extra: dict[str, Any] = {}
+        # the clamped diameter read last before the sweep ended (the encoders at this stop)
+        before = [d for t, d in clamp if t <= t_scan[g.stop - 1] + 1e-9]
+        if before:
+            extra["clamped_diameter"] = before[-1]
         out.append(
             scan_from_laserscans(
                 [m for _, m in scans_raw[g]],
@@ -673,7 +688,7 @@ def _read_bag(
                 true_rotations=true[1][g],
                 spec={**bag_spec, **dict(spec or {})},
                 fov=fov,
-                metadata={"topics": [s_topic, v_topic, o_topic, t_topic]},
+                metadata={"topics": [s_topic, v_topic, o_topic, t_topic], **extra},
                 source=f"{p} topic {s_topic!r}",
             )
         )
@@ -790,7 +805,9 @@ def write_rosbag(
     Each plane becomes a ``sensor_msgs/msg/LaserScan`` on ``scan_topic`` (no returns as
     ``+inf``; ``range_min``/``range_max`` from the spec), its servo angle a
     ``std_msgs/msg/Float64`` on ``servo_topic`` at the same time, the believed (nominal) sensor
-    pose a ``nav_msgs/msg/Odometry`` on ``odom_topic`` and, with ``truth_topic``, the true one.
+    pose a ``nav_msgs/msg/Odometry`` on ``odom_topic`` and, with ``truth_topic``, the true one;
+    the spec as JSON on ``/lidar_spec`` and a sweep's ``metadata["clamped_diameter"]`` (m) on
+    ``/clamped_diameter`` at its first plane.
     Bag times equal the header stamps: the planes' timestamps plus ``t_offset`` s (ROS time
     must be >= 0).
 
@@ -859,10 +876,17 @@ def write_rosbag(
                 if truth_topic
                 else None
             )
+            c_clamp = None
+            if any("clamped_diameter" in sc.metadata for sc in scans):
+                c_clamp = writer.add_connection(DEFAULT_TOPICS["clamp"], FLOAT64, typestore=store)
             c_spec = writer.add_connection(DEFAULT_TOPICS["spec"], STRING, typestore=store)
             text = json.dumps(scans[0].spec, default=_plain)
             writer.write(c_spec, _ns(t_min), ser(ty[STRING](data=text), STRING))
             for scan in scans:
+                if c_clamp is not None and "clamped_diameter" in scan.metadata:
+                    d = float(scan.metadata["clamped_diameter"])
+                    t0 = _ns(float(scan.timestamps[0]) + t_offset)
+                    writer.write(c_clamp, t0, ser(ty[FLOAT64](data=d), FLOAT64))
                 beams = scan.beam_angles
                 inc = float(beams[1] - beams[0]) if beams.size > 1 else 0.0
                 lo = float(scan.spec.get("min_range", 0.0))
