@@ -201,26 +201,29 @@ def _mount(mount: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
 def sweep_cuts(angles: Sequence[float], servo_range: float | None = None) -> list[slice]:
     """Split a sequence of servo angles (rad) into sweeps: a new sweep starts where the servo
     reverses (or jumps back) or, with ``servo_range`` (rad), where the angles since the start
-    of the sweep would span more than it."""
+    of the sweep would span more than it. Where the servo dwells at its turning point (the
+    same angle twice), the first reading ends the sweep and the next begins the new one."""
     a = np.asarray(angles, dtype=float)
     if a.size == 0:
         return []
     cuts = [0]
     direction = 0.0
+    dwell = 0  # first index of the run of equal angles ending at i - 1
     for i in range(1, a.size):
         step = a[i] - a[i - 1]
-        start = cuts[-1]
-        new = False
-        if step != 0.0:
-            if direction != 0.0 and math.copysign(1.0, step) != direction:
-                new = True
-            elif servo_range is not None and abs(a[i] - a[start]) > servo_range + 1e-9:
-                new = True
-        if new:
-            cuts.append(i)
-            direction = 0.0
-        elif step != 0.0:
+        if step == 0.0:
+            continue
+        reverse = direction != 0.0 and math.copysign(1.0, step) != direction
+        too_far = servo_range is not None and abs(a[i] - a[cuts[-1]]) > servo_range + 1e-9
+        if reverse or too_far:
+            # after a dwell the new sweep starts at its second reading (and this step is its
+            # first); else at this reading, its direction still unknown
+            dwelt = reverse and dwell + 1 < i
+            cuts.append(dwell + 1 if dwelt else i)
+            direction = math.copysign(1.0, step) if dwelt else 0.0
+        else:
             direction = math.copysign(1.0, step)
+        dwell = i
     cuts.append(a.size)
     return [slice(cuts[k], cuts[k + 1]) for k in range(len(cuts) - 1)]
 
@@ -298,6 +301,7 @@ def scan_from_laserscans(
     rot = np.tile(np.eye(3), (n, 1, 1)) if rotations is None else np.asarray(rotations, float)
     tpos = pos if true_positions is None else np.asarray(true_positions, dtype=float)
     trot = rot if true_rotations is None else np.asarray(true_rotations, dtype=float)
+    beams, ranges = _restore_float64(beams, ranges, spec_d, keep)
     if "min_range" in spec_d and "max_range" in spec_d:
         # a return within the message's float32 limits stays one when the limits are read as
         # the spec's float64 numbers (0.12 m in float32 is 0.1199999973 m)
@@ -312,7 +316,7 @@ def scan_from_laserscans(
         return Scan(
             ranges=ranges,
             valid=np.ones(ranges.shape, dtype=bool),
-            beam_angles=beams[keep],
+            beam_angles=beams,
             plane_angles=np.asarray(plane_angles, dtype=float),
             timestamps=t,
             positions=tpos,
@@ -326,8 +330,35 @@ def scan_from_laserscans(
         raise ScanReadError(f"{source}: {exc}") from exc
 
 
+def _restore_float64(
+    beams: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    spec: Mapping[str, Any],
+    keep: NDArray[np.bool_],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Undo a LaserScan's float32 rounding where the spec says what the numbers were: beam
+    angles that are the spec's (``fov``, ``beam_step``: a ``LidarSpec``'s beams) and ranges on
+    its ``range_resolution`` grid (a sensor reporting whole millimetres), each to within the
+    float32 rounding. ``beams`` are all the message's, ``ranges`` the kept ones."""
+    fov, step = spec.get("fov"), spec.get("beam_step")
+    if isinstance(fov, (int, float)) and isinstance(step, (int, float)) and step > 0:
+        n = int(round(fov / step)) + (0 if fov >= 2 * math.pi - 1e-9 else 1)
+        if n == beams.size:
+            exact = -0.5 * (n - 1) * step + step * np.arange(n)
+            if np.all(np.abs(exact - beams) <= 1e-6):
+                beams = exact
+    res = spec.get("range_resolution")
+    if isinstance(res, (int, float)) and res > 0:
+        with np.errstate(invalid="ignore", over="ignore"):
+            snapped = np.round(ranges / res) * res
+            near = np.abs(snapped - ranges) <= 4.0 * float(np.finfo(np.float32).eps) * ranges
+        ranges = np.where(np.isfinite(ranges) & near, snapped, ranges)
+    return beams[keep], ranges
+
+
 def _stamp(stamp: Any) -> float:
-    return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
+    # (the same rounding as a bag time in ns: stamps and bag times compare equal)
+    return 1e-9 * (int(stamp.sec) * 10**9 + int(stamp.nanosec))
 
 
 # ------------------------------------------------------------------------ reading
@@ -363,7 +394,8 @@ def read_scans(
     ``/lidar_spec`` (written by :func:`write_rosbag`) gives the sensor description as JSON;
     a ``std_msgs/msg/Float64`` on ``/clamped_diameter`` (m) the clamp encoders' reading,
     stored in each sweep's ``metadata["clamped_diameter"]`` (the last one before its end).
-    Each LaserScan gets the servo angle at its header stamp, interpolated; sweeps are cut
+    Each LaserScan gets the servo angle at its header stamp, interpolated (one before the
+    first or after the last servo reading is dropped); sweeps are cut
     where the servo reverses or jumps back (or exceeds ``servo_range``).
 
     Args:
@@ -660,10 +692,20 @@ def _read_bag(
         raise ScanReadError(f"{p}: topic {v_topic!r} holds no servo angles")
     scans_raw.sort(key=lambda x: x[0])
     servo.sort()
-    t_scan = np.array([t for t, _ in scans_raw])
     sv_t = np.array([t for t, _ in servo])
     sv_a = np.array([a for _, a in servo])
+    # a LaserScan outside the servo readings' time span has no known plane: it is dropped
+    scans_raw = [(t, m) for t, m in scans_raw if sv_t[0] <= t <= sv_t[-1]]
+    if not scans_raw:
+        raise ScanReadError(
+            f"{p}: no LaserScan on {s_topic!r} lies within the servo readings on {v_topic!r} "
+            f"({sv_t[0]:.3f} to {sv_t[-1]:.3f} s); expected both recorded together"
+        )
+    t_scan = np.array([t for t, _ in scans_raw])
     angles = np.interp(t_scan, sv_t, sv_a)
+    # (a servo reading at a scan's own stamp is its angle exactly; np.interp may round it)
+    at = np.clip(np.searchsorted(sv_t, t_scan), 0, sv_t.size - 1)
+    angles = np.where(sv_t[at] == t_scan, sv_a[at], angles)
     believed = _poses_at(t_scan, odom, mount_p, mount_r)
     true = _poses_at(t_scan, truth, np.zeros(3), np.eye(3)) if truth else believed
     out = []
