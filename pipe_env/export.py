@@ -144,9 +144,15 @@ def mjcf_text(world: PipeWorld, keyframe: Mapping[str, Any] | None = None) -> st
     if keyframe:
         key = spec.add_key()
         key.name = "start"
-        for name in ("qpos", "qvel", "mocap_pos", "mocap_quat"):
+        # (MjsKey names the mocap state mpos and mquat)
+        for name, attr in (
+            ("qpos", "qpos"),
+            ("qvel", "qvel"),
+            ("mocap_pos", "mpos"),
+            ("mocap_quat", "mquat"),
+        ):
             if name in keyframe:
-                setattr(key, name, np.asarray(keyframe[name], dtype=float).ravel().tolist())
+                setattr(key, attr, np.asarray(keyframe[name], dtype=float).ravel().tolist())
     try:
         return spec.to_xml()
     finally:
