@@ -272,3 +272,16 @@ def test_write_rosbag_replaces_an_existing_bag(tmp_path, x4_sweep):
     write_rosbag([scan, late], tmp_path / "bag")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bag"]  # (no temporary left)
     assert len(read_scans(tmp_path / "bag", min_planes=1)) == 2
+
+
+def test_real_data_doc_snippets_run(monkeypatch):
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    monkeypatch.chdir(root)
+    text = (root / "docs" / "real-data.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", text, re.DOTALL)
+    assert blocks
+    for i, code in enumerate(blocks):
+        exec(compile(code, f"docs/real-data.md python block {i}", "exec"), {"__name__": "__doc__"})
