@@ -193,3 +193,15 @@ def test_far_returns_take_bounded_memory(layout, method, scale, fraction, seed, 
     assert peak < PEAK_LIMIT, (layout, method, scale, fraction, peak)
     assert 0.0 <= det.confidence <= 1.0
     assert all(o.distance <= MAX_RANGE_LIMIT for o in det.options)
+
+
+def test_thesis_method_examines_a_bounded_number_of_openings():
+    # scattered far returns made hundreds of outlier regions, each dilated over the whole
+    # grid and fitted with an ellipse: seconds per sweep
+    from detector.spatial import MAX_REGIONS
+
+    scan, _, d = scan_layout("t_junction", 0.4)
+    pick = (np.random.default_rng(0).random(scan.ranges.shape) < 0.2) & scan.valid
+    far = dataclasses.replace(scan, ranges=np.where(pick, scan.ranges * 100.0, scan.ranges))
+    det = detect(dataclasses.replace(far, spec={}), d, "thesis")
+    assert det.diagnostics["n_outlines"] <= MAX_REGIONS
