@@ -166,7 +166,8 @@ def _detect(args: argparse.Namespace) -> int:
         )
     fused = result.fused
     assert fused is not None
-    last = _detection_of(fused["detection"])
+    # one sweep: its own detection; several: the fusion (the tracker's confidences)
+    last = _detection_of(result.sweeps[-1]["detection"] if len(scans) == 1 else fused["detection"])
     title = (
         f"structure ahead: {last.kind}"
         + ("" if len(scans) == 1 else f" (fused over {len(scans)} sweeps, ")

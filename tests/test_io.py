@@ -11,6 +11,8 @@ import math
 import numpy as np
 import pytest
 from detector_scans import scan_layout
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from rosbags.rosbag2 import Writer
 from rosbags.typesys import Stores, get_typestore
 
@@ -285,3 +287,49 @@ def test_real_data_doc_snippets_run(monkeypatch):
     assert blocks
     for i, code in enumerate(blocks):
         exec(compile(code, f"docs/real-data.md python block {i}", "exec"), {"__name__": "__doc__"})
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_corrupt_recordings_raise_scan_read_errors_naming_the_file(tmp_path_factory, data):
+    # a valid npz, CSV and bag, then bytes cut, flipped or replaced: a ScanReadError (a
+    # ValueError naming the file) or scans, never a raw zipfile/csv/sqlite/rosbags error
+    folder = tmp_path_factory.mktemp("corrupt")
+    scan = _tiny_scan()
+    kind = data.draw(st.sampled_from(["npz", "csv", "bag"]))
+    path = folder / f"rec.{kind}"
+    {"npz": write_npz, "csv": write_csv, "bag": write_rosbag}[kind]([scan], path)
+    raw = bytearray(path.read_bytes())
+    how = data.draw(st.sampled_from(["cut", "flip", "garbage"]))
+    if how == "cut":
+        raw = raw[: data.draw(st.integers(0, len(raw) - 1))]
+    elif how == "flip":
+        for i in data.draw(st.lists(st.integers(0, len(raw) - 1), min_size=1, max_size=8)):
+            raw[i] ^= 0xFF
+    else:
+        raw = bytearray(data.draw(st.binary(max_size=200)))
+    path.write_bytes(bytes(raw))
+    try:
+        got = read_scans(path)
+    except ScanReadError as exc:
+        assert str(path) in str(exc)
+    else:
+        assert all(isinstance(s, Scan) for s in got)
+
+
+def _tiny_scan() -> Scan:
+    p, b = 4, 7
+    ranges = np.full((p, b), 0.4)
+    ranges[1, 2] = np.inf
+    return Scan(
+        ranges=ranges,
+        valid=np.isfinite(ranges),
+        beam_angles=np.linspace(-1.0, 1.0, b),
+        plane_angles=np.linspace(0.0, 1.5, p),
+        timestamps=np.arange(p, dtype=float),
+        positions=np.zeros((p, 3)),
+        rotations=np.tile(np.eye(3), (p, 1, 1)),
+        nominal_positions=np.zeros((p, 3)),
+        nominal_rotations=np.tile(np.eye(3), (p, 1, 1)),
+        spec={"min_range": 0.1, "max_range": 2.0},
+    )
