@@ -11,6 +11,12 @@ writes the reports with every finished result (the rest marked not run). Scenari
 ``known_failure`` that fail are expected failures (JUnit ``<skipped>``), ones that pass are
 flagged; ``strict`` counts both as failures. Reports are written atomically and the JSON holds
 no NaN or Infinity.
+
+Ray, as Ray users run it (:func:`ray_init_kwargs`): with an address (``ray_address``, else the
+``RAY_ADDRESS`` environment variable) the run connects to that existing cluster and leaves it
+running, its size set by the cluster (``jobs`` is not used); without one it starts a private
+local Ray instance with ``jobs`` CPUs and shuts it down at the end. An already initialised Ray
+(``ray.init`` called by the caller) is used as it is.
 """
 
 from __future__ import annotations
@@ -125,8 +131,10 @@ def run_tasks(
     backend: str = "local",
     on_result: Callable[[ScenarioResult], None] | None = None,
     timeouts: Sequence[float] | float | None = None,
+    ray_address: str | None = None,
 ) -> list[ScenarioResult]:
-    """Run the tasks on ``backend`` with ``jobs`` workers; results in task order.
+    """Run the tasks on ``backend`` with ``jobs`` workers; results in task order
+    (``ray_address``: see module docstring).
 
     Every task gets a result, whatever happens to its worker: a worker that dies is an error
     result for the task it ran (the others go on, on a fresh worker), a task running longer
@@ -157,7 +165,7 @@ def run_tasks(
 
     try:
         if backend == "ray":
-            _run_ray(tasks, jobs, limits, finish)
+            _run_ray(tasks, jobs, limits, finish, ray_address)
         else:
             _run_local(tasks, jobs, limits, finish)
     except KeyboardInterrupt:
@@ -310,11 +318,26 @@ def _run_local(
 
 
 # -------------------------------------------------------------------------------- ray
+def ray_init_kwargs(jobs: int, address: str | None = None) -> dict[str, Any]:
+    """The ``ray.init`` arguments of a run: connect to ``address`` (else ``$RAY_ADDRESS``) when
+    one is given, else start a new local instance with ``jobs`` CPUs (``address="local"``, so
+    Ray does not attach to some other cluster it finds on this machine)."""
+    address = address or os.environ.get("RAY_ADDRESS") or None
+    common: dict[str, Any] = {"log_to_driver": False, "ignore_reinit_error": True}
+    fault = os.environ.get(FAULT_ENV)
+    if fault:  # the test hook reaches the Ray workers too
+        common["runtime_env"] = {"env_vars": {FAULT_ENV: fault}}
+    if address:
+        return {"address": address, **common}
+    return {"address": "local", "num_cpus": jobs, "include_dashboard": False, **common}
+
+
 def _run_ray(
     tasks: Sequence[tuple[str, int]],
     jobs: int,
     limits: Sequence[float],
     finish: Callable[[int, ScenarioResult], None],
+    address: str | None = None,
 ) -> None:
     try:
         import ray
@@ -325,15 +348,13 @@ def _run_ray(
         ) from exc
     started = False
     if not ray.is_initialized():
-        fault = os.environ.get(FAULT_ENV)
-        ray.init(
-            num_cpus=jobs,
-            include_dashboard=False,
-            log_to_driver=False,
-            ignore_reinit_error=True,
-            runtime_env={"env_vars": {FAULT_ENV: fault}} if fault else None,
-        )
+        ray.init(**ray_init_kwargs(jobs, address))
         started = True
+    # at most this many tasks in flight, so that a task's clock starts when it can run: the
+    # local instance's ``jobs`` CPUs, or the CPUs of the cluster connected to
+    in_flight = jobs if started and not (address or os.environ.get("RAY_ADDRESS")) else 0
+    if not in_flight:
+        in_flight = max(1, int(ray.cluster_resources().get("CPU", jobs)))
     refs: list[Any] = []
     try:
         # no retries: a task that kills its worker is reported, not run again
@@ -341,7 +362,7 @@ def _run_ray(
         todo = list(range(len(tasks)))[::-1]
         running: dict[Any, tuple[int, float]] = {}  # ref -> (task index, deadline)
         while todo or running:
-            while todo and len(running) < jobs:  # at most ``jobs`` in flight: deadlines hold
+            while todo and len(running) < in_flight:
                 i = todo.pop()
                 ref = remote.remote(*tasks[i])
                 refs.append(ref)
@@ -516,6 +537,7 @@ def run_and_report(
     broken: Sequence[tuple[str, Exception]] = (),
     timeout: float | None = None,
     strict: bool = False,
+    ray_address: str | None = None,
 ) -> list[ScenarioResult]:
     """Run scenarios and write the reports that were asked for.
 
@@ -536,6 +558,7 @@ def run_and_report(
             backend,
             on_result,
             timeouts_of(scenarios, seeds, timeout),
+            ray_address,
         )
     except RunInterrupted as exc:
         interrupted, results = exc, exc.results
