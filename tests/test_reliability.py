@@ -233,3 +233,33 @@ def test_figures_and_telemetry_are_written_atomically(tmp_path: Path) -> None:
     with np.load(tmp_path / "run.npz") as z:
         assert z["status"] == "done" and z["times"].tolist() == [0.0, 1.0, 2.0]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "a.svg", "run.npz"]
+
+
+# --------------------------------------------------------------------------- soak
+@pytest.mark.slow
+def test_full_fidelity_episodes_keep_one_world_and_renderer() -> None:
+    """Nothing accumulates across full-fidelity episodes with rendering: one world, one
+    plant, at most one renderer alive (benchmarks/soak.py measures the RSS)."""
+    import collections
+    import gc
+
+    from agents.evaluate import random_valid_episode
+
+    env = gym.make(
+        "pipenav/PipeNav-v0",
+        fidelity="full",
+        render_mode="rgb_array",
+        network_config={"n_fittings": 4},
+        max_episode_steps=2,
+    )
+    rng = np.random.default_rng(0)
+    counts = []
+    for ep in range(4):
+        random_valid_episode(env, rng, ep)
+        env.render()
+        gc.collect()
+        c = collections.Counter(type(o).__name__ for o in gc.get_objects())
+        counts.append((c["PipeWorld"], c["PhysicalPlant"], c["Renderer"], c["RotatingLidar"]))
+    env.close()
+    for worlds, plants, renderers, lidars in counts:
+        assert plants == 1 and lidars == 1 and renderers <= 1 and worlds <= 2, counts
