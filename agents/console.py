@@ -141,8 +141,13 @@ class OperatorConsole:
         return target
 
     def run(self) -> int:
-        obs, info = self.env.reset(seed=self.seed)
-        # the reset's drive can end the episode (a goal before any decision): nothing to ask
+        try:
+            obs, info = self.env.reset(seed=self.seed)
+        except ValueError as exc:  # e.g. a network whose goal the reset's drive reaches
+            self.console.print(f"error: {escape(str(exc))}")
+            return 2
+        # the reset's drive can end the episode (jams, or a chain of single ways too long to
+        # follow): nothing to ask
         done = self.env.unwrapped.decision is None
         while True:
             self.console.print(self.table(info))
