@@ -1,0 +1,466 @@
+"""Compiled (numba) kernels of the analytic LiDAR backend: exact rays against the bore, ray by ray.
+
+This module owns the per-ray arithmetic of :mod:`pipe_env.raycast_analytic`: the same pieces
+(cone frustums, cylinders when the slope is 0, and torus sectors, each clipped by two planes),
+the same interval formulas and the same union rule, evaluated one ray at a time in compiled code
+instead of over (ray, piece) pair arrays in numpy. Per ray:
+
+1. broad phase: the chord of the ray through every piece's bounding sphere (slightly inflated,
+   so rounding cannot cull a piece the ray touches); pieces whose chord lies behind the origin
+   or beyond the cutoff are dropped;
+2. the ray's exit from the union, as the numpy path defines it: ``t`` starts at 0 and extends to
+   the farthest end of the intervals that contain it (``lo <= t + SEAM_EPS``, ``hi > t``) until
+   none does. A piece's intervals are computed only when its chord reaches ``t`` (lazily, once),
+   so a ray usually evaluates one or two pieces; casting stops as soon as ``t`` passes the cutoff;
+3. the element and the surface whose interval ends at the exit give the hit's element and its
+   outward normal.
+
+Pieces are packed in one (K, 20) float64 table (:data:`FIELDS` gives the columns), quadrics
+first, then tori, as the numpy path orders them. Units: metres.
+
+Functions are compiled on first use and cached on disk (``cache=True``), so later processes load
+them in well under a second.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+#: Columns of the packed piece table: point (axis point or torus centre), unit axis, radius0 or
+#: major radius, slope or minor radius, the two clip planes (normal, offset), bounding sphere.
+FIELDS = ("p", "p", "p", "u", "u", "u", "r", "k", "n0", "n0", "n0", "h0", "n1", "n1", "n1", "h1")
+FIELDS += ("bc", "bc", "bc", "br")
+N_FIELDS = len(FIELDS)
+#: Piece kinds (column of the kind array).
+QUADRIC, TORUS = 0, 1
+#: Two intervals closer than this along a ray are treated as touching, m (as the numpy path).
+SEAM_EPS = 1.0e-9
+SIDE, PLANE0, PLANE1 = 0, 1, 2
+_INF = math.inf
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _clip(
+    dn0: float, g0: float, dn1: float, g1: float, lo: float, hi: float
+) -> tuple[float, float, int]:
+    """Clip ``[lo, hi]`` (side surface at ``hi``) by the planes ``t dn_i <= g_i``; hi's code."""
+    code = SIDE
+    tp = g0 / dn0 if dn0 != 0.0 else 0.0
+    if dn0 > 0.0 and tp < hi:
+        hi = tp
+        code = PLANE0
+    if dn0 < 0.0 and tp > lo:
+        lo = tp
+    if dn0 == 0.0 and g0 < 0.0:
+        lo = _INF
+    tp = g1 / dn1 if dn1 != 0.0 else 0.0
+    if dn1 > 0.0 and tp < hi:
+        hi = tp
+        code = PLANE1
+    if dn1 < 0.0 and tp > lo:
+        lo = tp
+    if dn1 == 0.0 and g1 < 0.0:
+        lo = _INF
+    return lo, hi, code
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _quadric_interval(
+    a: float,
+    b: float,
+    c: float,
+    dn0: float,
+    g0: float,
+    dn1: float,
+    g1: float,
+) -> tuple[float, float, int]:
+    """The interval of ``a t^2 + 2 b t + c <= 0`` clipped by two planes (empty: lo >= hi)."""
+    disc = b * b - a * c
+    sq = math.sqrt(max(disc, 0.0))
+    qq = -(b + math.copysign(sq, b))
+    if a > 1e-12:
+        if disc < 0.0:
+            return _INF, -_INF, SIDE
+        t1 = qq / a
+        t2 = c / qq if qq != 0.0 else math.nan
+        if t1 != t1 or t2 != t2:
+            return _INF, -_INF, SIDE
+        return _clip(dn0, g0, dn1, g1, min(t1, t2), max(t1, t2))
+    if a >= -1e-12:  # linear: a ray parallel to a cylinder is inside for all t or never
+        if b > 1e-15:
+            return _clip(dn0, g0, dn1, g1, -_INF, -c / (2.0 * b))
+        if b < -1e-15:
+            return _clip(dn0, g0, dn1, g1, -c / (2.0 * b), _INF)
+        if c <= 0.0:
+            return _clip(dn0, g0, dn1, g1, -_INF, _INF)
+        return _INF, -_INF, SIDE
+    if disc < 0.0:  # a < 0: inside everywhere
+        return _clip(dn0, g0, dn1, g1, -_INF, _INF)
+    # a < 0 (a cone crossed steeply): outside between the roots; within the frustum's slab only
+    # one of (-inf, r_lo] and [r_hi, inf) belongs to the right nappe
+    t1 = qq / a
+    t2 = c / qq if qq != 0.0 else math.nan
+    if t1 != t1 or t2 != t2:
+        return _INF, -_INF, SIDE
+    r_lo = min(t1, t2)
+    r_hi = max(t1, t2)
+    lo_a, hi_a, code_a = _clip(dn0, g0, dn1, g1, -_INF, r_lo)
+    if hi_a > lo_a:
+        return lo_a, hi_a, code_a
+    return _clip(dn0, g0, dn1, g1, r_hi, _INF)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def largest_cubic_root(a: float, b: float, c: float) -> float:
+    """Largest real root of ``z^3 + a z^2 + b z + c``."""
+    shift = a / 3.0
+    p = b - a * shift
+    q = 2.0 * shift**3 - shift * b + c
+    half_q = 0.5 * q
+    disc = half_q * half_q + (p / 3.0) ** 3
+    if disc > 0:
+        sq = math.sqrt(disc)
+        y = np.cbrt(-half_q + sq) + np.cbrt(-half_q - sq)
+    else:
+        m = math.sqrt(max(-p / 3.0, 0.0))
+        cos_arg = -half_q / m**3 if m > 0 else 0.0
+        y = 2.0 * m * math.cos(math.acos(min(max(cos_arg, -1.0), 1.0)) / 3.0)
+    return y - shift
+
+
+@numba.njit(cache=True, error_model="numpy")
+def depressed_quartic_roots(p: float, q: float, s: float) -> tuple[int, float, float, float, float]:
+    """Real roots of ``x^4 + p x^2 + q x + s = 0``: their count and the roots, ascending (NaN
+    after the last).
+
+    The scalar twin of :func:`pipe_env.raycast_analytic.solve_depressed_quartic`: Descartes'
+    factorisation through the largest root of the resolvent cubic, two Newton steps per root.
+    """
+    a2, a1, a0 = 2.0 * p, p * p - 4.0 * s, -q * q
+    z = largest_cubic_root(a2, a1, a0)
+    for _ in range(2):
+        f = ((z + a2) * z + a1) * z + a0
+        fp = (3.0 * z + 2.0 * a2) * z + a1
+        if abs(fp) > 1e-300:
+            z = z - f / fp
+    z = max(z, 0.0)
+    scale = max(max(abs(p), math.sqrt(abs(s))), 1e-300)
+    nan = math.nan
+    x0 = x1 = x2 = x3 = nan
+    n = 0
+    if z <= 1e-14 * scale:  # biquadratic: x^2 = (-p +- sqrt(p^2 - 4 s)) / 2
+        dq = p * p - 4.0 * s
+        if dq >= 0:
+            sq = math.sqrt(dq)
+            y1 = 0.5 * (-p - sq)
+            y2 = 0.5 * (-p + sq)
+            if y1 >= 0:
+                r = math.sqrt(abs(y1))
+                x0, x1 = -r, r
+                n = 2
+            if y2 >= 0:
+                r = math.sqrt(abs(y2))
+                if n == 0:
+                    x0, x1 = -r, r
+                else:
+                    x2, x3 = -r, r
+                n += 2
+    else:
+        alpha = math.sqrt(z)
+        q_over_alpha = q / alpha
+        beta = 0.5 * (p + z - q_over_alpha)
+        gamma = 0.5 * (p + z + q_over_alpha)
+        d1 = z - 4.0 * beta
+        d2 = z - 4.0 * gamma
+        if d1 >= 0:
+            s1 = math.sqrt(d1)
+            x0, x1 = 0.5 * (-alpha - s1), 0.5 * (-alpha + s1)
+            n = 2
+        if d2 >= 0:
+            s2 = math.sqrt(d2)
+            if n == 0:
+                x0, x1 = 0.5 * (alpha - s2), 0.5 * (alpha + s2)
+            else:
+                x2, x3 = 0.5 * (alpha - s2), 0.5 * (alpha + s2)
+            n += 2
+    if n == 0:
+        return 0, nan, nan, nan, nan
+    x0 = _newton2(x0, p, q, s, scale)
+    x1 = _newton2(x1, p, q, s, scale)
+    if n == 2:
+        return 2, min(x0, x1), max(x0, x1), nan, nan
+    x2 = _newton2(x2, p, q, s, scale)
+    x3 = _newton2(x3, p, q, s, scale)
+    # sort four: min/max network
+    a, b = min(x0, x1), max(x0, x1)
+    c, d = min(x2, x3), max(x2, x3)
+    lo, m1 = min(a, c), max(a, c)
+    m2, hi = min(b, d), max(b, d)
+    return 4, lo, min(m1, m2), max(m1, m2), hi
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _newton2(x: float, p: float, q: float, s: float, scale: float) -> float:
+    """Two guarded Newton steps on ``x^4 + p x^2 + q x + s`` from ``x``."""
+    for _ in range(2):
+        x2 = x * x
+        f = (x2 + p) * x2 + q * x + s
+        fp = (4.0 * x2 + 2.0 * p) * x + q
+        if abs(fp) > 1e-12 * (abs(x) * scale + 1.0):
+            x = x - f / fp
+    return x
+
+
+#: Columns of the per-origin table (:func:`_origin_table`).
+_PX, _S0, _C, _RS, _G0, _G1, _BX, _BCC, _RAD2 = 0, 3, 4, 5, 6, 7, 8, 11, 12
+_N_ORIGIN = 13
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _origin_table(
+    pieces: NDArray[np.float64],
+    kind: NDArray[np.int64],
+    ox: float,
+    oy: float,
+    oz: float,
+    out: NDArray[np.float64],
+) -> None:
+    """Per-piece constants of rays from the origin ``o``: the point p - o; s0 = -(p - o) . u;
+    the constant term (quadrics: |p - o|^2 - s0^2 - rs^2 with rs = r0 + slope s0; tori:
+    |c - o|^2); rs; the plane gaps h_i - n_i . o; the bounding centre - o, its squared norm and
+    the squared (slightly inflated) bounding radius."""
+    for k in range(pieces.shape[0]):
+        px = pieces[k, 0] - ox
+        py = pieces[k, 1] - oy
+        pz = pieces[k, 2] - oz
+        s0 = -(px * pieces[k, 3] + py * pieces[k, 4] + pz * pieces[k, 5])
+        pp = px * px + py * py + pz * pz
+        out[k, 0] = px
+        out[k, 1] = py
+        out[k, 2] = pz
+        out[k, _S0] = s0
+        if kind[k] == QUADRIC:
+            rs = pieces[k, 6] + pieces[k, 7] * s0
+            out[k, _C] = pp - s0 * s0 - rs * rs
+            out[k, _RS] = rs
+        else:
+            out[k, _C] = pp
+            out[k, _RS] = 0.0
+        out[k, _G0] = pieces[k, 11] - (pieces[k, 8] * ox + pieces[k, 9] * oy + pieces[k, 10] * oz)
+        out[k, _G1] = pieces[k, 15] - (pieces[k, 12] * ox + pieces[k, 13] * oy + pieces[k, 14] * oz)
+        bx = pieces[k, 16] - ox
+        by = pieces[k, 17] - oy
+        bz = pieces[k, 18] - oz
+        out[k, 8] = bx
+        out[k, 9] = by
+        out[k, 10] = bz
+        out[k, _BCC] = bx * bx + by * by + bz * bz
+        r = pieces[k, 19] * (1.0 + 1e-9) + 1e-9  # inflated against rounding
+        out[k, _RAD2] = r * r
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _piece_intervals(
+    pieces: NDArray[np.float64],
+    kind: NDArray[np.int64],
+    table: NDArray[np.float64],
+    k: int,
+    dx: float,
+    dy: float,
+    dz: float,
+) -> tuple[int, float, float, int, float, float, int]:
+    """The (up to two) non-empty intervals of piece ``k`` along the ray ``o + t d``: their count
+    and (lo, hi, code of hi) of each."""
+    du = dx * pieces[k, 3] + dy * pieces[k, 4] + dz * pieces[k, 5]
+    dp = dx * table[k, 0] + dy * table[k, 1] + dz * table[k, 2]
+    dn0 = dx * pieces[k, 8] + dy * pieces[k, 9] + dz * pieces[k, 10]
+    dn1 = dx * pieces[k, 12] + dy * pieces[k, 13] + dz * pieces[k, 14]
+    g0 = table[k, _G0]
+    g1 = table[k, _G1]
+    s0 = table[k, _S0]
+    if kind[k] == QUADRIC:
+        slope = pieces[k, 7]
+        kdu = slope * du
+        a = 1.0 - du * du - kdu * kdu
+        b = -dp - s0 * du - kdu * table[k, _RS]
+        lo, hi, code = _quadric_interval(a, b, table[k, _C], dn0, g0, dn1, g1)
+        if hi > lo:
+            return 1, lo, hi, code, 0.0, 0.0, SIDE
+        return 0, 0.0, 0.0, SIDE, 0.0, 0.0, SIDE
+    # torus sector: solve from the ray point closest to the centre, in units of the major radius
+    big = pieces[k, 6]
+    t0 = dp
+    inv = 1.0 / big
+    cc = (s0 + t0 * du) * inv
+    qq = max(table[k, _C] - t0 * t0, 0.0) * inv * inv
+    rr = pieces[k, 7] * inv
+    bb = qq + 1.0 - rr * rr
+    p2 = 2.0 * bb - 4.0 * (1.0 - du * du)
+    p1 = 8.0 * cc * du
+    p0 = bb * bb - 4.0 * (qq - cc * cc)
+    nr, x0, x1, x2, x3 = depressed_quartic_roots(p2, p1, p0)
+    m = 0
+    lo_a = hi_a = lo_b = hi_b = 0.0
+    code_a = code_b = SIDE
+    if nr >= 2:
+        lo, hi, code = _clip(dn0, g0, dn1, g1, x0 * big + t0, x1 * big + t0)
+        if hi > lo:
+            lo_a, hi_a, code_a = lo, hi, code
+            m = 1
+    if nr == 4:
+        lo, hi, code = _clip(dn0, g0, dn1, g1, x2 * big + t0, x3 * big + t0)
+        if hi > lo:
+            if m == 0:
+                lo_a, hi_a, code_a = lo, hi, code
+            else:
+                lo_b, hi_b, code_b = lo, hi, code
+            m += 1
+    return m, lo_a, hi_a, code_a, lo_b, hi_b, code_b
+
+
+@numba.njit(cache=True, error_model="numpy")
+def cast_rays(
+    pieces: NDArray[np.float64],
+    kind: NDArray[np.int64],
+    element: NDArray[np.int64],
+    origins: NDArray[np.float64],
+    per_origin: int,
+    dirs: NDArray[np.float64],
+    cutoff: float,
+    want_normals: bool,
+    dist: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    hit_element: NDArray[np.int64],
+) -> None:
+    """Cast N rays against the bore; ray ``i`` starts at ``origins[i // per_origin]``.
+
+    Writes ``dist`` (N,) (``inf``: no wall within ``cutoff``; 0: the ray starts outside the
+    bore), ``normal`` (N, 3) (outward unit normals if ``want_normals``, else zeros) and
+    ``hit_element`` (N,) (-1: none), as :meth:`pipe_env.raycast_analytic.AnalyticBore.cast`.
+    """
+    n_rays = dirs.shape[0]
+    n_pieces = pieces.shape[0]
+    table = np.empty((n_pieces, _N_ORIGIN))
+    cand = np.empty(n_pieces, dtype=np.int64)
+    e0 = np.empty(n_pieces)
+    e1 = np.empty(n_pieces)
+    n_iv = np.empty(n_pieces, dtype=np.int64)  # intervals computed per candidate (-1: not yet)
+    iv_lo = np.empty((n_pieces, 2))
+    iv_hi = np.empty((n_pieces, 2))
+    iv_code = np.empty((n_pieces, 2), dtype=np.int64)
+    for oi in range(origins.shape[0]):
+        ox = origins[oi, 0]
+        oy = origins[oi, 1]
+        oz = origins[oi, 2]
+        _origin_table(pieces, kind, ox, oy, oz, table)
+        for i in range(oi * per_origin, min((oi + 1) * per_origin, n_rays)):
+            dx = dirs[i, 0]
+            dy = dirs[i, 1]
+            dz = dirs[i, 2]
+            # broad phase: chords through the bounding spheres
+            m = 0
+            for k in range(n_pieces):
+                tc = dx * table[k, 8] + dy * table[k, 9] + dz * table[k, 10]
+                h2 = table[k, _RAD2] - (table[k, _BCC] - tc * tc)
+                if h2 < 0.0:
+                    continue
+                h = math.sqrt(h2)
+                if tc + h < 0.0 or tc - h > cutoff + SEAM_EPS:
+                    continue
+                cand[m] = k
+                e0[m] = tc - h
+                e1[m] = tc + h
+                n_iv[m] = -1
+                m += 1
+            # the exit from the union, extending t from 0
+            t = 0.0
+            while True:
+                new_t = t
+                for j in range(m):
+                    if e0[j] > t + SEAM_EPS or e1[j] <= t:
+                        continue
+                    if n_iv[j] < 0:
+                        nv, la, ha, ca, lb, hb, cb = _piece_intervals(
+                            pieces, kind, table, cand[j], dx, dy, dz
+                        )
+                        n_iv[j] = nv
+                        iv_lo[j, 0] = la
+                        iv_hi[j, 0] = ha
+                        iv_code[j, 0] = ca
+                        iv_lo[j, 1] = lb
+                        iv_hi[j, 1] = hb
+                        iv_code[j, 1] = cb
+                    for v in range(n_iv[j]):
+                        if iv_lo[j, v] <= t + SEAM_EPS and iv_hi[j, v] > new_t:
+                            new_t = iv_hi[j, v]
+                if new_t == t or new_t > cutoff:
+                    t = new_t
+                    break
+                t = new_t
+            normal[i, 0] = 0.0
+            normal[i, 1] = 0.0
+            normal[i, 2] = 0.0
+            if t > cutoff:
+                dist[i] = _INF
+                hit_element[i] = -1
+                continue
+            dist[i] = t
+            if t <= 0.0:
+                hit_element[i] = -1
+                continue
+            # the piece and surface whose interval ends at the exit (the last in piece order)
+            best = -1
+            best_code = SIDE
+            for j in range(m):
+                for v in range(max(n_iv[j], 0)):
+                    if iv_hi[j, v] == t and cand[j] >= best:
+                        best = cand[j]
+                        best_code = iv_code[j, v]
+            hit_element[i] = element[best]
+            if want_normals:
+                _normal(pieces, kind, best, best_code, ox, oy, oz, dx, dy, dz, t, normal[i])
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _normal(
+    pieces: NDArray[np.float64],
+    kind: NDArray[np.int64],
+    k: int,
+    code: int,
+    ox: float,
+    oy: float,
+    oz: float,
+    dx: float,
+    dy: float,
+    dz: float,
+    t: float,
+    out: NDArray[np.float64],
+) -> None:
+    """The outward unit normal of piece ``k``'s surface ``code`` at ``o + t d`` into ``out``."""
+    if code == PLANE0:
+        nx, ny, nz = pieces[k, 8], pieces[k, 9], pieces[k, 10]
+    elif code == PLANE1:
+        nx, ny, nz = pieces[k, 12], pieces[k, 13], pieces[k, 14]
+    else:
+        wx = ox + t * dx - pieces[k, 0]
+        wy = oy + t * dy - pieces[k, 1]
+        wz = oz + t * dz - pieces[k, 2]
+        ux, uy, uz = pieces[k, 3], pieces[k, 4], pieces[k, 5]
+        s = wx * ux + wy * uy + wz * uz
+        if kind[k] == QUADRIC:  # the gradient of the cone's implicit function
+            slope = pieces[k, 7]
+            f = s + slope * (pieces[k, 6] + slope * s)
+            nx, ny, nz = wx - f * ux, wy - f * uy, wz - f * uz
+        else:  # away from the nearest point of the torus's core circle
+            rx, ry, rz = wx - s * ux, wy - s * uy, wz - s * uz
+            rho = math.sqrt(rx * rx + ry * ry + rz * rz)
+            g = pieces[k, 6] / max(rho, 1e-300)
+            nx, ny, nz = wx - g * rx, wy - g * ry, wz - g * rz
+    norm = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
+    out[0] = nx / norm
+    out[1] = ny / norm
+    out[2] = nz / norm
