@@ -13,7 +13,7 @@ Ray casting backends (``RotatingLidar(..., backend=...)``):
 - ``"analytic"`` (the default of the closed loop: the full-fidelity plant,
   :class:`pipe_env.plant_full.PhysicalPlant`, argument ``lidar_backend``): exact intersection
   with the network's cylinders, cones, planes and tori (:mod:`pipe_env.raycast_analytic`),
-  vectorised in numpy.
+  compiled per ray (numba), one origin per plane.
 
 Poses:
 
@@ -449,11 +449,10 @@ class RotatingLidar:
         if self.backend == "mujoco":
             return self._caster.cast(origins, dirs, self._cutoff, normals)
         n_p, n_b = dirs.shape[:2]
-        same = bool((origins == origins[0]).all())
-        o = origins[0] if same else np.repeat(origins, n_b, axis=0)
-        hits = self._caster.cast(o, dirs.reshape(-1, 3), self._cutoff, normals)
+        hits = self._caster.cast_groups(origins, dirs, self._cutoff, normals)
         # a ray starting outside the bore reports 0: no measurement
-        dist = np.where(hits.dist > 0.0, hits.dist, np.inf).reshape(n_p, n_b)
+        dist = hits.dist.reshape(n_p, n_b)
+        dist[dist <= 0.0] = np.inf
         return dist, hits.normal.reshape(n_p, n_b, 3) if normals else None
 
 

@@ -345,10 +345,10 @@ def cast_rays(
     n_rays = dirs.shape[0]
     n_pieces = pieces.shape[0]
     table = np.empty((n_pieces, _N_ORIGIN))
-    cand = np.empty(n_pieces, dtype=np.int64)
-    e0 = np.empty(n_pieces)
-    e1 = np.empty(n_pieces)
-    n_iv = np.empty(n_pieces, dtype=np.int64)  # intervals computed per candidate (-1: not yet)
+    active = np.empty(n_pieces, dtype=np.int64)  # pieces within the cutoff of the origin
+    at_origin = np.empty(n_pieces, dtype=np.bool_)  # bounding sphere contains the origin
+    stamp = np.full(n_pieces, -1, dtype=np.int64)  # last ray whose intervals were computed
+    n_iv = np.zeros(n_pieces, dtype=np.int64)
     iv_lo = np.empty((n_pieces, 2))
     iv_hi = np.empty((n_pieces, 2))
     iv_code = np.empty((n_pieces, 2), dtype=np.int64)
@@ -357,50 +357,63 @@ def cast_rays(
         oy = origins[oi, 1]
         oz = origins[oi, 2]
         _origin_table(pieces, kind, ox, oy, oz, table)
+        n_active = 0
+        for k in range(n_pieces):
+            rad = math.sqrt(table[k, _RAD2])
+            if math.sqrt(table[k, _BCC]) - rad <= cutoff + SEAM_EPS:
+                active[n_active] = k
+                at_origin[n_active] = table[k, _BCC] <= table[k, _RAD2]
+                n_active += 1
         for i in range(oi * per_origin, min((oi + 1) * per_origin, n_rays)):
             dx = dirs[i, 0]
             dy = dirs[i, 1]
             dz = dirs[i, 2]
-            # broad phase: chords through the bounding spheres
-            m = 0
-            for k in range(n_pieces):
-                tc = dx * table[k, 8] + dy * table[k, 9] + dz * table[k, 10]
-                h2 = table[k, _RAD2] - (table[k, _BCC] - tc * tc)
-                if h2 < 0.0:
-                    continue
-                h = math.sqrt(h2)
-                if tc + h < 0.0 or tc - h > cutoff + SEAM_EPS:
-                    continue
-                cand[m] = k
-                e0[m] = tc - h
-                e1[m] = tc + h
-                n_iv[m] = -1
-                m += 1
-            # the exit from the union, extending t from 0
+            # The exit from the union, extending t from 0. A piece's intervals are computed
+            # once its (inflated) bounding sphere contains the point at t: an interval with
+            # lo <= t + SEAM_EPS < ... and hi > t needs it.
             t = 0.0
+            last = -1
+            last_code = SIDE
             while True:
                 new_t = t
-                for j in range(m):
-                    if e0[j] > t + SEAM_EPS or e1[j] <= t:
-                        continue
-                    if n_iv[j] < 0:
+                best = -1
+                best_code = SIDE
+                for j in range(n_active):
+                    k = active[j]
+                    if stamp[k] != i:
+                        if t == 0.0:
+                            if not at_origin[j]:
+                                continue
+                        else:
+                            tc = dx * table[k, 8] + dy * table[k, 9] + dz * table[k, 10]
+                            if t * (t - 2.0 * tc) + table[k, _BCC] > table[k, _RAD2]:
+                                continue
                         nv, la, ha, ca, lb, hb, cb = _piece_intervals(
-                            pieces, kind, table, cand[j], dx, dy, dz
+                            pieces, kind, table, k, dx, dy, dz
                         )
-                        n_iv[j] = nv
-                        iv_lo[j, 0] = la
-                        iv_hi[j, 0] = ha
-                        iv_code[j, 0] = ca
-                        iv_lo[j, 1] = lb
-                        iv_hi[j, 1] = hb
-                        iv_code[j, 1] = cb
-                    for v in range(n_iv[j]):
-                        if iv_lo[j, v] <= t + SEAM_EPS and iv_hi[j, v] > new_t:
-                            new_t = iv_hi[j, v]
-                if new_t == t or new_t > cutoff:
-                    t = new_t
+                        stamp[k] = i
+                        n_iv[k] = nv
+                        iv_lo[k, 0] = la
+                        iv_hi[k, 0] = ha
+                        iv_code[k, 0] = ca
+                        iv_lo[k, 1] = lb
+                        iv_hi[k, 1] = hb
+                        iv_code[k, 1] = cb
+                    for v in range(n_iv[k]):
+                        hi = iv_hi[k, v]
+                        if hi >= new_t and hi > t and iv_lo[k, v] <= t + SEAM_EPS:
+                            # the farthest end; on a tie the last piece in order (numpy path)
+                            if hi > new_t or k >= best:
+                                new_t = hi
+                                best = k
+                                best_code = iv_code[k, v]
+                if new_t == t:
                     break
                 t = new_t
+                last = best
+                last_code = best_code
+                if t > cutoff:
+                    break
             normal[i, 0] = 0.0
             normal[i, 1] = 0.0
             normal[i, 2] = 0.0
@@ -412,17 +425,10 @@ def cast_rays(
             if t <= 0.0:
                 hit_element[i] = -1
                 continue
-            # the piece and surface whose interval ends at the exit (the last in piece order)
-            best = -1
-            best_code = SIDE
-            for j in range(m):
-                for v in range(max(n_iv[j], 0)):
-                    if iv_hi[j, v] == t and cand[j] >= best:
-                        best = cand[j]
-                        best_code = iv_code[j, v]
-            hit_element[i] = element[best]
+            # the piece and surface whose interval ended at the exit (the last extension)
+            hit_element[i] = element[last]
             if want_normals:
-                _normal(pieces, kind, best, best_code, ox, oy, oz, dx, dy, dz, t, normal[i])
+                _normal(pieces, kind, last, last_code, ox, oy, oz, dx, dy, dz, t, normal[i])
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
