@@ -47,23 +47,27 @@ _INF = math.inf
 def _clip(
     dn0: float, g0: float, dn1: float, g1: float, lo: float, hi: float
 ) -> tuple[float, float, int]:
-    """Clip ``[lo, hi]`` (side surface at ``hi``) by the planes ``t dn_i <= g_i``; hi's code."""
+    """Clip ``[lo, hi]`` (side surface at ``hi``) by the planes ``t dn_i <= g_i``; hi's code.
+
+    A plane's parameter ``g / dn`` is divided out only where it cuts (compared by products)."""
     code = SIDE
-    tp = g0 / dn0 if dn0 != 0.0 else 0.0
-    if dn0 > 0.0 and tp < hi:
-        hi = tp
-        code = PLANE0
-    if dn0 < 0.0 and tp > lo:
-        lo = tp
-    if dn0 == 0.0 and g0 < 0.0:
+    if dn0 > 0.0:
+        if g0 < hi * dn0:
+            hi = g0 / dn0
+            code = PLANE0
+    elif dn0 < 0.0:
+        if g0 < lo * dn0:
+            lo = g0 / dn0
+    elif g0 < 0.0:
         lo = _INF
-    tp = g1 / dn1 if dn1 != 0.0 else 0.0
-    if dn1 > 0.0 and tp < hi:
-        hi = tp
-        code = PLANE1
-    if dn1 < 0.0 and tp > lo:
-        lo = tp
-    if dn1 == 0.0 and g1 < 0.0:
+    if dn1 > 0.0:
+        if g1 < hi * dn1:
+            hi = g1 / dn1
+            code = PLANE1
+    elif dn1 < 0.0:
+        if g1 < lo * dn1:
+            lo = g1 / dn1
+    elif g1 < 0.0:
         lo = _INF
     return lo, hi, code
 
