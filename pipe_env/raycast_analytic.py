@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pipe_env.fittings import FittingGeometry
 from pipe_env.network import PipeNetwork
-from pipe_env.raycast_kernels import N_FIELDS, QUADRIC, TORUS, cast_rays
+from pipe_env.raycast_kernels import N_FIELDS, QUADRIC, TORUS, axial_safe_bands, cast_rays
 
 #: Longest piece a straight run is split into, metres (tighter spatial culling).
 SEGMENT_LENGTH = 0.25
@@ -255,7 +255,7 @@ def _pieces(
 def _pack(
     quadrics: QuadricPieces, tori: TorusPieces
 ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
-    """The pieces as the compiled kernels read them: a (K, 20) table (columns in
+    """The pieces as the compiled kernels read them: a (K, 22) table (columns in
     :data:`pipe_env.raycast_kernels.FIELDS`), kinds and element ids; quadrics, then tori."""
     rows = []
     for pc in (quadrics, tori):
@@ -272,6 +272,7 @@ def _pack(
                     pc.plane_offsets[:, 1],
                     pc.bound_centre,
                     pc.bound_radius,
+                    np.zeros((len(pc), 2)),  # safe bands, below
                 ]
             ).reshape(-1, N_FIELDS)
         )
@@ -279,6 +280,7 @@ def _pack(
     kind = np.concatenate(
         [np.full(len(quadrics), QUADRIC, dtype=np.int64), np.full(len(tori), TORUS, dtype=np.int64)]
     )
+    table[:, N_FIELDS - 2 :] = axial_safe_bands(table, kind)
     element = np.ascontiguousarray(np.concatenate([quadrics.element, tori.element]), dtype=np.int64)
     return table, kind, element
 

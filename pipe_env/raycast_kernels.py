@@ -33,14 +33,65 @@ from numpy.typing import NDArray
 #: Columns of the packed piece table: point (axis point or torus centre), unit axis, radius0 or
 #: major radius, slope or minor radius, the two clip planes (normal, offset), bounding sphere.
 FIELDS = ("p", "p", "p", "u", "u", "u", "r", "k", "n0", "n0", "n0", "h0", "n1", "n1", "n1", "h1")
-FIELDS += ("bc", "bc", "bc", "br")
+FIELDS += ("bc", "bc", "bc", "br", "safe0", "safe1")
 N_FIELDS = len(FIELDS)
+#: Columns of the axial band [safe0, safe1] of a quadric's side wall that no other piece's
+#: bounding sphere reaches (see :func:`axial_safe_bands`).
+_SAFE0, _SAFE1 = 20, 21
+#: Margin of the safe bands, m (far above rounding and SEAM_EPS).
+SAFE_MARGIN = 1.0e-6
 #: Piece kinds (column of the kind array).
 QUADRIC, TORUS = 0, 1
 #: Two intervals closer than this along a ray are treated as touching, m (as the numpy path).
 SEAM_EPS = 1.0e-9
 SIDE, PLANE0, PLANE1 = 0, 1, 2
 _INF = math.inf
+
+
+def axial_safe_bands(table: NDArray[np.float64], kind: NDArray[np.int64]) -> NDArray[np.float64]:
+    """(K, 2) for every quadric piece, an interval of the axial coordinate ``s = (x - p) . u``
+    in which no other piece's bounding sphere (with a margin) reaches: a ray leaving the piece
+    through its side wall there leaves the bore (no other piece can extend it), so the kernel
+    stops without looking at the other pieces. The band is the widest gap between the other
+    pieces' axial shadows (where a sphere (c_j, R_j + margin) can reach the wall); empty
+    (lo > hi) if there is none, and for tori. Reads columns 0-19 of the packed table."""
+    n = len(table)
+    out = np.empty((n, 2))
+    out[:, 0] = np.inf
+    out[:, 1] = -np.inf
+    for k in range(n):
+        if kind[k] != QUADRIC:
+            continue
+        p, u = table[k, 0:3], table[k, 3:6]
+        centre = float((table[k, 16:19] - p) @ u)
+        reach = table[k, 19]
+        # the widest the wall gets within the piece's bounding sphere
+        wall = max(abs(table[k, 6] + table[k, 7] * (centre + e * reach)) for e in (-1.0, 1.0))
+        edges = [(-np.inf, centre - reach)]  # (start, end) of the blocked stretches
+        edges.append((centre + reach, np.inf))
+        for j in range(n):
+            if j == k:
+                continue
+            w = table[j, 16:19] - p
+            along = float(w @ u)
+            off_axis = float(np.sqrt(max(float(w @ w) - along * along, 0.0)))
+            # the wall's circle at s is within R_j of c_j only if
+            # (s - along)^2 + (off_axis - wall)^2 <= R_j^2 (wall points are within `wall` of
+            # the axis, so the circle is no nearer than off_axis - wall)
+            radius = table[j, 19] * (1 + 1e-9) + SAFE_MARGIN
+            gap = max(off_axis - wall, 0.0)
+            if gap < radius:
+                half = float(np.sqrt(radius * radius - gap * gap)) + SAFE_MARGIN
+                edges.append((along - half, along + half))
+        edges.sort()
+        best = (np.inf, -np.inf)
+        end = -np.inf
+        for start, stop in edges:
+            if start > end and start - end > best[1] - best[0]:
+                best = (end, start)
+            end = max(end, stop)
+        out[k] = best
+    return out
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -327,6 +378,70 @@ def _piece_intervals(
 
 
 @numba.njit(cache=True, error_model="numpy")
+def _first_quadric(
+    pieces: NDArray[np.float64],
+    table: NDArray[np.float64],
+    k: int,
+    dirs: NDArray[np.float64],
+    start: int,
+    stop: int,
+    lo_out: NDArray[np.float64],
+    hi_out: NDArray[np.float64],
+    code_out: NDArray[np.int64],
+    ok_out: NDArray[np.bool_],
+) -> None:
+    """The interval of quadric piece ``k`` for rays ``start:stop`` from the table's origin, as
+    :func:`_piece_intervals` computes it, without branches. ``ok_out`` is False where the
+    general case does not apply (a nearly tangent or steep ray: the caller recomputes)."""
+    ux, uy, uz = pieces[k, 3], pieces[k, 4], pieces[k, 5]
+    px, py, pz = table[k, 0], table[k, 1], table[k, 2]
+    n0x, n0y, n0z = pieces[k, 8], pieces[k, 9], pieces[k, 10]
+    n1x, n1y, n1z = pieces[k, 12], pieces[k, 13], pieces[k, 14]
+    g0 = table[k, _G0]
+    g1 = table[k, _G1]
+    s0 = table[k, _S0]
+    c = table[k, _C]
+    rs = table[k, _RS]
+    slope = pieces[k, 7]
+    for i in range(start, stop):
+        dx = dirs[i, 0]
+        dy = dirs[i, 1]
+        dz = dirs[i, 2]
+        du = dx * ux + dy * uy + dz * uz
+        dp = dx * px + dy * py + dz * pz
+        dn0 = dx * n0x + dy * n0y + dz * n0z
+        dn1 = dx * n1x + dy * n1y + dz * n1z
+        kdu = slope * du
+        a = 1.0 - du * du - kdu * kdu
+        b = -dp - s0 * du - kdu * rs
+        disc = b * b - a * c
+        sq = math.sqrt(max(disc, 0.0))
+        qq = -(b + math.copysign(sq, b))
+        t1 = qq / a
+        t2 = c / qq
+        lo = min(t1, t2)
+        hi = max(t1, t2)
+        code = SIDE
+        # the planes as _clip does it, with selects
+        tp = g0 / dn0
+        cut = (dn0 > 0.0) & (g0 < hi * dn0)
+        hi = tp if cut else hi
+        code = PLANE0 if cut else code
+        lo = tp if (dn0 < 0.0) & (g0 < lo * dn0) else lo
+        lo = _INF if (dn0 == 0.0) & (g0 < 0.0) else lo
+        tp = g1 / dn1
+        cut = (dn1 > 0.0) & (g1 < hi * dn1)
+        hi = tp if cut else hi
+        code = PLANE1 if cut else code
+        lo = tp if (dn1 < 0.0) & (g1 < lo * dn1) else lo
+        lo = _INF if (dn1 == 0.0) & (g1 < 0.0) else lo
+        lo_out[i - start] = lo
+        hi_out[i - start] = hi
+        code_out[i - start] = code
+        ok_out[i - start] = (a > 1e-12) & (disc >= 0.0) & (qq != 0.0)
+
+
+@numba.njit(cache=True, error_model="numpy")
 def cast_rays(
     pieces: NDArray[np.float64],
     kind: NDArray[np.int64],
@@ -356,22 +471,54 @@ def cast_rays(
     iv_lo = np.empty((n_pieces, 2))
     iv_hi = np.empty((n_pieces, 2))
     iv_code = np.empty((n_pieces, 2), dtype=np.int64)
+    b_lo = np.empty(0)
+    b_hi = np.empty(0)
+    b_code = np.empty(0, dtype=np.int64)
+    b_ok = np.empty(0, dtype=np.bool_)
     for oi in range(origins.shape[0]):
         ox = origins[oi, 0]
         oy = origins[oi, 1]
         oz = origins[oi, 2]
         _origin_table(pieces, kind, ox, oy, oz, table)
         n_active = 0
+        n_at = 0
+        first = -1
         for k in range(n_pieces):
             rad = math.sqrt(table[k, _RAD2])
             if math.sqrt(table[k, _BCC]) - rad <= cutoff + SEAM_EPS:
                 active[n_active] = k
                 at_origin[n_active] = table[k, _BCC] <= table[k, _RAD2]
+                if at_origin[n_active]:
+                    n_at += 1
+                    first = k
                 n_active += 1
-        for i in range(oi * per_origin, min((oi + 1) * per_origin, n_rays)):
+        start = oi * per_origin
+        stop = min(start + per_origin, n_rays)
+        # Usually one piece holds the origin and every ray starts by crossing it: its interval
+        # for all the rays at once, in a loop without branches (vectorised, no mispredictions)
+        batched = n_at == 1 and kind[first] == QUADRIC and stop > start
+        if batched:
+            if len(b_lo) < stop - start:
+                b_lo = np.empty(stop - start)
+                b_hi = np.empty(stop - start)
+                b_code = np.empty(stop - start, dtype=np.int64)
+                b_ok = np.empty(stop - start, dtype=np.bool_)
+            _first_quadric(pieces, table, first, dirs, start, stop, b_lo, b_hi, b_code, b_ok)
+        for i in range(start, stop):
             dx = dirs[i, 0]
             dy = dirs[i, 1]
             dz = dirs[i, 2]
+            if batched and b_ok[i - start]:
+                stamp[first] = i
+                hi = b_hi[i - start]
+                lo = b_lo[i - start]
+                if hi > lo:
+                    n_iv[first] = 1
+                    iv_lo[first, 0] = lo
+                    iv_hi[first, 0] = hi
+                    iv_code[first, 0] = b_code[i - start]
+                else:
+                    n_iv[first] = 0
             # The exit from the union, extending t from 0. A piece's intervals are computed
             # once its (inflated) bounding sphere contains the point at t: an interval with
             # lo <= t + SEAM_EPS < ... and hi > t needs it.
@@ -418,6 +565,12 @@ def cast_rays(
                 last_code = best_code
                 if t > cutoff:
                     break
+                if last_code == SIDE and kind[last] == QUADRIC:
+                    # through the side wall where no other piece reaches: out of the bore
+                    du = dx * pieces[last, 3] + dy * pieces[last, 4] + dz * pieces[last, 5]
+                    s_axial = t * du + table[last, _S0]
+                    if pieces[last, _SAFE0] <= s_axial <= pieces[last, _SAFE1]:
+                        break
             normal[i, 0] = 0.0
             normal[i, 1] = 0.0
             normal[i, 2] = 0.0
