@@ -539,6 +539,15 @@ def cast_rays(
                             tc = dx * table[k, 8] + dy * table[k, 9] + dz * table[k, 10]
                             if t * (t - 2.0 * tc) + table[k, _BCC] > table[k, _RAD2]:
                                 continue
+                            if kind[k] == TORUS:  # and within reach of the torus's tube
+                                du = dx * pieces[k, 3] + dy * pieces[k, 4] + dz * pieces[k, 5]
+                                dc = dx * table[k, 0] + dy * table[k, 1] + dz * table[k, 2]
+                                h = t * du + table[k, _S0]
+                                w2 = t * (t - 2.0 * dc) + table[k, _C]
+                                rho = math.sqrt(max(w2 - h * h, 0.0)) - pieces[k, 6]
+                                reach = pieces[k, 7] + SAFE_MARGIN
+                                if rho * rho + h * h > reach * reach:
+                                    continue
                         nv, la, ha, ca, lb, hb, cb = _piece_intervals(
                             pieces, kind, table, k, dx, dy, dz
                         )
