@@ -1,12 +1,12 @@
-"""Exact ray casting against the bore of a pipe network, vectorised in numpy.
+"""Exact ray casting against the bore of a pipe network.
 
 This module owns the analytic LiDAR backend: instead of the faceted CSG ray meshes
 (:mod:`pipe_env.meshes`), every network element is described by the exact solids whose union is
 the pipe's bore (the air inside the pipe), and a ray cast from inside the bore hits the wall where
 it first leaves that union:
 
-- straight runs: finite cylinders between their ports (long runs are split into segments of at most
-  ``segment_length`` so that spatial culling stays tight);
+- straight runs: finite cylinders between their ports (for the numpy path, long runs are split
+  into segments of at most ``segment_length`` so that its spatial culling stays tight);
 - reducers: cone frustums between the two ports;
 - closures: a cylinder whose inner cap is the end wall;
 - mitre bends: two cylinders, each clipped by the bisector plane;
@@ -16,11 +16,16 @@ it first leaves that union:
 - long-radius bends: a torus sector (a quartic per ray) between the two port planes.
 
 All quadric pieces (cylinders, cones) share one parameterisation, a frustum of a cone (slope 0: a
-cylinder) along an axis, clipped by two planes, so a batch of rays is intersected with all of
-them at once. Each piece contributes, per ray, the interval of ray parameters inside it (a torus
-sector up to two); the first exit from the union is found by extending ``t`` from 0 while some
-interval contains it. Seams between pieces are shared planes, so no ray can slip through them and
-no ray escapes a closed network.
+cylinder) along an axis, clipped by two planes. Each piece contributes, per ray, the interval of
+ray parameters inside it (a torus sector up to two); the first exit from the union is found by
+extending ``t`` from 0 while some interval contains it. Seams between pieces are shared planes,
+so no ray can slip through them and no ray escapes a closed network.
+
+Two implementations of the same arithmetic: :meth:`AnalyticBore.cast` (and
+:meth:`AnalyticBore.cast_groups` for a sweep, one origin per plane), compiled per ray in
+:mod:`pipe_env.raycast_kernels` (the backend); and :meth:`AnalyticBore.cast_numpy`, vectorised
+over (ray, piece) pairs in numpy, the former backend kept as the reference the kernels are tested
+against (same hits within rounding, about 1e-13 m).
 
 Units: metres. Conventions: ``dist`` is ``inf`` where nothing is hit within ``cutoff`` and 0 where
 the ray starts outside the bore (inside a wall or outside the network); ``normal`` is the unit
