@@ -35,7 +35,6 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.report import write_section  # noqa: E402
 from pipe_env import layouts  # noqa: E402
 from pipe_env.lidar import RotatingLidar  # noqa: E402
 from pipe_env.network import PipeNetwork  # noqa: E402
@@ -169,7 +168,11 @@ def main() -> None:
     text = "\n".join(lines)
     print(text)
     if args.write_docs:
-        path = write_section("lidar", text)
+        from benchmarks.report import write_section
+
+        command = " ".join(["python benchmarks/bench_lidar.py", *sys.argv[1:]])
+        command = command.replace(" --write-docs", "")
+        path = write_section("lidar", f"`{command}`\n\n{text}")
         print(f"\nwrote section 'lidar' of {path}")
 
 

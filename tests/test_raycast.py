@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import functools
+import importlib.util
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -453,3 +458,31 @@ def test_analytic_hits_are_where_rays_leave_the_bore(name: str, diameter: float,
         assert bore.contains(before).all()
         assert not bore.contains(after).any()
         np.testing.assert_allclose(np.linalg.norm(hits.normal, axis=1), 1.0, atol=1e-9)
+
+
+# ------------------------------------------------------------------------------- benchmark
+def test_bench_lidar_prints_embree_beside_the_backend_and_writes_its_section(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``bench_lidar.py --write-docs`` prints both worlds' rates with Embree's and the ratio,
+    and writes the same table as the stamped 'lidar' section (here into a temporary file)."""
+    pytest.importorskip("embreex")
+    import benchmarks.report as report
+
+    path = tmp_path / "benchmarks.md"
+    monkeypatch.setattr(report, "write_section", functools.partial(report.write_section, path=path))
+    monkeypatch.setattr(sys, "argv", ["bench_lidar.py", "--repeat", "1", "--write-docs"])
+    root = Path(__file__).resolve().parent.parent
+    spec = importlib.util.spec_from_file_location("bench_lidar", root / "benchmarks/bench_lidar.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.main()
+    out = capsys.readouterr().out
+    for row in ("analytic backend (compiled kernels)", "Embree (embreex), 1 thread"):
+        assert row in out
+    assert out.count("analytic backend / Embree = ") == 2
+    text = path.read_text()
+    assert "<!-- begin lidar -->" in text
+    assert "`python benchmarks/bench_lidar.py --repeat 1`" in text
+    assert "| Embree (embreex), 1 thread, same meshes |" in text
