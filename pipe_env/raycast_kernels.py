@@ -389,6 +389,8 @@ def _first_quadric(
     hi_out: NDArray[np.float64],
     code_out: NDArray[np.int64],
     ok_out: NDArray[np.bool_],
+    cutoff: float,
+    done_out: NDArray[np.bool_],
 ) -> None:
     """The interval of quadric piece ``k`` for rays ``start:stop`` from the table's origin, as
     :func:`_piece_intervals` computes it, without branches. ``ok_out`` is False where the
@@ -403,6 +405,8 @@ def _first_quadric(
     c = table[k, _C]
     rs = table[k, _RS]
     slope = pieces[k, 7]
+    safe0 = pieces[k, _SAFE0]
+    safe1 = pieces[k, _SAFE1]
     for i in range(start, stop):
         dx = dirs[i, 0]
         dy = dirs[i, 1]
@@ -438,7 +442,20 @@ def _first_quadric(
         lo_out[i - start] = lo
         hi_out[i - start] = hi
         code_out[i - start] = code
-        ok_out[i - start] = (a > 1e-12) & (disc >= 0.0) & (qq != 0.0)
+        ok = (a > 1e-12) & (disc >= 0.0) & (qq != 0.0)
+        ok_out[i - start] = ok
+        # done: the ray starts inside and leaves through the side wall where no other piece
+        # reaches (the union's exit, as the general loop would find it)
+        s_axial = hi * du + s0
+        done_out[i - start] = (
+            ok
+            & (code == SIDE)
+            & (lo <= SEAM_EPS)
+            & (hi > 0.0)
+            & (hi <= cutoff)
+            & (s_axial >= safe0)
+            & (s_axial <= safe1)
+        )
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -475,6 +492,7 @@ def cast_rays(
     b_hi = np.empty(0)
     b_code = np.empty(0, dtype=np.int64)
     b_ok = np.empty(0, dtype=np.bool_)
+    b_done = np.empty(0, dtype=np.bool_)
     for oi in range(origins.shape[0]):
         ox = origins[oi, 0]
         oy = origins[oi, 1]
@@ -503,11 +521,24 @@ def cast_rays(
                 b_hi = np.empty(stop - start)
                 b_code = np.empty(stop - start, dtype=np.int64)
                 b_ok = np.empty(stop - start, dtype=np.bool_)
-            _first_quadric(pieces, table, first, dirs, start, stop, b_lo, b_hi, b_code, b_ok)
+                b_done = np.empty(stop - start, dtype=np.bool_)
+            _first_quadric(
+                pieces, table, first, dirs, start, stop, b_lo, b_hi, b_code, b_ok, cutoff, b_done
+            )
         for i in range(start, stop):
             dx = dirs[i, 0]
             dy = dirs[i, 1]
             dz = dirs[i, 2]
+            if batched and b_done[i - start]:
+                t = b_hi[i - start]
+                dist[i] = t
+                hit_element[i] = element[first]
+                normal[i, 0] = 0.0
+                normal[i, 1] = 0.0
+                normal[i, 2] = 0.0
+                if want_normals:
+                    _normal(pieces, kind, first, SIDE, ox, oy, oz, dx, dy, dz, t, normal[i])
+                continue
             if batched and b_ok[i - start]:
                 stamp[first] = i
                 hi = b_hi[i - start]
