@@ -391,6 +391,9 @@ def _first_quadric(
     ok_out: NDArray[np.bool_],
     cutoff: float,
     done_out: NDArray[np.bool_],
+    want_normals: bool,
+    origin: NDArray[np.float64],
+    normal: NDArray[np.float64],
 ) -> None:
     """The interval of quadric piece ``k`` for rays ``start:stop`` from the table's origin, as
     :func:`_piece_intervals` computes it, without branches. ``ok_out`` is False where the
@@ -447,7 +450,7 @@ def _first_quadric(
         # done: the ray starts inside and leaves through the side wall where no other piece
         # reaches (the union's exit, as the general loop would find it)
         s_axial = hi * du + s0
-        done_out[i - start] = (
+        done = (
             ok
             & (code == SIDE)
             & (lo <= SEAM_EPS)
@@ -456,6 +459,18 @@ def _first_quadric(
             & (s_axial >= safe0)
             & (s_axial <= safe1)
         )
+        done_out[i - start] = done
+        if want_normals and done:  # as _normal computes it
+            wx = origin[0] + hi * dx - pieces[k, 0]
+            wy = origin[1] + hi * dy - pieces[k, 1]
+            wz = origin[2] + hi * dz - pieces[k, 2]
+            sw = wx * ux + wy * uy + wz * uz
+            f = sw + slope * (pieces[k, 6] + slope * sw)
+            nx, ny, nz = wx - f * ux, wy - f * uy, wz - f * uz
+            norm = max(math.sqrt(nx * nx + ny * ny + nz * nz), 1e-300)
+            normal[i, 0] = nx / norm
+            normal[i, 1] = ny / norm
+            normal[i, 2] = nz / norm
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -523,21 +538,33 @@ def cast_rays(
                 b_ok = np.empty(stop - start, dtype=np.bool_)
                 b_done = np.empty(stop - start, dtype=np.bool_)
             _first_quadric(
-                pieces, table, first, dirs, start, stop, b_lo, b_hi, b_code, b_ok, cutoff, b_done
+                pieces,
+                table,
+                first,
+                dirs,
+                start,
+                stop,
+                b_lo,
+                b_hi,
+                b_code,
+                b_ok,
+                cutoff,
+                b_done,
+                want_normals,
+                origins[oi],
+                normal,
             )
         for i in range(start, stop):
             dx = dirs[i, 0]
             dy = dirs[i, 1]
             dz = dirs[i, 2]
-            if batched and b_done[i - start]:
-                t = b_hi[i - start]
-                dist[i] = t
+            if batched and b_done[i - start]:  # normal written by _first_quadric
+                dist[i] = b_hi[i - start]
                 hit_element[i] = element[first]
-                normal[i, 0] = 0.0
-                normal[i, 1] = 0.0
-                normal[i, 2] = 0.0
-                if want_normals:
-                    _normal(pieces, kind, first, SIDE, ox, oy, oz, dx, dy, dz, t, normal[i])
+                if not want_normals:
+                    normal[i, 0] = 0.0
+                    normal[i, 1] = 0.0
+                    normal[i, 2] = 0.0
                 continue
             if batched and b_ok[i - start]:
                 stamp[first] = i
