@@ -3,19 +3,22 @@
 This module owns the per-ray arithmetic of :mod:`pipe_env.raycast_analytic`: the same pieces
 (cone frustums, cylinders when the slope is 0, and torus sectors, each clipped by two planes),
 the same interval formulas and the same union rule, evaluated one ray at a time in compiled code
-instead of over (ray, piece) pair arrays in numpy. Per ray:
+instead of over (ray, piece) pair arrays in numpy. For the rays of one origin:
 
-1. broad phase: the chord of the ray through every piece's bounding sphere (slightly inflated,
-   so rounding cannot cull a piece the ray touches); pieces whose chord lies behind the origin
-   or beyond the cutoff are dropped;
-2. the ray's exit from the union, as the numpy path defines it: ``t`` starts at 0 and extends to
-   the farthest end of the intervals that contain it (``lo <= t + SEAM_EPS``, ``hi > t``) until
-   none does. A piece's intervals are computed only when its chord reaches ``t`` (lazily, once),
-   so a ray usually evaluates one or two pieces; casting stops as soon as ``t`` passes the cutoff;
-3. the element and the surface whose interval ends at the exit give the hit's element and its
+1. pieces whose bounding sphere lies beyond the cutoff are dropped;
+2. when one piece's bounding sphere holds the origin (the usual case), that piece's interval is
+   computed for all the rays at once in a loop without branches; a ray that leaves it through
+   its side wall where no other piece reaches (its safe band, :func:`axial_safe_bands`) is
+   done there;
+3. otherwise the ray's exit from the union, as the numpy path defines it: ``t`` starts at 0 and
+   extends to the farthest end of the intervals that contain it (``lo <= t + SEAM_EPS``,
+   ``hi > t``) until none does. A piece's intervals are computed only when the point at ``t``
+   lies in its (slightly inflated) bounding sphere, and for a torus near its tube (lazily,
+   once); casting stops as soon as ``t`` passes the cutoff or leaves through a safe band;
+4. the piece and surface whose interval ended at the exit give the hit's element and its
    outward normal.
 
-Pieces are packed in one (K, 20) float64 table (:data:`FIELDS` gives the columns), quadrics
+Pieces are packed in one (K, 22) float64 table (:data:`FIELDS` gives the columns), quadrics
 first, then tori, as the numpy path orders them. Units: metres.
 
 Functions are compiled on first use and cached on disk (``cache=True``), so later processes load
