@@ -17,7 +17,7 @@ from pipe_env.generator import NetworkConfig, generate_network
 from pipe_env.meshes import circle_segments, polygon_radius
 from pipe_env.network import PipeNetwork
 from pipe_env.raycast_analytic import AnalyticBore, RayHits, solve_depressed_quartic
-from pipe_env.raycast_kernels import depressed_quartic_roots
+from pipe_env.raycast_kernels import axial_safe_bands, depressed_quartic_roots
 from pipe_env.raycast_mujoco import EDGE_GUARD, MujocoCaster
 from pipe_env.world import build_world
 
@@ -250,6 +250,29 @@ def test_compiled_backend_matches_numpy_on_generated_networks(seed: int, planar:
     dirs = sample_directions(1500, rng)
     assert_same_hits(bore.cast(origins, dirs), bore.cast_numpy(origins, dirs), "generated")
     assert_same_seam_hits(bore, net, seed, 1500)
+
+
+@pytest.mark.parametrize("name", COMPARED_LAYOUTS)
+def test_safe_bands_are_out_of_every_other_pieces_reach(name: str) -> None:
+    """Wall points of a quadric within its safe band lie outside every other piece's
+    bounding sphere (which is what lets a ray leaving there stop), and the straight runs
+    have a band (so the shortcut is taken)."""
+    bore = AnalyticBore.from_network(layouts.make_layout(name))
+    table, kind = bore._table, bore._kind
+    bands = axial_safe_bands(table, kind)
+    rng = np.random.default_rng(14)
+    runs = [k for k in range(len(table)) if bore.elements[bore._element[k]].startswith("run:")]
+    assert all(bands[k, 0] < bands[k, 1] for k in runs)
+    for k in np.flatnonzero(bands[:, 0] <= bands[:, 1]):
+        p, u, r0, slope = table[k, 0:3], table[k, 3:6], table[k, 6], table[k, 7]
+        s = rng.uniform(bands[k, 0], bands[k, 1], 2000)
+        side = np.cross(u, rng.normal(size=(2000, 3)))
+        side /= np.linalg.norm(side, axis=1)[:, None]
+        wall = p + s[:, None] * u + (r0 + slope * s)[:, None] * side
+        for j in range(len(table)):
+            if j != k:
+                gap = np.linalg.norm(wall - table[j, 16:19], axis=1) - table[j, 19]
+                assert gap.min() > 0.0
 
 
 def test_cast_groups_equals_cast_with_repeated_origins() -> None:
