@@ -10,10 +10,10 @@ judged. Memory is flat when it changes little between the warm-up and the end: t
 prints both and exits 1 if the growth over the second half of a part exceeds
 ``--max-growth-mb``.
 
-Measured (full fidelity, small generated networks): the plain RSS climbs from about 100 MB to 200-270
-MB over the first episodes and then wanders with the allocator's retained pages; after
-``malloc_trim`` it stays at 140-160 MB (MuJoCo, the meshes and the compiled kernels loaded once),
-and the live Python objects stay at one world, one plant and at most one renderer per env.
+Measured (full fidelity, small generated networks): the plain RSS climbs from about 100 MB to
+200-270 MB over the first episodes and then wanders with the allocator's retained pages; after
+``malloc_trim`` it stays at 140-165 MB (MuJoCo, the meshes and the compiled kernels loaded
+once), and the live Python objects stay at one world, one plant and at most one renderer.
 
 Usage: python benchmarks/soak.py [--episodes 100] [--decisions 1000000] [--every 10]
        [--max-growth-mb 30] [--write-docs]
