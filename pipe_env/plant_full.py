@@ -40,14 +40,15 @@ from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
 from pipe_env.network import PipeNetwork
 from pipe_env.plant import BACK_OUT, Decision, Outcome, detection_record, goal_edge_position
-from pipe_env.routing import EdgePosition, locate
+from pipe_env.routing import EdgePosition, edge_length, locate
 from pipe_env.sensing_model import DETECTORS
 
 #: Fewer valid returns than this in a sweep means the sensor cannot see the pipe ahead.
 BLIND_RETURNS = 60
 #: Consecutive blind sweeps before the robot stops (fail safe).
 BLIND_SWEEPS = 2
-#: Longest drive without a decision before the robot stops to let the agent decide, metres.
+#: ``advance`` drives in legs of at most this many metres (a long straight takes several; the
+#: robot stops only for a structure, a dead end or the goal), metres.
 MAX_DRIVE = 4.0
 #: The goal counts as reached within this distance along the network, metres.
 GOAL_TOLERANCE = 0.05
@@ -115,6 +116,9 @@ class PhysicalPlant:
         self.trigger_distance = float(trigger_distance)
         self.keep_image = bool(scan_image)
         self.scan_interval = float(scan_interval)
+        #: the longest drive ``advance`` makes without a decision: the network's centreline
+        #: length plus a metre (further, the robot drove through a structure it did not see)
+        self._limit = 1.0 + float(sum(edge_length(network, r.id) for r in network.runs))
         lidar_kwargs: dict[str, Any] = {"backend": lidar_backend}
         if misalignment is not None:
             lidar_kwargs["misalignment"] = misalignment
@@ -331,13 +335,25 @@ class PhysicalPlant:
     def advance(self, goal: Any = None) -> tuple[Decision | None, Outcome]:
         """Drive and scan until a structure is confirmed, the goal is reached, or blind."""
         out = Outcome()
-        on_scan, verdict = self._on_scan_factory(goal)
-        outcome = self.executor.drive_until(
-            on_scan, MAX_DRIVE, scan_interval=self.scan_interval, rng=self.rng
-        )
-        self._account(outcome, out)
-        self._odometer += abs(float(outcome.travelled))
-        why = verdict["why"]
+        # a long straight is normal pipe: the robot drives on in legs of MAX_DRIVE until a
+        # structure, a dead end (blind) or the goal stops it, or it jams; the whole network's
+        # pipe length bounds the drive (a robot cannot drive further without a structure)
+        limit = self._limit
+        driven = 0.0
+        while True:
+            on_scan, verdict = self._on_scan_factory(goal)
+            leg = min(MAX_DRIVE, max(limit - driven, 0.0))
+            outcome = self.executor.drive_until(
+                on_scan, leg, scan_interval=self.scan_interval, rng=self.rng
+            )
+            self._account(outcome, out)
+            self._odometer += abs(float(outcome.travelled))
+            driven += abs(float(outcome.travelled))
+            why = verdict["why"]
+            if why is not None or outcome.status != "done" or driven >= limit - 1e-6:
+                break
+            if abs(float(outcome.travelled)) < 1e-6:
+                break  # nothing driven (a zero-length leg): decide here
         ahead = self._goal_ahead(goal) if why in ("confirmed", "blind") else None
         if ahead is not None and 0.0 <= ahead <= self.trigger_distance + self.scan_interval:
             # the goal lies between the robot and the structure it stopped for (a goal near a
