@@ -265,6 +265,8 @@ class Executor:
         self.physics_ticks = 0
         self.kinematic_ticks = 0
         self.time = 0.0
+        #: called with the simulated time (s) after every control period, or None (video frames)
+        self.on_tick: Callable[[float], None] | None = None
         self.odometer = 0.0
         n = self.config.n_modules
         c = self.config
@@ -479,6 +481,8 @@ class Executor:
         """Advance one control period with the current targets; returns the front's lag, m."""
         self._physics()
         self.time += self.substeps * self.model.opt.timestep
+        if self.on_tick is not None:
+            self.on_tick(self.time)
         d = self.data
         front = d.xpos[self.robot.body_ids[0]]
         diff = self._F_pos - front
