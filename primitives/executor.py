@@ -689,6 +689,8 @@ class Executor:
             self.near.update(d, force=True)
         self.time += n_ticks * CONTROL_DT
         self.kinematic_ticks += n_ticks
+        if self.on_tick is not None:  # (one frame of the glide for videos)
+            self.on_tick(self.time)
         self._tele.record(self, 0.0)
         self._settle(SETTLE_TICKS)
 
