@@ -243,7 +243,7 @@ def main() -> None:
     if args.write_docs:
         from benchmarks.report import write_section
 
-        write_section("Full fidelity: physics where contact decides", markdown)
+        write_section("full fidelity", markdown)
 
 
 if __name__ == "__main__":
