@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.detection import Detection
+from detector.fit_kernels import MODEL_CYLINDER
 from detector.grid import label_regions
 from detector.improved_config import ImprovedConfig
 from detector.pipe_cloud import (
@@ -28,7 +29,7 @@ from detector.pipe_cloud import (
     _tolerance_v,
     _transform,
 )
-from detector.robust import mad_sigma, robust_gauss_newton
+from detector.robust import mad_sigma, robust_fit
 from detector.transforms import SensorInPipe
 
 #: The wall's own radius replaces the clamped one when they differ by more than this, m.
@@ -60,33 +61,6 @@ def _axis_pose(params: NDArray[np.float64], sensor_origin: NDArray[np.float64]) 
     pos = -(rot @ origin)
     pos[0] -= float(rot[0] @ (sensor_origin - origin))
     return SensorInPipe.trusted(pos, rot)
-
-
-def _cyl_axis_residual(
-    sub: NDArray[np.float64], big_r: float, x: NDArray[np.float64], want_jac: bool
-) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """Residual (distance to the axis - R) of ``(3, N)`` points for the axis through
-    (0, y0, z0) along (1, a, b), and its analytic Jacobian ``(N, 4)``."""
-    y0, z0, a, b = (float(v) for v in x)
-    n = math.sqrt(1.0 + a * a + b * b)
-    qu = sub[0]
-    qy = sub[1] - y0
-    qz = sub[2] - z0
-    t = (qu + a * qy + b * qz) * (1.0 / n)
-    dist = qu * qu + qy * qy + qz * qz - t * t
-    np.maximum(dist, 1e-18, out=dist)
-    np.sqrt(dist, out=dist)
-    res = dist - big_r
-    if not want_jac:
-        return res, None
-    inv = 1.0 / dist
-    jac = np.empty((4, qu.size))
-    jac[0] = (t * (a / n) - qy) * inv
-    jac[1] = (t * (b / n) - qz) * inv
-    tn = t * (1.0 / n)
-    jac[2] = tn * jac[0]
-    jac[3] = tn * jac[1]
-    return res, jac.T
 
 
 def _refine_axis(
@@ -121,10 +95,10 @@ def _refine_axis(
     tilt_sigma = cfg.prior_tilt if span >= 0.05 else math.radians(0.05)
     prior = np.array([cfg.prior_offset, cfg.prior_offset, tilt_sigma, tilt_sigma])
     info["axis_span"] = span
-    x, res, w = robust_gauss_newton(
-        None,
+    x, res, w = robust_fit(
+        MODEL_CYLINDER,
+        sub,
         np.zeros(4),
-        np.full(4, 1e-5),
         c=gate,
         iterations=10,
         prior_sigma=prior,
@@ -132,7 +106,7 @@ def _refine_axis(
         step_tol=STEP_TOL,
         anneal=ANNEAL,
         cost_tol=COST_TOL,
-        resjac=lambda p: _cyl_axis_residual(sub, big_r, p, True),
+        fpar=np.array([big_r]),
     )
     info.update(
         axis_points=int((w > 0).sum()),
