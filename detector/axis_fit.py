@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.detection import Detection
-from detector.fit_kernels import MODEL_CYLINDER
+from detector.fit_kernels import MODEL_CYLINDER, wall_distances, wall_fit
 from detector.grid import label_regions
 from detector.improved_config import ImprovedConfig
 from detector.pipe_cloud import (
@@ -27,7 +27,6 @@ from detector.pipe_cloud import (
     _pct,
     _subsample,
     _tolerance_v,
-    _transform,
 )
 from detector.robust import mad_sigma, robust_fit
 from detector.transforms import SensorInPipe
@@ -162,7 +161,7 @@ def _wall_radius(
 def _straight_wall_rms(cloud: PipeCloud) -> float:
     """Largest scatter (m) of wall returns about a straight cylinder that the returns' own
     noise explains: 4 x their median radial noise, at least 0.6 mm."""
-    return max(4.0 * float(_pct(cloud.sigma_v, 50.0)), 0.0006)
+    return max(4.0 * cloud.sigma_percentile(50.0), 0.0006)
 
 
 def _wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float) -> bool:
@@ -213,27 +212,14 @@ def _wall_count(
     tolerance: a return off the wall costs 1, one on it costs how far in the tolerance it
     lies), and the rms distance from the wall of those within the tolerance (m)."""
     sp, tol = _thinned(cloud, cfg)
-    pts = _transform(pose, sp)
-    e = np.sqrt(np.square(pts[1]) + np.square(pts[2])) - big_r
-    near = pts[0] < u_max
+    u, e = wall_distances(sp, pose.rotation, pose.position, big_r)
+    near = u < u_max
     n_near = int(np.count_nonzero(near))
     if n_near < 40:
         near[:] = True
         n_near = int(near.size)
-    return _wall_fit(e[near], tol_scale * tol[near], n_near)
-
-
-def _wall_fit(
-    e: NDArray[np.float64], tol: NDArray[np.float64], n: int
-) -> tuple[int, int, float, float]:
-    """``(n_ok, n, cost, rms)`` of returns ``e`` off the wall (m) with tolerances ``tol``
-    (m): how many lie within their tolerance, ``n`` (passed through), the truncated quadratic
-    cost ``sum min((e / tol)^2, 1)``, and the rms of ``e`` over those within (m)."""
-    q = np.square(e / tol)
-    ok = q <= 1.0
-    n_ok = int(np.count_nonzero(ok))
-    rms = math.sqrt(float(np.mean(np.square(e[ok])))) if n_ok else math.inf
-    return n_ok, n, float(np.minimum(q, 1.0).sum()), rms
+    n_ok, cost, rms = wall_fit(e, tol, near, tol_scale)
+    return n_ok, n_near, cost, rms
 
 
 def _common_wall_fit(
@@ -247,15 +233,16 @@ def _common_wall_fit(
     nearer than ``u_max`` along the axis under every pose (a tilted pose would otherwise count
     returns the others leave out). Empty when fewer than 40 returns are in that set."""
     sp, tol = _thinned(cloud, cfg)
-    pts = [_transform(p, sp) for p in poses]
-    near = np.logical_and.reduce([q[0] < u_max for q in pts])
+    walls = [wall_distances(sp, p.rotation, p.position, big_r) for p in poses]
+    near = np.logical_and.reduce([u < u_max for u, _ in walls])
     n_near = int(np.count_nonzero(near))
     if n_near < 40:
         return []
-    return [
-        _wall_fit(np.sqrt(np.square(q[1][near]) + np.square(q[2][near])) - big_r, tol[near], n_near)
-        for q in pts
-    ]
+    fits = []
+    for _, e in walls:
+        n_ok, cost, rms = wall_fit(e, tol, near, 1.0)
+        fits.append((n_ok, n_near, cost, rms))
+    return fits
 
 
 def _intact(

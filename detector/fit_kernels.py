@@ -27,6 +27,7 @@ its scalar constants from ``fpar``:
 - ``MODEL_TAPER``: a reducer's radius along the axis, ``r(u)`` from the wall radius to ``r2``
   over ``[L, L + T]``; ``data`` = (u, r), ``fpar`` = (wall radius,), parameters ``(L, T, r2)``.
 
+:func:`wall_distances` and :func:`wall_fit` measure how well a pose explains the wall;
 :func:`coarse_branch_cost` scores the coarse grid an outgoing pipe's fit starts from.
 
 Compiled on first use and cached on disk (``cache=True``). Lengths in metres, angles in
@@ -446,6 +447,46 @@ def coarse_branch_cost(lq, l_grid, dirs, big_r, c0):  # type: ignore[no-untyped-
         for j in range(m):
             cost[k, j] /= n
     return cost
+
+
+@njit(cache=True)
+def wall_distances(sp, rot, pos, big_r):  # type: ignore[no-untyped-def]
+    """The returns ``sp`` ((3, n), sensor frame) under the pose ``(rot, pos)``: their position
+    along the pipe axis and their distance from the wall of radius ``big_r`` (m), both (n,)."""
+    n = sp.shape[1]
+    u = np.empty(n)
+    e = np.empty(n)
+    for i in range(n):
+        x, y, z = sp[0, i], sp[1, i], sp[2, i]
+        u[i] = rot[0, 0] * x + rot[0, 1] * y + rot[0, 2] * z + pos[0]
+        py = rot[1, 0] * x + rot[1, 1] * y + rot[1, 2] * z + pos[1]
+        pz = rot[2, 0] * x + rot[2, 1] * y + rot[2, 2] * z + pos[2]
+        e[i] = math.sqrt(py * py + pz * pz) - big_r
+    return u, e
+
+
+@njit(cache=True)
+def wall_fit(e, tol, near, tol_scale):  # type: ignore[no-untyped-def]
+    """Of the returns ``near`` (a mask) at distances ``e`` (m) from the wall, with tolerances
+    ``tol_scale`` x ``tol`` (m): how many lie within their tolerance, the truncated quadratic
+    cost ``sum min((e / tol)^2, 1)``, and the rms of ``e`` over those within (m; ``inf`` when
+    none)."""
+    n_ok = 0
+    cost = 0.0
+    sq = 0.0
+    for i in range(e.size):
+        if not near[i]:
+            continue
+        q = e[i] / (tol_scale * tol[i])
+        q *= q
+        if q <= 1.0:
+            n_ok += 1
+            sq += e[i] * e[i]
+            cost += q
+        else:
+            cost += 1.0
+    rms = math.sqrt(sq / n_ok) if n_ok else math.inf
+    return n_ok, cost, rms
 
 
 def residuals(

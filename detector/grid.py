@@ -151,6 +151,30 @@ def _label(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32], int
     return labels, n
 
 
+def region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
+    """(cells, grid rows spanned) of each label 0..n_lab of a labelled grid (both (n_lab + 1,)
+    integers; 0 for the background, label 0)."""
+    return _region_stats(np.ascontiguousarray(labels, dtype=np.int32), int(n_lab))
+
+
+@njit(cache=True)
+def _region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
+    g, k = labels.shape
+    counts = np.zeros(n_lab + 1, dtype=np.int64)
+    rows = np.zeros(n_lab + 1, dtype=np.int64)
+    last_row = np.full(n_lab + 1, -1, dtype=np.int64)
+    for r in range(g):
+        for c in range(k):
+            lab = labels[r, c]
+            if lab == 0:
+                continue
+            counts[lab] += 1
+            if last_row[lab] != r:
+                last_row[lab] = r
+                rows[lab] += 1
+    return counts, rows
+
+
 def dilate(mask: NDArray[np.bool_], wraps: bool, iterations: int = 1) -> NDArray[np.bool_]:
     """8-neighbourhood dilation of a grid mask, wrapping rows when the grid wraps."""
     if iterations <= 0:

@@ -366,7 +366,7 @@ def detect_improved(
             # a noiseless wall fitted closely: the tolerance floor shrinks towards its scatter
             # (under the given pose, the wall returns' own scatter about it)
             rms = diag.get("wall_radius_rms", info.get("axis_rms", counts[best][3]))
-            if rms is not None and float(_pct(cloud.sigma_v, 90.0)) < 0.0005:
+            if rms is not None and cloud.sigma_percentile(90.0) < 0.0005:
                 cloud.floor = _scatter_floor(config, rms)
                 diag["tolerance_floor"] = cloud.floor
         # (what the pose and radius left in the diagnostics, for a fit again under a new pose)

@@ -13,12 +13,13 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
-from detector.grid import build_grid
+from detector.grid import build_grid, region_stats
 from detector.improved_config import ImprovedConfig
 from detector.robust import mad_sigma, tukey_weights
-from detector.scan import Scan, corrected_ranges, radial_noise
+from detector.scan import Scan, radial_noise
 from detector.transforms import SensorInPipe
 
 #: Fits stop when no parameter moves by more than this (metres, radians): far below the
@@ -57,6 +58,7 @@ class PipeCloud:
     _xyz: NDArray[np.float64] | None = field(init=False, default=None)
     _r_v: NDArray[np.float64] | None = field(init=False, default=None)
     _tol_v: NDArray[np.float64] | None = field(init=False, default=None)
+    _sigma_pct: dict[float, float] = field(init=False, default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -98,6 +100,13 @@ class PipeCloud:
     def pts(self) -> NDArray[np.float64]:
         """(G, K, 3) view of the pipe-frame points."""
         return self.xyz.transpose(1, 2, 0)
+
+    def sigma_percentile(self, q: float) -> float:
+        """The ``q``-th percentile of the returns' radial noise (m; computed once)."""
+        v = self._sigma_pct.get(q)
+        if v is None:
+            v = self._sigma_pct[q] = _pct(self.sigma_v, q)
+        return v
 
     def values(self, mask: NDArray[np.bool_], per_return: NDArray) -> NDArray:
         """Per-return values (``(N,)`` compact order) of the grid cells in ``mask``."""
@@ -188,13 +197,10 @@ def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray,
 
 def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig) -> PipeCloud:
     wraps, k_cols, src, dirs, trig, src_missing, beam_step = _pattern(scan)
-    ok = scan.valid.reshape(-1)[src]  # (missing cells point at a copy of a real one ...)
-    ok[src_missing] = False  # (... and are dropped here)
-    cell = np.flatnonzero(ok)
-    pb = src[cell]
-    ranges = corrected_ranges(scan.ranges.reshape(-1)[pb], range_bias)
-    local = np.take(dirs, cell, axis=1)
-    local *= ranges
+    # (missing cells point at a copy of a real one and are dropped)
+    cell, pb, ranges, local = _gather_returns(
+        scan.valid.reshape(-1), scan.ranges.reshape(-1), src, src_missing, dirs, range_bias
+    )
     if _moves(scan):
         # continuous sweep: express every plane in the last plane's sensor frame (odometry)
         plane = pb // scan.n_beams
@@ -221,6 +227,39 @@ def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedCon
     )
     cloud.set_pose(pose)
     return cloud
+
+
+@njit(cache=True)
+def _gather_returns(valid, ranges, src, missing, dirs, bias):  # type: ignore[no-untyped-def]
+    """The valid returns of the grid cells in raster order: their cells, scan indices, ranges
+    less ``bias`` (clamped at 0 m, as :func:`detector.scan.corrected_ranges`) and sensor-frame
+    points ``(3, n)``; ``missing``: cells without a beam."""
+    m = src.size
+    keep = np.ones(m, dtype=np.bool_)
+    for c in missing:
+        keep[c] = False
+    n = 0
+    for c in range(m):
+        if keep[c] and valid[src[c]]:
+            n += 1
+        else:
+            keep[c] = False
+    cell = np.empty(n, dtype=np.intp)
+    pb = np.empty(n, dtype=np.intp)
+    rng = np.empty(n)
+    local = np.empty((3, n))
+    k = 0
+    for c in range(m):
+        if keep[c]:
+            r = max(ranges[src[c]] - bias, 0.0)
+            cell[k] = c
+            pb[k] = src[c]
+            rng[k] = r
+            local[0, k] = dirs[0, c] * r
+            local[1, k] = dirs[1, c] * r
+            local[2, k] = dirs[2, c] * r
+            k += 1
+    return cell, pb, rng, local
 
 
 def _moves(scan: Scan) -> bool:
@@ -274,14 +313,9 @@ def _dir(theta: float, phi: float) -> NDArray[np.float64]:
 
 
 def _region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
-    """(cells, grid rows spanned) of each label 0..n_lab of a labelled grid."""
-    flat = labels.reshape(-1)
-    nz = np.flatnonzero(flat)
-    lab = flat[nz]
-    counts = np.bincount(lab, minlength=n_lab + 1)
-    occupied = np.zeros((n_lab + 1, labels.shape[0]), dtype=bool)
-    occupied[lab, nz // labels.shape[1]] = True
-    return counts, np.count_nonzero(occupied, axis=1)
+    """(cells, grid rows spanned) of each label 0..n_lab of a labelled grid
+    (:func:`detector.grid.region_stats`)."""
+    return region_stats(labels, n_lab)
 
 
 def _covers(xyz: NDArray, idx: NDArray[np.intp], fraction: float, bins: int = 36) -> bool:
