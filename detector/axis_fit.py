@@ -28,7 +28,7 @@ from detector.pipe_cloud import (
     _subsample,
     _tolerance_v,
 )
-from detector.robust import mad_sigma, robust_fit
+from detector.robust import mad_sigma, median, robust_fit
 from detector.transforms import SensorInPipe
 
 #: The wall's own radius replaces the clamped one when they differ by more than this, m.
@@ -145,7 +145,7 @@ def _wall_radius(
     if n < 100:
         return big_r
     e_sel = e[sel]
-    de = float(np.median(e_sel))
+    de = median(e_sel)
     if not RADIUS_DEAD_BAND <= abs(de) <= cfg.max_radius_correction:
         return big_r
     if not _covers(xyz, np.flatnonzero(sel), 0.75):

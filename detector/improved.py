@@ -155,12 +155,12 @@ from detector.pipe_cloud import (
     PipeCloud,
     _azimuth_coverage,
     _azimuth_uniformity,
+    _classify,
     _confidence,
     _dir,
     _pct,
     _prepare,
     _region_stats,
-    _tolerance,
 )
 from detector.robust import mad_sigma
 from detector.scan import Scan
@@ -833,20 +833,17 @@ def _taper_radius_check(
 def _detect_in_pipe_frame(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, diag: dict[str, Any]
 ) -> Detection:
-    valid = cloud.valid
     diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
     diag["sensor_offset_pipe"] = [float(v) for v in cloud.pose.position[1:]]
-    r = np.sqrt(np.square(cloud.xyz[1]) + np.square(cloud.xyz[2]))
-    # residual axis error grows with the distance along the axis
-    tol = _tolerance(cloud, cfg)
-    e = np.where(valid, r - big_r, 0.0)
-    # (a lowered floor serves the openings only: returns beyond the wall)
-    tol_in = tol if cloud.floor is None else tol + (cfg.tol_floor - cloud.floor)
-    wall = valid & (e <= tol) & (e >= -tol_in)
-    beyond = valid & (e > tol)
-    inside = valid & (e < -tol_in)
-    n_valid = int(valid.sum())
-    diag.update(n_wall=int(wall.sum()), n_beyond=int(beyond.sum()), n_inside=int(inside.sum()))
+    # (the tolerance: the residual axis error grows with the distance along the axis)
+    tol, wall, beyond, inside = _classify(cloud, big_r, cfg)
+    n_valid = cloud.n
+    n_wall = int(np.count_nonzero(wall))
+    diag.update(
+        n_wall=n_wall,
+        n_beyond=int(np.count_nonzero(beyond)),
+        n_inside=int(np.count_nonzero(inside)),
+    )
     if n_valid < cfg.min_anomaly_points:
         diag["reason"] = "too few returns"
         return Detection.straight(confidence=0.0, **diag)
@@ -859,11 +856,11 @@ def _detect_in_pipe_frame(
         good = (counts >= cfg.min_anomaly_points) & (row_span >= cfg.min_region_rows)
         good[0] = False
         keep = good[labels] & anomaly
-    n_keep = int(keep.sum())
+    n_keep = int(np.count_nonzero(keep))
     diag["n_anomaly"] = n_keep
-    wall_frac = float(wall.sum()) / max(n_valid, 1)
+    wall_frac = float(n_wall) / max(n_valid, 1)
     if n_keep < cfg.min_anomaly_points:
-        conf = min(1.0, float(wall.sum()) / 200.0) * wall_frac
+        conf = min(1.0, float(n_wall) / 200.0) * wall_frac
         return Detection.straight(confidence=conf, **diag)
     beyond_k = beyond & keep
     inside_k = inside & keep

@@ -272,10 +272,44 @@ def _moves(scan: Scan) -> bool:
     return float(np.ptp(scan.nominal_rotations, axis=0).max()) > 1e-9
 
 
-def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
-    """(G, K) radial tolerance of each return: floor, sensor noise and residual axis error."""
+def _classify(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]:
+    """The returns on the grid, by their distance ``e`` from the wall of radius ``big_r`` (m)
+    under the current pose: ``(tol, wall, beyond, inside)``, the (G, K) radial tolerance of
+    each return (floor, sensor noise and residual axis error: as :func:`_tolerance_v`; the
+    floor where there is no return) and the masks of ``-tol_in <= e <= tol``, ``e > tol`` and
+    ``e < -tol_in``, where ``tol_in`` is ``tol`` less any lowering of the floor (a lowered
+    floor serves the openings only: returns beyond the wall)."""
     floor = cfg.tol_floor if cloud.floor is None else cloud.floor
-    return floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(cloud.xyz[0])
+    lift = 0.0 if cloud.floor is None else cfg.tol_floor - cloud.floor
+    g, k = cloud.shape
+    return _classify_kernel(
+        cloud.cell, g, k, cloud.r_v, cloud.sigma_v, cloud.xyz_v[0], big_r, floor,
+        cfg.noise_k, cfg.axis_slope, lift,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _classify_kernel(cell, g, k, r_v, sigma_v, u_v, big_r, floor, noise_k, slope, lift):  # type: ignore[no-untyped-def]
+    tol = np.full((g, k), floor + noise_k * 0.0 + slope * 0.0)
+    wall = np.zeros((g, k), dtype=np.bool_)
+    beyond = np.zeros((g, k), dtype=np.bool_)
+    inside = np.zeros((g, k), dtype=np.bool_)
+    for i in range(cell.size):
+        row = cell[i] // k
+        col = cell[i] - row * k
+        t = floor + noise_k * sigma_v[i] + slope * abs(u_v[i])
+        tol[row, col] = t
+        e = r_v[i] - big_r
+        t_in = t + lift
+        if e > t:
+            beyond[row, col] = True
+        elif e < -t_in:
+            inside[row, col] = True
+        elif e <= t and e >= -t_in:
+            wall[row, col] = True
+    return tol, wall, beyond, inside
 
 
 def _tolerance_v(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:

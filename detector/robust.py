@@ -28,11 +28,25 @@ def tukey_weights(res: NDArray[np.float64], c: float) -> NDArray[np.float64]:
     return w
 
 
+def median(x: NDArray[np.float64]) -> float:
+    """``np.median`` of finite (n,) values, the same number, by partial sorting (without
+    ``np.median``'s checks and copies); 0 for empty input."""
+    n = x.size
+    if n == 0:
+        return 0.0
+    h = n // 2
+    if n % 2:
+        return float(np.partition(x, h)[h])
+    part = np.partition(x, (h - 1, h))
+    return float((part[h - 1] + part[h]) / 2.0)
+
+
 def mad_sigma(x: NDArray[np.float64]) -> float:
-    """Robust standard deviation (1.4826 x median absolute deviation); 0 for empty input."""
+    """Robust standard deviation (1.4826 x median absolute deviation) of finite values; 0 for
+    empty input."""
     if x.size == 0:
         return 0.0
-    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+    return float(1.4826 * median(np.abs(x - median(x))))
 
 
 def robust_gauss_newton(

@@ -15,7 +15,7 @@ from scipy import ndimage
 
 from detector import fit_kernels as fk
 from detector.grid import label_regions
-from detector.robust import robust_fit, robust_gauss_newton
+from detector.robust import mad_sigma, median, robust_fit, robust_gauss_newton
 
 
 # --------------------------------------------------------------------------- numpy references
@@ -317,3 +317,11 @@ def test_coarse_branch_cost_matches_numpy(seed: int) -> None:
     dirs = np.stack([np.cos(th), np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph)])
     cost = fk.coarse_branch_cost(lq, l_grid, dirs, 0.05, 0.006)
     np.testing.assert_allclose(cost, coarse_cost_np(lq, l_grid, dirs, 0.05, 0.006), atol=1e-15)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(-1e3, 1e3), min_size=1, max_size=60))
+def test_median_is_numpys(values: list[float]) -> None:
+    x = np.array(values)
+    assert median(x) == float(np.median(x))
+    assert mad_sigma(x) == float(1.4826 * np.median(np.abs(x - np.median(x))))
