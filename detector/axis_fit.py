@@ -12,11 +12,12 @@ import math
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from detector.detection import Detection
 from detector.fit_kernels import MODEL_CYLINDER, wall_distances, wall_fit
-from detector.grid import label_regions
+from detector.grid import label_grid
 from detector.improved_config import ImprovedConfig
 from detector.pipe_cloud import (
     ANNEAL,
@@ -268,27 +269,53 @@ def _intact(
 
 
 def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:
-    """Axial position where the wall stops being intact (first significant anomalies); the
-    horizon when there are none."""
-    xyz = cloud.xyz_v
-    r = cloud.r_v
-    tol = _tolerance_v(cloud, cfg)
-    idx = np.flatnonzero(np.abs(r - big_r) > 2.0 * tol)  # returns off the wall
-    if idx.size < cfg.min_anomaly_points:
-        return cfg.horizon
+    """Axial position where the wall stops being intact (first significant anomalies: regions
+    of at least ``min_anomaly_points`` returns off the wall by more than twice their
+    tolerance); the horizon when there are none."""
     g, k = cloud.shape
-    mask = np.zeros(g * k, dtype=bool)
-    cells = cloud.cell[idx]
-    mask[cells] = True
-    labels, n_lab = label_regions(mask.reshape(g, k), cloud.wraps)
-    lab = labels.reshape(-1)[cells]
-    counts = np.bincount(lab, minlength=n_lab + 1)
-    good = counts >= cfg.min_anomaly_points
-    good[0] = False
-    sel = idx[good[lab]]
-    if not sel.size:
+    n_off, entry = _off_wall_entries(
+        cloud.cell,
+        g,
+        k,
+        cloud.wraps and g >= 3,
+        cloud.xyz_v[0],
+        cloud.r_v,
+        _tolerance_v(cloud, cfg),
+        big_r,
+        cfg.min_anomaly_points,
+    )
+    if n_off < cfg.min_anomaly_points or not entry.size:
         return cfg.horizon
-    u = xyz[0][sel]
-    # where the beams of those returns crossed the wall radius (sensor near the axis)
-    uc = u * big_r / np.maximum(r[sel], 1e-9)
-    return float(_pct(np.minimum(u, uc), 1)) - 0.005
+    return float(_pct(entry, 1)) - 0.005
+
+
+@njit(cache=True)
+def _off_wall_entries(cell, g, k, wraps, u, r, tol, big_r, min_points):  # type: ignore[no-untyped-def]
+    """How many returns lie off the wall by more than twice their tolerance, and for those in
+    regions (:func:`detector.grid.label_grid`) of at least ``min_points`` of them, where along
+    the axis each entered the structure: ``min(u, u R / r)``, where its beam crossed the wall
+    radius (sensor near the axis)."""
+    n = cell.size
+    off = np.empty(n, dtype=np.bool_)
+    mask = np.zeros((g, k), dtype=np.bool_)
+    n_off = 0
+    for i in range(n):
+        off[i] = abs(r[i] - big_r) > 2.0 * tol[i]
+        if off[i]:
+            n_off += 1
+            mask[cell[i] // k, cell[i] % k] = True
+    if n_off < min_points:
+        return n_off, np.empty(0)
+    labels, n_lab = label_grid(mask, wraps)
+    counts = np.zeros(n_lab + 1, dtype=np.int64)
+    for i in range(n):
+        if off[i]:
+            counts[labels[cell[i] // k, cell[i] % k]] += 1
+    out = np.empty(n_off)
+    m = 0
+    for i in range(n):
+        if off[i] and counts[labels[cell[i] // k, cell[i] % k]] >= min_points:
+            uc = u[i] * big_r / max(r[i], 1e-9)
+            out[m] = min(u[i], uc)
+            m += 1
+    return n_off, out[:m]

@@ -85,11 +85,11 @@ def label_regions(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int3
     """Connected regions (8-neighbourhood) of a grid mask, joined across the row seam when the
     grid wraps (and has at least three rows). Returns ``(labels, n)`` with labels 1..n,
     numbered in the raster order of each region's first cell, and 0 for background (compiled:
-    :func:`_label`)."""
+    :func:`label_grid`)."""
     m = np.ascontiguousarray(mask, dtype=np.bool_)
     if m.ndim != 2:
         raise ValueError(f"mask must be a 2D grid, got shape {m.shape}")
-    labels, n = _label(m, bool(wraps) and m.shape[0] >= 3)
+    labels, n = label_grid(m, bool(wraps) and m.shape[0] >= 3)
     return labels, int(n)
 
 
@@ -111,9 +111,9 @@ def _union(parent: NDArray[np.int64], a: int, b: int) -> None:
 
 
 @njit(cache=True)
-def _label(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32], int]:
-    """Union-find labelling of :func:`label_regions` (``wraps``: the first and last rows are
-    neighbours)."""
+def label_grid(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32], int]:
+    """The labelling of :func:`label_regions`, compiled (callable from other compiled code):
+    union-find; ``wraps``: the first and last rows are neighbours."""
     g, k = mask.shape
     parent = np.arange(g * k)
     for r in range(g):
