@@ -252,20 +252,32 @@ def _intact(
     """Straight pipe when fewer than ``min_anomaly_points`` returns leave the wall tolerance
     (no region of anomalies can reach that size, so the classification would find nothing
     else); ``None`` otherwise."""
-    e = cloud.r_v - big_r
-    tol = _tolerance_v(cloud, cfg)
-    if cloud.n < cfg.min_anomaly_points or np.count_nonzero(np.abs(e) > tol) >= (
-        cfg.min_anomaly_points
-    ):
+    if cloud.n < cfg.min_anomaly_points:
         return None
-    n_beyond = int(np.count_nonzero(e > tol))
-    n_inside = int(np.count_nonzero(e < -tol))
+    n_beyond, n_inside = _off_wall_counts(cloud.r_v, _tolerance_v(cloud, cfg), big_r)
+    if n_beyond + n_inside >= cfg.min_anomaly_points:
+        return None
     n_wall = cloud.n - n_beyond - n_inside
     diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
     diag["sensor_offset_pipe"] = [float(v) for v in cloud.pose.position[1:]]
     diag.update(n_wall=n_wall, n_beyond=n_beyond, n_inside=n_inside, n_anomaly=0)
     conf = min(1.0, n_wall / 200.0) * n_wall / cloud.n
     return Detection.straight(confidence=conf, **diag)
+
+
+@njit(cache=True)
+def _off_wall_counts(r, tol, big_r):  # type: ignore[no-untyped-def]
+    """How many returns at distances ``r`` from the axis lie beyond the wall of radius
+    ``big_r`` by more than their tolerance ``tol``, and how many inside it (m)."""
+    n_beyond = 0
+    n_inside = 0
+    for i in range(r.size):
+        e = r[i] - big_r
+        if e > tol[i]:
+            n_beyond += 1
+        elif e < -tol[i]:
+            n_inside += 1
+    return n_beyond, n_inside
 
 
 def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:

@@ -123,7 +123,6 @@ All lengths in metres, angles in radians.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -232,7 +231,6 @@ def detect_improved(
             default: ``scan.spec["bias"]`` (0 if absent).
         refine_axis: refine the pipe axis from the wall returns.
     """
-    t0 = time.perf_counter()
     d_clamped = float(clamped_diameter)
     if not (math.isfinite(d_clamped) and d_clamped > 0.0):
         raise ValueError(f"clamped_diameter must be a positive length (m), got {clamped_diameter}")
@@ -250,14 +248,14 @@ def detect_improved(
         if reach is not None:
             diag["blocked_within_min_range"] = reach
             opt = StructureOption("closure", reach, 0.0, 0.0, 0.0, BLIND_CONFIDENCE)
-            return _timed(Detection("closure", [opt], BLIND_CONFIDENCE, diag), t0)
+            return Detection("closure", [opt], BLIND_CONFIDENCE, diag)
         # the given pose and the clamp reading explain every return already: straight pipe,
         # nothing to measure or refine (the common case, kept cheap)
         if refine_axis:
             diag["axis_pass"] = 0
             straight = _intact(cloud, big_r, config, diag)
             if straight is not None:
-                return _timed(_with_ring_holes(cloud, big_r, straight), t0)
+                return _with_ring_holes(cloud, big_r, straight)
         # the clamp's encoders read the diameter to a millimetre or two: the wall right around
         # the sensor (nearer than any structure in view) measures it first, the wall before
         # the structure again once the axis is refined
@@ -268,7 +266,7 @@ def detect_improved(
             if big_r != r_clamped:  # (straight pipe after all, at its measured radius?)
                 straight = _intact(cloud, big_r, config, diag)
                 if straight is not None:
-                    return _timed(_with_ring_holes(cloud, big_r, straight), t0)
+                    return _with_ring_holes(cloud, big_r, straight)
             diag.pop("axis_pass")
             candidates = [(pose0, {})]
             passes = [0]  # the pass each candidate pose comes from
@@ -291,7 +289,7 @@ def detect_improved(
                 diag["axis_pass"] = 1
                 straight = _intact(cloud, big_r, config, diag)
                 if straight is not None:  # no return off the wall under the refined axis
-                    return _timed(_with_ring_holes(cloud, big_r, straight), t0)
+                    return _with_ring_holes(cloud, big_r, straight)
                 for key in info1:
                     diag.pop(key)
                 diag.pop("axis_pass")
@@ -392,13 +390,6 @@ def detect_improved(
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
-    return _timed(det, t0)
-
-
-def _timed(det: Detection, t0: float) -> Detection:
-    """``det`` with the time since ``t0`` (seconds) in its diagnostics (a finite number added
-    to the detection's own dictionary: nothing to check again)."""
-    det.diagnostics["time_s"] = time.perf_counter() - t0
     return det
 
 

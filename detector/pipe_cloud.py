@@ -207,20 +207,10 @@ def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedCon
         world = np.einsum("nij,jn->in", scan.nominal_rotations[plane], local)
         world += scan.nominal_positions[plane].T
         local = scan.nominal_rotations[-1].T @ (world - scan.nominal_positions[-1][:, None])
-    near = local[0] <= cfg.horizon
-    if not near.all():
-        keep = np.flatnonzero(near)
-        cell, ranges, local = cell[keep], ranges[keep], np.take(local, keep, axis=1)
-    tr = np.take(trig, cell, axis=1)
-    # crop the grid to the beam-angle columns that hold returns
+    # (the returns within the horizon, on the grid cropped to the columns that hold returns)
     g = src.size // max(k_cols, 1)
-    row, col = np.divmod(cell, k_cols)
-    if cell.size:
-        k0, k1 = int(col.min()), int(col.max()) + 1
-    else:
-        k0, k1 = 0, 1
-    shape = (g, k1 - k0)
-    cell = row * shape[1] + (col - k0)
+    cell, ranges, local, tr, k = _crop(cell, ranges, local, trig, k_cols, cfg.horizon)
+    shape = (g, k)
     sigma_range, sigma_r = radial_noise(scan.spec, ranges, tr[0], tr[1])
     cloud = PipeCloud(
         wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose, beam_step
@@ -260,6 +250,43 @@ def _gather_returns(valid, ranges, src, missing, dirs, bias):  # type: ignore[no
             local[2, k] = dirs[2, c] * r
             k += 1
     return cell, pb, rng, local
+
+
+@njit(cache=True)
+def _crop(cell, ranges, local, trig, k_cols, horizon):  # type: ignore[no-untyped-def]
+    """The returns nearer than ``horizon`` along the sensor's axis, with their cells on the
+    grid cropped to the beam-angle columns that hold returns, their ranges, points ``(3, n)``
+    and ``|sin|, |cos|`` of their beam angles ``(2, n)``; and the cropped grid's width."""
+    n = cell.size
+    m = 0
+    k0 = k_cols
+    k1 = -1
+    for i in range(n):
+        if local[0, i] <= horizon:
+            m += 1
+            col = cell[i] % k_cols
+            k0 = min(k0, col)
+            k1 = max(k1, col)
+    if m == 0:
+        k0, k1 = 0, 0
+    width = k1 + 1 - k0
+    out_cell = np.empty(m, dtype=np.intp)
+    out_range = np.empty(m)
+    out_local = np.empty((3, m))
+    out_trig = np.empty((2, m))
+    j = 0
+    for i in range(n):
+        if local[0, i] <= horizon:
+            row = cell[i] // k_cols
+            out_cell[j] = row * width + (cell[i] - row * k_cols - k0)
+            out_range[j] = ranges[i]
+            out_local[0, j] = local[0, i]
+            out_local[1, j] = local[1, i]
+            out_local[2, j] = local[2, i]
+            out_trig[0, j] = trig[0, cell[i]]
+            out_trig[1, j] = trig[1, cell[i]]
+            j += 1
+    return out_cell, out_range, out_local, out_trig, width
 
 
 def _moves(scan: Scan) -> bool:
