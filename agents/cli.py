@@ -386,6 +386,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--what", default="all", choices=["all", "map", "detection"])
     pl.add_argument("--out", default="results/plots")
     pl.set_defaults(func=_plot)
+    from agents.cli_data import add_commands  # detect, record, export
+
+    add_commands(sub)
     return parser
 
 

@@ -16,16 +16,19 @@ Bisection assumes survival is monotonic in the error's size; each bound is the l
 error that survived with the next tested one failing (resolution ``hi / 2**iterations``).
 
 Usage: python benchmarks/bench_primitives.py [--diameters 0.06 0.09 0.12] [--directions 0 135]
-       [--iterations 5] [--long] [--skip-tolerance] [--skip-speed]
+       [--iterations 5] [--long] [--skip-tolerance] [--skip-speed] [--write-docs]
+       (--write-docs: also write the "primitives" section of docs/benchmarks.md)
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import replace
+from pathlib import Path
 
 from detector.options import StructureOption
 from pipe_env import layouts
@@ -43,6 +46,14 @@ SEARCH_MAX: dict[str, Callable[[float], float]] = {
     "angle": lambda d: math.radians(60.0),
 }
 SCAN_EVERY = 0.05  # m
+#: Everything printed, kept for ``--write-docs``.
+OUTPUT: list[str] = []
+
+
+def emit(line: str = "") -> None:
+    """Print ``line`` and keep it for the docs section."""
+    print(line, flush=True)
+    OUTPUT.append(line)
 
 
 def survives(net: PipeNetwork, field: str, error: float) -> bool:
@@ -78,8 +89,8 @@ def bound(net: PipeNetwork, field: str, sign: float, hi: float, iterations: int)
 
 def tolerance_table(args: argparse.Namespace) -> None:
     styles = ["mitre"] + (["long"] if args.long else [])
-    print("Tolerance study: largest option error take_turn survives (90 deg bends)")
-    print(
+    emit("Tolerance study: largest option error take_turn survives (90 deg bends)")
+    emit(
         f"roll directions {args.directions} deg, {args.iterations} bisection steps; "
         "min over directions (per direction in brackets)"
     )
@@ -87,7 +98,7 @@ def tolerance_table(args: argparse.Namespace) -> None:
         f"{'bend':6s} {'D mm':>5s}  {'distance -':>16s} {'distance +':>16s}  "
         f"{'direction -':>11s} {'direction +':>11s}  {'angle -':>8s} {'angle +':>8s}"
     )
-    print(header)
+    emit(header)
     for style in styles:
         make = layouts.mitre_bend if style == "mitre" else layouts.long_bend
         for d in args.diameters:
@@ -111,7 +122,7 @@ def tolerance_table(args: argparse.Namespace) -> None:
                     v = min(cells[(field, sign)])
                     row += f"{math.degrees(v):7.1f}d   "[:12]
                 row += " "
-            print(row.rstrip())
+            emit(row.rstrip())
             detail = "        per direction: " + "; ".join(
                 f"{f} {'+' if s > 0 else '-'} "
                 + "/".join(
@@ -120,7 +131,7 @@ def tolerance_table(args: argparse.Namespace) -> None:
                 )
                 for (f, s), vs in cells.items()
             )
-            print(detail)
+            emit(detail)
 
 
 def with_scans(seq: Sequence) -> Sequence:
@@ -139,8 +150,8 @@ def with_scans(seq: Sequence) -> Sequence:
 
 
 def speed_table(diameter: float) -> None:
-    print()
-    print(f"Speed (simulated s per wall s), {diameter * 1000:.0f} mm pipe, ideal LiDAR sweeps")
+    emit()
+    emit(f"Speed (simulated s per wall s), {diameter * 1000:.0f} mm pipe, ideal LiDAR sweeps")
     straight = layouts.straight(diameter, 2.0)
     mitre = layouts.mitre_bend(diameter, math.pi / 2, 0.0)
     cases = []
@@ -152,7 +163,7 @@ def speed_table(diameter: float) -> None:
         o = structures_ahead(mitre, ex.robot.sensor_pose(), 5.0)[0]
         seq = take_turn(o, ex.robot.clamped_diameter())
         cases.append(("90 deg mitre turn", scan, ex, with_scans(seq) if scan else seq))
-    print(
+    emit(
         f"{'motion':18s} {'scanning':9s} {'status':7s} {'sim s':>7s} {'wall s':>7s} "
         f"{'sim/wall':>9s} {'sweeps':>6s}"
     )
@@ -161,7 +172,7 @@ def speed_table(diameter: float) -> None:
         out = ex.run(seq)
         wall = time.perf_counter() - t0
         sweeps = sum(isinstance(s, Scan) for s in seq.steps)
-        print(
+        emit(
             f"{name:18s} {'yes' if scan else 'no':9s} {out.status:7s} {out.duration:7.2f} "
             f"{wall:7.2f} {out.duration / wall:9.2f} {sweeps:6d}"
         )
@@ -175,6 +186,9 @@ def main() -> None:
     parser.add_argument("--long", action="store_true", help="also long-radius bends")
     parser.add_argument("--skip-tolerance", action="store_true")
     parser.add_argument("--skip-speed", action="store_true")
+    parser.add_argument(
+        "--write-docs", action="store_true", help="write the tables to docs/benchmarks.md"
+    )
     args = parser.parse_args()
     t0 = time.perf_counter()
     if not args.skip_tolerance:
@@ -182,6 +196,14 @@ def main() -> None:
     if not args.skip_speed:
         speed_table(0.09)
     print(f"\ntotal wall time {time.perf_counter() - t0:.0f} s")
+    if args.write_docs:
+        sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+        from benchmarks.report import write_section
+
+        argv = [a for a in sys.argv[1:] if a != "--write-docs"]
+        command = " ".join(["python benchmarks/bench_primitives.py", *argv])
+        text = "\n".join([f"`{command}`", "", "```", *OUTPUT, "```"])
+        print(f"wrote {write_section('primitives', text)}")
 
 
 if __name__ == "__main__":

@@ -5,13 +5,16 @@ reference measured in the same run (building the world of a single straight pipe
 absolute times vary between machines. Target from the issue: under 2 s in total.
 
 Usage: python benchmarks/bench_world.py [--fittings 20] [--seeds 5] [--three-d] [--loops]
+       [--write-docs]   (--write-docs: also write the "world" section of docs/benchmarks.md)
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -33,6 +36,9 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--three-d", action="store_true")
     parser.add_argument("--loops", action="store_true")
+    parser.add_argument(
+        "--write-docs", action="store_true", help="write the tables to docs/benchmarks.md"
+    )
     args = parser.parse_args()
 
     reference = statistics.median(timed(build_world, layouts.straight(0.1))[1] for _ in range(5))
@@ -63,14 +69,16 @@ def main() -> None:
             }
         )
     med = {k: statistics.median(r[k] for r in rows) for k in rows[0]}
-    print(
+    lines = [
         f"pipenav world benchmark: {args.fittings} fittings (+ end caps), "
         f"{'3D' if args.three_d else 'planar'}{', loops' if args.loops else ''}, "
-        f"{args.seeds} seeds, mujoco {mujoco.__version__}"
-    )
-    print(f"reference: build_world(straight pipe) = {reference * 1000:.1f} ms")
-    print("| phase | median s | x reference |")
-    print("|---|---|---|")
+        f"{args.seeds} seeds, mujoco {mujoco.__version__}",
+        "",
+        f"reference: build_world(straight pipe) = {reference * 1000:.1f} ms",
+        "",
+        "| phase | median s | x reference |",
+        "|---|---|---|",
+    ]
     for k in (
         "generate",
         "validate",
@@ -80,15 +88,24 @@ def main() -> None:
         "build_world",
         "total",
     ):
-        print(f"| {k} | {med[k]:.3f} | {med[k] / reference:.1f} |")
-    print(f"| fittings incl. caps / runs | {med['fittings']:.0f} / {med['runs']:.0f} | |")
-    print(
+        lines.append(f"| {k} | {med[k]:.3f} | {med[k] / reference:.1f} |")
+    lines.append(f"| fittings incl. caps / runs | {med['fittings']:.0f} / {med['runs']:.0f} | |")
+    lines.append(
         f"| geoms / ray-mesh triangles / contact geoms | {med['geoms']:.0f} / "
         f"{med['triangles']:.0f} / {med['contact geoms']:.0f} | |"
     )
     worst = max(r["total"] for r in rows)
     verdict = "met" if worst < 2.0 else "NOT met"
-    print(f"target: generate + validate + build < 2 s: worst {worst:.3f} s -> {verdict}")
+    lines += ["", f"target: generate + validate + build < 2 s: worst {worst:.3f} s -> {verdict}"]
+    print("\n".join(line for line in lines if line))
+    if args.write_docs:
+        sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+        from benchmarks.report import write_section
+
+        argv = [a for a in sys.argv[1:] if a != "--write-docs"]
+        command = " ".join(["python benchmarks/bench_world.py", *argv])
+        path = write_section("world", "\n".join([f"`{command}`", "", *lines]))
+        print(f"wrote {path}")
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ from detector.detection import Detection
 from detector.improved import detect_improved
 from detector.planar import detect_planar_thesis
 from detector.planar_improved import detect_planar_improved
-from detector.scan import Scan
+from detector.scan import Scan, spec_value
 from detector.spatial import detect_spatial_thesis
 
 #: Methods of :func:`detect`.
@@ -28,19 +28,35 @@ METHODS: tuple[str, ...] = ("thesis", "improved")
 PLANAR_METHODS: tuple[str, ...] = ("thesis", "improved")
 
 
+#: Narrowest clamped diameter the detector accepts, metres.
+MIN_CLAMPED_DIAMETER = 0.01
+#: Widest clamped diameter the detector accepts, metres (narrower still when the scan's
+#: sensor cannot see across it: ``2 x spec max_range``).
+MAX_CLAMPED_DIAMETER = 2.0
+
+
 def _check(scan: Any, clamped_diameter: Any) -> float:
     if not isinstance(scan, Scan):
         raise ValueError(f"scan must be a detector.scan.Scan, got {type(scan).__name__}")
+    hi = min(MAX_CLAMPED_DIAMETER, 2.0 * spec_value(scan.spec, "max_range", math.inf))
+    allowed = f"[{MIN_CLAMPED_DIAMETER:g}, {hi:g}] m"
     if isinstance(clamped_diameter, (bool, np.bool_)):
-        raise ValueError(f"clamped_diameter must be a number in (0, 2] m, got {clamped_diameter!r}")
+        raise ValueError(
+            f"clamped_diameter must be a number in {allowed}, got {clamped_diameter!r}"
+        )
     try:
         d = float(clamped_diameter)
     except (TypeError, ValueError) as exc:
         raise ValueError(
             f"clamped_diameter must be a number (m), got {clamped_diameter!r}"
         ) from exc
-    if not (math.isfinite(d) and 0.0 < d <= 2.0):
-        raise ValueError(f"clamped_diameter must be in (0, 2] m, got {clamped_diameter!r}")
+    if not (math.isfinite(d) and MIN_CLAMPED_DIAMETER <= d <= hi):
+        why = (
+            f" (the sensor's max_range is {spec_value(scan.spec, 'max_range', 0.0):g} m)"
+            if hi < MAX_CLAMPED_DIAMETER
+            else ""
+        )
+        raise ValueError(f"clamped_diameter must be in {allowed}{why}, got {clamped_diameter!r}")
     return d
 
 

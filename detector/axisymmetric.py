@@ -384,10 +384,11 @@ def _rings(p: NDArray[np.float64]) -> list[NDArray[np.bool_]]:
     per ring."""
     if p.shape[1] < CONE_MIN_RETURNS:
         return []
-    bins = np.floor((p[0] - p[0].min()) / CONE_FIRST_RING).astype(np.int64)
-    counts = np.bincount(bins)
+    span = np.clip(p[0] - p[0].min(), 0.0, 1e12)
+    bins = np.floor(span / CONE_FIRST_RING).astype(np.int64)
+    vals, counts = np.unique(bins, return_counts=True)  # (occupied bins only: bounded work)
     out = []
-    for k in np.flatnonzero(counts >= CONE_MIN_RETURNS):
+    for k in vals[counts >= CONE_MIN_RETURNS]:
         sel = bins == k
         if _azimuth_coverage(p[:, sel].T) >= CONE_RING_COVERAGE:
             out.append(sel)

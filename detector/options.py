@@ -1,7 +1,7 @@
 """The structure option: one way on past a detected (or true) pipe structure.
 
 Both the detector and the network's ground truth return this type, so estimates and truth can
-be compared field by field. Definitions follow DESIGN.md (SI units in the API):
+be compared field by field. Definitions follow docs/design.md (SI units in the API):
 
 - ``kind``: ``straight``, ``reducer`` (diameter change), ``closure`` (the thesis's "reduction to
   0 mm": an end wall or obstacle), ``bend`` or ``junction`` (two or more ways on).

@@ -423,12 +423,23 @@ def _confidence(n_support: int, rms: float, tol: float, n_scale: float = 30.0) -
 
 def _radius_mode(r: NDArray[np.float64]) -> float:
     """Most frequent radius (m): 1 mm histogram peak refined by the median of its
-    neighbourhood (2 mm either side)."""
-    bins = np.floor(r / 0.001).astype(np.int64)
-    lo = int(bins.min())
-    cnt = np.bincount(bins - lo)
-    smooth = np.convolve(cnt, np.ones(3), mode="same")
-    peak = (int(np.argmax(smooth)) + lo + 0.5) * 0.001
+    neighbourhood (2 mm either side).
+
+    Only the occupied bins and their neighbours are counted (not every bin from the smallest
+    radius to the largest), so the work and memory grow with the returns, not with the
+    radii's span."""
+    bins = np.floor(np.clip(r, -1e12, 1e12) / 0.001).astype(np.int64)
+    vals, cnt = np.unique(bins, return_counts=True)
+    # the 3-bin sum at each occupied bin and its neighbours; the smallest bin among equal sums
+    # wins, as a dense histogram's argmax would pick it
+    cand = np.unique(np.concatenate([vals - 1, vals, vals + 1]))
+    cand = cand[(cand >= vals[0]) & (cand <= vals[-1])]
+    cum = np.concatenate([[0], np.cumsum(cnt)])
+    smooth = (
+        cum[np.searchsorted(vals, cand + 1, side="right")]
+        - cum[np.searchsorted(vals, cand - 1, side="left")]
+    )
+    peak = (int(cand[int(np.argmax(smooth))]) + 0.5) * 0.001
     near = np.abs(r - peak) <= 0.002
     return float(_pct(r[near], 50.0)) if near.any() else float(peak)
 

@@ -10,7 +10,11 @@ so plane angle 0 is the horizontal plane (beta > 0 to the left) and plane angle 
 vertical one (beta > 0 upwards). Units: metres, radians, seconds.
 
 "No return" (out of range, dropout, no surface) is ``inf`` in ``ranges`` and ``False`` in
-``valid``; no other value ever stands for a missing distance.
+``valid`` once a :class:`Scan` is built. What it is built from may use the other conventions of
+REP 117 and of LiDAR SDKs: a beam is a return only where ``valid`` is True and its range is
+finite, above 0 and within the spec's ``[min_range, max_range]`` (``MAX_RANGE_LIMIT`` when the
+spec gives no ``max_range``). Every other beam (NaN, +-inf, 0.0, negative, too near, too far,
+flagged invalid) becomes ``inf``/``False``, counted by reason in :attr:`Scan.no_returns`.
 
 This module lives in ``detector`` (not ``pipe_env``) so recorded scans can be loaded and
 detected without the simulator.
@@ -29,7 +33,27 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.atomic import atomic_open
+
 SCAN_FORMAT_VERSION = 1
+
+#: Farthest range (m) a scan without a ``max_range`` in its spec keeps as a return (the
+#: farthest a ``LidarSpec`` allows is 100 m; beyond a kilometre a return is no pipe wall).
+MAX_RANGE_LIMIT = 1000.0
+#: Largest ``max |R^T R - I|`` of a rotation matrix in a scan (its determinant must be +1
+#: within the same tolerance).
+ROTATION_TOL = 1e-6
+#: Beam and plane angles must lie in ``[-ANGLE_LIMIT, ANGLE_LIMIT]`` radians.
+ANGLE_LIMIT = 2.0 * math.pi
+#: Reasons a beam is no return, in the order they are judged (:attr:`Scan.no_returns`).
+NO_RETURN_REASONS: tuple[str, ...] = (
+    "flagged",  # valid was False
+    "nan",
+    "inf",  # +inf or -inf
+    "zero",  # 0.0, the "no return" of many LiDAR SDKs
+    "below_min_range",  # negative, or below the spec's min_range
+    "above_max_range",  # beyond the spec's max_range (or MAX_RANGE_LIMIT)
+)
 
 #: Entries of ``Scan.spec`` the detector reads (the ``LidarSpec`` fields of the same names),
 #: with their unit and the values allowed: ``">= 0"`` a finite number >= 0, ``"finite"`` any
@@ -110,25 +134,36 @@ class Scan:
                 k = _first(~np.isfinite(arr))
                 raise ValueError(f"Scan.{name} must be finite, got {float(arr[k])} at index {k}")
             object.__setattr__(self, name, arr)
-        valid = self.valid
-        if np.any(np.isnan(r)):
-            k = _first(np.isnan(r))
-            raise ValueError(
-                f"Scan.ranges must not be NaN, got nan at (plane, beam) {k}; use inf with "
-                "valid=False for no return"
-            )
-        mismatch = valid != np.isfinite(r)
-        if np.any(mismatch):
-            k = _first(mismatch)
-            raise ValueError(
-                f"Scan.valid must be True exactly where ranges are finite, got valid="
-                f"{bool(valid[k])} with range {float(r[k])} at (plane, beam) {k}"
-            )
-        if np.any(r[valid] < 0):
-            k = _first(r < 0)
-            raise ValueError(f"Scan.ranges must be >= 0 m, got {float(r[k])} at (plane, beam) {k}")
-        object.__setattr__(self, "ranges", r)
         _check_spec(self.spec)
+        for name in ("beam_angles", "plane_angles"):
+            arr = getattr(self, name)
+            bad = np.abs(arr) > ANGLE_LIMIT
+            if np.any(bad):
+                k = _first(bad)
+                raise ValueError(
+                    f"Scan.{name} must be angles in [-2 pi, 2 pi] rad, got {float(arr[k])} at "
+                    f"index {k}"
+                )
+        for name in ("rotations", "nominal_rotations"):
+            _check_rotations(name, getattr(self, name))
+        r, valid, counts = _returns(r, self.valid, self.spec)
+        object.__setattr__(self, "valid", valid)
+        object.__setattr__(self, "_no_returns", counts)
+        object.__setattr__(self, "ranges", r)
+
+    @property
+    def no_returns(self) -> dict[str, int]:
+        """Beams without a return, counted by reason (:data:`NO_RETURN_REASONS`; each beam
+        counts once, under the first reason that applies)."""
+        return dict(self._no_returns)  # type: ignore[attr-defined]
+
+    def diagnostics(self) -> dict[str, Any]:
+        """Counts for people and logs: beams, returns and the no returns by reason."""
+        return {
+            "n_beams": int(self.ranges.size),
+            "n_returns": self.n_valid,
+            "no_returns": self.no_returns,
+        }
 
     @property
     def n_planes(self) -> int:
@@ -194,11 +229,27 @@ class Scan:
             dict(self.metadata),
         )
 
+    @classmethod
+    def from_laserscans(cls, messages: Any, plane_angles: Any, **kwargs: Any) -> Scan:
+        """One sweep from ``sensor_msgs/LaserScan`` messages (one per plane) and their servo
+        angles (rad), for live use: see :func:`detector.io.scan_from_laserscans`."""
+        from detector.io import scan_from_laserscans
+
+        return scan_from_laserscans(messages, plane_angles, **kwargs)
+
     # ---------------------------------------------------------------- storage
     def save(self, path: str | Path) -> None:
-        """Write an ``.npz`` file (arrays plus the spec and metadata as JSON)."""
+        """Write an ``.npz`` file (arrays plus the spec and metadata as JSON), atomically;
+        ``.npz`` is appended to a name without it (as numpy does)."""
+        target = Path(path)
+        if target.suffix != ".npz":
+            target = target.with_name(target.name + ".npz")
+        with atomic_open(target, "wb") as handle:
+            self._savez(handle)
+
+    def _savez(self, handle: Any) -> None:
         np.savez_compressed(
-            Path(path),
+            handle,
             format_version=np.array(SCAN_FORMAT_VERSION),
             ranges=self.ranges,
             valid=self.valid,
@@ -242,6 +293,50 @@ class Scan:
         return cls(**arrays, spec=spec, metadata=meta)
 
 
+def _returns(
+    ranges: NDArray[np.float64], valid: NDArray[np.bool_], spec: Mapping[str, Any] | None
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], dict[str, int]]:
+    """``(ranges, valid, counts)``: ``inf``/``False`` at every beam that is no return (module
+    docstring), and how many beams each reason of :data:`NO_RETURN_REASONS` took."""
+    lo = spec_value(spec, "min_range", 0.0)
+    hi = min(spec_value(spec, "max_range", MAX_RANGE_LIMIT), MAX_RANGE_LIMIT)
+    with np.errstate(invalid="ignore"):
+        masks = (
+            ~valid,
+            np.isnan(ranges),
+            np.isinf(ranges),
+            ranges == 0.0,
+            ranges < lo,
+            ranges > hi,
+        )
+    left = np.ones(ranges.shape, dtype=bool)
+    counts: dict[str, int] = {}
+    for reason, mask in zip(NO_RETURN_REASONS, masks, strict=True):
+        hit = mask & left
+        counts[reason] = int(np.count_nonzero(hit))
+        left &= ~hit
+    if bool(left.all()):
+        return ranges, left, counts
+    return np.where(left, ranges, np.inf), left, counts
+
+
+def _check_rotations(name: str, rot: NDArray[np.float64]) -> None:
+    """Reject ``rot`` (P, 3, 3) unless every matrix is a proper rotation within
+    :data:`ROTATION_TOL`."""
+    if rot.shape[0] == 0:
+        return
+    ortho = np.abs(np.einsum("pki,pkj->pij", rot, rot) - np.eye(3)).max(axis=(1, 2))
+    det = np.linalg.det(rot)
+    bad = (ortho > ROTATION_TOL) | (np.abs(det - 1.0) > ROTATION_TOL)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise ValueError(
+            f"Scan.{name}[{k}] must be a proper rotation matrix (R^T R = I and det R = +1 "
+            f"within {ROTATION_TOL:g}), got max |R^T R - I| = {float(ortho[k]):.3g} and "
+            f"det R = {float(det[k]):.6g}"
+        )
+
+
 def _first(mask: NDArray[np.bool_]) -> tuple[int, ...]:
     """Index (as a tuple of ints) of the first True element of ``mask``."""
     return tuple(int(i) for i in np.unravel_index(int(np.argmax(mask)), mask.shape))
@@ -275,6 +370,12 @@ def _check_spec(spec: Any) -> None:
                 "> 0": f"a number > 0{u} (inf: unlimited)",
             }[allowed]
             raise ValueError(f"Scan.spec[{key!r}] must be {what}, got {value!r}")
+    if "min_range" in spec and "max_range" in spec:
+        if not float(spec["min_range"]) < float(spec["max_range"]):
+            raise ValueError(
+                f"Scan.spec['min_range'] must be < Scan.spec['max_range'], got min_range "
+                f"{spec['min_range']!r} and max_range {spec['max_range']!r} m"
+            )
 
 
 def spec_value(spec: Mapping[str, Any] | None, key: str, default: float) -> float:

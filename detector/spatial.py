@@ -72,6 +72,8 @@ RADIUS_ERROR = 0.0025
 MIN_REGION = 5
 #: Fewest outline points for an ellipse.
 MIN_OUTLINE = 5
+#: Openings (outlier regions) examined per sweep, the largest first.
+MAX_REGIONS = 16
 
 
 def _ellipse_3d(points: NDArray[np.float64]) -> dict[str, Any] | None:
@@ -153,10 +155,13 @@ def detect_spatial_thesis(
     labels, n_reg = label_regions(outl, grid.wraps)
     p_g = np.stack([grid.take(pts[..., i], fill=0.0) for i in range(3)], axis=-1)
     outlines: list[NDArray[np.float64]] = []
-    for k in range(1, n_reg + 1):
+    sizes = np.bincount(labels.ravel(), minlength=n_reg + 1)
+    big = np.flatnonzero(sizes[1:] >= min_region) + 1
+    # bounded work: only the MAX_REGIONS largest openings (a fitting has at most four; a
+    # scan of scattered far returns has hundreds, each an outline and an ellipse fit)
+    big = np.sort(big[np.argsort(-sizes[big], kind="stable")[:MAX_REGIONS]])
+    for k in big:
         region = labels == k
-        if region.sum() < min_region:
-            continue
         ring = dilate(region, grid.wraps) & wall
         if ring.sum() >= MIN_OUTLINE:
             outlines.append(p_g[ring])

@@ -12,7 +12,7 @@ Frames (REP-103, as in :mod:`detector.scan`):
 :class:`SensorInPipe` holds the sensor pose in the pipe frame (``position`` of the sensor
 origin, ``rotation`` pipe-from-sensor); ``to_pipe`` maps sensor points into the pipe frame, and
 :func:`option_direction` expresses an outgoing axis found in the pipe frame as the option's
-angle and its direction (atan2(z, y) in the sensor frame, as DESIGN.md defines them). Units:
+angle and its direction (atan2(z, y) in the sensor frame, as docs/design.md defines them). Units:
 metres and radians.
 """
 

@@ -99,7 +99,7 @@ def rotation_about(axis: ArrayLike, angle: float) -> NDArray[np.float64]:
 def direction_from_angles(angle: float, direction: float) -> NDArray[np.float64]:
     """Body-frame unit vector deflected by ``angle`` from +x, rolled by ``direction`` about +x.
 
-    ``direction`` follows DESIGN.md: atan2(z, y), so 0 = left (+y), pi/2 = up (+z), pi = right.
+    ``direction`` follows docs/design.md: atan2(z, y), so 0 = left (+y), pi/2 = up (+z), pi = right.
     """
     sa = math.sin(angle)
     return np.array([math.cos(angle), sa * math.cos(direction), sa * math.sin(direction)])

@@ -1,4 +1,4 @@
-"""Ground truth: the structure ahead of a pose and its options, as DESIGN.md defines them.
+"""Ground truth: the structure ahead of a pose and its options, as docs/design.md defines them.
 
 For a pose on or near a centreline, the fitting ahead is the one the pose is heading towards
 along its run. Its options (one per way on) carry the distance along the incoming pipe axis from

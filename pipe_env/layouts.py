@@ -4,8 +4,8 @@ Every layout puts the structure's reference point at the world origin, the incom
 +x, and ``start_pose`` on the incoming centreline ``distance`` metres before the reference point
 with the identity rotation (x forward, y left, z up). Outgoing pipes end in closures
 ``outlet_length`` metres beyond their fitting. Angles are radians; ``direction`` is the roll of
-the outgoing axis as DESIGN.md defines it (0 = left, pi/2 = up, pi = right), so the ground-truth
-option of a layout reports exactly the parameters it was built with.
+the outgoing axis as docs/design.md defines it (0 = left, pi/2 = up, pi = right), so the
+ground-truth option of a layout reports exactly the parameters it was built with.
 """
 
 from __future__ import annotations

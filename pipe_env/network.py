@@ -455,8 +455,8 @@ class PipeNetwork:
         """Ground truth: the options of the nearest structure ahead of ``pose``.
 
         One :class:`~detector.options.StructureOption` per way on, with distance, diameter,
-        angle and direction as DESIGN.md defines them, measured in ``pose``'s frame. Empty if no
-        structure's reference point lies within ``max_distance`` metres ahead.
+        angle and direction as docs/design.md defines them, measured in ``pose``'s frame. Empty
+        if no structure's reference point lies within ``max_distance`` metres ahead.
         """
         from pipe_env.ground_truth import structures_ahead
 

@@ -2,7 +2,7 @@
 
 A :class:`Sequence` is data (a name and a tuple of :mod:`primitives.steps`): it prints, converts
 to and from plain dicts (JSON/YAML), and replays on the executor. Builders (lengths in metres,
-angles in radians, ``option`` distances from the sensor as DESIGN.md defines them):
+angles in radians, ``option`` distances from the sensor as docs/design.md defines them):
 
 - :func:`go_straight`, :func:`back_out`, :func:`stop_before`;
 - :func:`take_turn`: drive to where the turn arc starts (from the option's distance), unclamp,

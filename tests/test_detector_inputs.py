@@ -152,18 +152,24 @@ def test_clamped_diameter_is_no_bool(value):
 # ------------------------------------------------------------------ containers' messages
 def test_scan_array_messages_name_the_value_and_where():
     r = np.tile(np.linspace(0.2, 0.5, 30), (10, 1))
+    # NaN, negative ranges and a finite range flagged invalid are no returns (REP 117)
     bad = r.copy()
     bad[3, 7] = math.nan
-    with pytest.raises(ValueError, match=r"Scan\.ranges must not be NaN, got nan at .* \(3, 7\)"):
-        _scan(bad)
-    bad = r.copy()
     bad[2, 5] = -0.25
-    with pytest.raises(ValueError, match=r"must be >= 0 m, got -0\.25 at \(plane, beam\) \(2, 5\)"):
-        _scan(bad)
-    valid = np.isfinite(r)
+    valid = np.ones(r.shape, dtype=bool)
     valid[4, 0] = False
-    with pytest.raises(ValueError, match=r"got valid=False with range 0\.2 at .* \(4, 0\)"):
-        _scan(r, valid=valid)
+    scan = _scan(bad, valid=valid)
+    assert not scan.valid[3, 7] and not scan.valid[2, 5] and not scan.valid[4, 0]
+    assert np.isinf(scan.ranges[[3, 2, 4], [7, 5, 0]]).all()
+    assert scan.n_valid == r.size - 3
+    assert scan.no_returns == {
+        "flagged": 1,
+        "nan": 1,
+        "inf": 0,
+        "zero": 0,
+        "below_min_range": 1,
+        "above_max_range": 0,
+    }
     pos = np.zeros((10, 3))
     pos[6, 2] = math.inf
     with pytest.raises(

@@ -1,4 +1,4 @@
-"""Poses, frames and the angle conventions of DESIGN.md."""
+"""Poses, frames and the angle conventions of docs/design.md."""
 
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ def test_pose_rejects_nan_and_bad_rotation() -> None:
 
 
 def test_direction_convention() -> None:
-    # DESIGN.md: 0 = left (+y), pi/2 = up (+z), pi = right, -pi/2 = down
+    # docs/design.md: 0 = left (+y), pi/2 = up (+z), pi = right, -pi/2 = down
     assert np.allclose(direction_from_angles(math.pi / 2, 0.0), [0, 1, 0], atol=1e-12)
     assert np.allclose(direction_from_angles(math.pi / 2, math.pi / 2), [0, 0, 1], atol=1e-12)
     assert np.allclose(direction_from_angles(math.pi / 2, math.pi), [0, -1, 0], atol=1e-12)

@@ -1,4 +1,4 @@
-"""Canonical layouts and the ground truth they produce (DESIGN.md option definitions)."""
+"""Canonical layouts and the ground truth they produce (docs/design.md option definitions)."""
 
 from __future__ import annotations
 
