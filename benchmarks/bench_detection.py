@@ -903,12 +903,13 @@ def main(argv: list[str] | None = None) -> int:
         from benchmarks.report import write_section
 
         summary = [s for s in sections if s.startswith("**3D,")]
+        given = [a for a in (sys.argv[1:] if argv is None else argv) if a != "--write-docs"]
+        command = " ".join(["python benchmarks/bench_detection.py", *given])
         write_section(
             "detection",
-            f"`benchmarks/bench_detection.py{' --quick' if quick else ''}` (seed {args.seed}): "
-            "detection speed of both methods in the same run, and the accuracy per sensor "
-            "over all kinds (40-10 cm); the full tables are in the script's report.\n\n"
-            + "\n\n".join([speed, *summary]),
+            f"`{command}`\n\nDetection speed of both methods in the same run, and the "
+            "accuracy per sensor over all kinds (40-10 cm); the full tables are in the "
+            "script's report.\n\n" + "\n\n".join([speed, *summary]),
         )
     for f in figs:
         print("wrote", f)
