@@ -73,22 +73,11 @@ def _refine_axis(
     info: dict[str, Any] = {"axis_points": 0}
     if xyz.shape[1] < 20:
         return cloud.pose, info
-    r = cloud.r_v
     gate = max(0.35 * big_r, 0.01)
-    cand = np.flatnonzero(np.abs(r - big_r) < gate)
-    if cand.size < 20:
+    sub = _axis_returns(xyz, cloud.r_v, big_r, gate, math.nan if u_max is None else u_max)
+    if sub.shape[1] == 0:
         return cloud.pose, info
-    u = xyz[0, cand]
-    if u_max is None:
-        keep = max(400, int(0.6 * cand.size))
-        if keep < cand.size:
-            cut = float(np.partition(u, keep - 1)[keep - 1])
-            cand = cand[u <= cut]
-    else:
-        cand = cand[u < u_max]
-        if cand.size < 40:
-            return cloud.pose, info
-    sub = np.ascontiguousarray(xyz[:, _subsample(cand, cfg.axis_points)])
+    sub = np.ascontiguousarray(sub[:, _subsample(np.arange(sub.shape[1]), cfg.axis_points)])
     # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
     # gentle taper would pass for a tilted wall), so it is held at the prior
     span = float(_pct(sub[0], 95) - _pct(sub[0], 5))
@@ -121,6 +110,45 @@ def _refine_axis(
     return _axis_pose(x, cloud.pose.position).compose(cloud.pose), info
 
 
+@njit(cache=True)
+def _axis_returns(xyz, r, big_r, gate, u_max):  # type: ignore[no-untyped-def]
+    """The wall-like returns (within ``gate`` of the radius ``big_r``, m) an axis refinement
+    fits, ``(3, n)`` in their order: with ``u_max`` NaN, the nearest 60 % of them along the
+    axis (at least 400); else those nearer than ``u_max`` (m). None (``(3, 0)``) when fewer
+    than 20, or 40 before ``u_max``, are left."""
+    n = r.size
+    cand = np.empty(n, dtype=np.intp)
+    m = 0
+    for i in range(n):
+        if abs(r[i] - big_r) < gate:
+            cand[m] = i
+            m += 1
+    if m < 20:
+        return np.empty((3, 0))
+    u = np.empty(m)
+    for j in range(m):
+        u[j] = xyz[0, cand[j]]
+    if math.isnan(u_max):
+        keep = max(400, int(0.6 * m))
+        cut = np.inf
+        if keep < m:
+            cut = np.partition(u, keep - 1)[keep - 1]
+        sel = u <= cut
+    else:
+        sel = u < u_max
+        if np.count_nonzero(sel) < 40:
+            return np.empty((3, 0))
+    out = np.empty((3, np.count_nonzero(sel)))
+    k = 0
+    for j in range(m):
+        if sel[j]:
+            out[0, k] = xyz[0, cand[j]]
+            out[1, k] = xyz[1, cand[j]]
+            out[2, k] = xyz[2, cand[j]]
+            k += 1
+    return out
+
+
 def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
     """Do two poses differ by more than 2 % of the radius across or 0.2 deg in tilt?"""
     lateral = float(np.abs(a.position[1:] - b.position[1:]).max())
@@ -140,16 +168,15 @@ def _wall_radius(
     about it (``wall_radius_rms``, 1.4826 MAD, m) in ``diag``. Corrections below
     ``RADIUS_DEAD_BAND`` are not made (the clamp reading is as good as the fit there)."""
     xyz = cloud.xyz_v
-    e = cloud.r_v - big_r
-    sel = (xyz[0] < u_max) & (np.abs(e) <= cfg.max_radius_correction + _tolerance_v(cloud, cfg))
-    n = int(np.count_nonzero(sel))
-    if n < 100:
+    idx, e_sel = _wall_returns(
+        xyz[0], cloud.r_v, _tolerance_v(cloud, cfg), big_r, u_max, cfg.max_radius_correction
+    )
+    if idx.size < 100:
         return big_r
-    e_sel = e[sel]
     de = median(e_sel)
     if not RADIUS_DEAD_BAND <= abs(de) <= cfg.max_radius_correction:
         return big_r
-    if not _covers(xyz, np.flatnonzero(sel), 0.75):
+    if not _covers(xyz, idx, 0.75):
         return big_r
     spread = float(mad_sigma(e_sel - de))
     if spread > _straight_wall_rms(cloud):  # not a straight wall about this axis
@@ -157,6 +184,24 @@ def _wall_radius(
     diag["wall_radius"] = big_r + de
     diag["wall_radius_rms"] = spread
     return big_r + de
+
+
+@njit(cache=True)
+def _wall_returns(u, r, tol, big_r, u_max, reach):  # type: ignore[no-untyped-def]
+    """The returns nearer than ``u_max`` along the axis whose distance ``e`` from the wall of
+    radius ``big_r`` is within ``reach`` plus their tolerance ``tol`` (m): their indices and
+    ``e`` (m)."""
+    n = r.size
+    idx = np.empty(n, dtype=np.intp)
+    e_sel = np.empty(n)
+    m = 0
+    for i in range(n):
+        e = r[i] - big_r
+        if u[i] < u_max and abs(e) <= reach + tol[i]:
+            idx[m] = i
+            e_sel[m] = e
+            m += 1
+    return idx[:m].copy(), e_sel[:m].copy()
 
 
 def _straight_wall_rms(cloud: PipeCloud) -> float:
