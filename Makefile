@@ -3,7 +3,6 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.pipenav-installed
-export MUJOCO_GL ?= osmesa
 PYTEST_ARGS ?=
 JOBS ?= auto
 

@@ -10,7 +10,10 @@ created) are reported as one ``error: ...`` line with exit code 2.
 - ``scenarios list`` / ``scenarios run``: the autonomy scenario suite with JUnit XML and JSON;
 - ``train`` / ``eval``: MaskablePPO training from a YAML config, agent evaluation;
 - ``drive``: the operator console (Decision Support: the robot proposes, you choose);
-- ``bench``: run a benchmark script; ``plot``: plots from an episode log.
+- ``bench``: run a benchmark script (source checkout only); ``plot``: plots from an episode log.
+
+Commands that take longer than a few seconds show a progress bar on stderr; results go to
+stdout (JSON, figures rounded) and to the files asked for (full precision).
 """
 
 from __future__ import annotations
@@ -31,6 +34,52 @@ EXIT_USAGE = 2
 
 def _print(*args: Any) -> None:
     print(*args, flush=True)
+
+
+def _rounded(value: Any, digits: int = 3) -> Any:
+    """``value`` with every float rounded to ``digits`` decimals (for printed results)."""
+    if isinstance(value, float):
+        return round(value, digits) if math.isfinite(value) else value
+    if isinstance(value, dict):
+        return {k: _rounded(v, digits) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_rounded(v, digits) for v in value]
+    return value
+
+
+def _progress(transient: bool = False) -> Any:
+    """A rich progress display on stderr: description, bar, done/total, elapsed, remaining."""
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        SpinnerColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    return Progress(
+        SpinnerColumn(),
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+        transient=transient,
+    )
+
+
+def _version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("pipenav")
+    except metadata.PackageNotFoundError:
+        from agents import __version__
+
+        return __version__
 
 
 def _int_at_least(minimum: int) -> Callable[[str], int]:
@@ -84,8 +133,16 @@ def _out_file(path: str | None, option: str) -> bool:
 
 
 # ------------------------------------------------------------------------------- demo
+_demo_doc = (
+    "One closed-loop episode (drive, scan, detect, decide, act) on the embedded default "
+    "network: writes report.json, episode.json, map.png, detection.png and render.png (the 3D "
+    "render, skipped with the reason when no OpenGL backend works) into --out."
+)
+
+
 def _demo(args: argparse.Namespace) -> int:
     from agents.episodes import DEMO_CONFIG, run_episode, save_episode_plots
+    from detector.atomic import atomic_write_text
     from pipe_env.generator import NetworkConfig
 
     try:
@@ -96,22 +153,30 @@ def _demo(args: argparse.Namespace) -> int:
     out = _out_dir(args.out)
     if out is None:
         return EXIT_USAGE
-    log = run_episode(
-        seed=args.seed,
-        agent=args.agent,
-        fidelity=args.fidelity,
-        detector=args.detector,
-        lidar=args.lidar,
-        n_fittings=args.fittings,
-        render=not args.no_render,
-        out=out,
-    )
+    with _progress() as progress:
+        task = progress.add_task(f"demo ({args.fidelity} fidelity): decisions", total=None)
+        log = run_episode(
+            seed=args.seed,
+            agent=args.agent,
+            fidelity=args.fidelity,
+            detector=args.detector,
+            lidar=args.lidar,
+            n_fittings=args.fittings,
+            render=not args.no_render,
+            out=out,
+            on_decision=lambda n: progress.update(task, completed=n),
+        )
+        progress.update(task, total=log["summary"]["decisions"])
     files = save_episode_plots(log, out)
     report = dict(log["summary"])
     # the files of this folder: the episode's own (log, render) and the plots
     report["files"] = sorted({"episode.json", "report.json", *log["files"], *files})
-    (out / "report.json").write_text(json.dumps(report, indent=2))
-    _print(json.dumps(report, indent=2))
+    if log.get("render_skipped"):
+        report["render_skipped"] = log["render_skipped"]
+    atomic_write_text(out / "report.json", json.dumps(report, indent=2))
+    _print(json.dumps(_rounded(report), indent=2))
+    if log.get("render_skipped"):
+        _print(f"3D render skipped: {log['render_skipped']}")
     return 0
 
 
@@ -171,7 +236,9 @@ def _scenarios_run(args: argparse.Namespace) -> int:
             progress.console.print(f"{mark} {escape(text)}")
             progress.advance(task)
 
-        results = run_and_report(found, seeds, args.jobs, args.backend, args.junit, args.json, done)
+        results = run_and_report(
+            found, seeds, args.jobs, args.backend, args.junit, args.json, done, args.ray_address
+        )
     failed = [r for r in results if not r.passed]
     _print(f"{len(results) - len(failed)} passed, {len(failed)} failed")
     for r in failed:
@@ -198,6 +265,11 @@ def _train(args: argparse.Namespace) -> int:
         cfg.max_minutes = args.minutes
     if args.timesteps is not None:
         cfg.total_timesteps = args.timesteps
+    try:
+        cfg.check_ppo_keys()
+    except ValueError as exc:
+        _print(f"error: --config {args.config or DEFAULT_CONFIG!s}: {exc}")
+        return EXIT_USAGE
     try:  # (the environment's own argument checks, before the workers start)
         gym.make(cfg.env_id, **cfg.env_kwargs).close()
     except (ValueError, TypeError, gym.error.Error) as exc:
@@ -205,8 +277,22 @@ def _train(args: argparse.Namespace) -> int:
         return EXIT_USAGE
     if _out_dir(args.out) is None:
         return EXIT_USAGE
-    summary = train(cfg, args.out, progress_bar=not args.no_progress)
-    _print(json.dumps(summary, indent=2))
+    with _progress() as progress:
+        task = progress.add_task("held-out evaluation", total=None, visible=False)
+
+        def on_final(done: int, total: int) -> None:
+            progress.update(task, completed=done, total=total, visible=not args.no_progress)
+
+        summary = train(
+            cfg,
+            args.out,
+            progress_bar=not args.no_progress,
+            final_episodes=args.eval_episodes,
+            on_final_episode=on_final,
+        )
+    _print(json.dumps(_rounded(summary), indent=2))
+    if summary.get("note"):
+        _print(f"note: {summary['note']}")
     return 0
 
 
@@ -214,6 +300,7 @@ def _eval(args: argparse.Namespace) -> int:
     from agents.evaluate import evaluate
     from agents.scripted import SCRIPTED_AGENTS
     from agents.train import DEFAULT_CONFIG, TrainConfig
+    from detector.atomic import atomic_write_text
     from pipe_env.generator import NetworkConfig
 
     agent = str(args.agent)
@@ -223,6 +310,14 @@ def _eval(args: argparse.Namespace) -> int:
             "nor an existing model .zip"
         )
         return EXIT_USAGE
+    if agent not in SCRIPTED_AGENTS:
+        from agents.evaluate import is_maskable_model
+
+        try:
+            is_maskable_model(agent)
+        except ValueError as exc:
+            _print(f"error: agent {exc}")
+            return EXIT_USAGE
     # default: the training distribution of the packaged config
     kwargs: dict[str, Any] = dict(TrainConfig.from_yaml(DEFAULT_CONFIG).env_kwargs)
     kwargs.update(detector=args.detector, fidelity=args.fidelity)
@@ -243,10 +338,17 @@ def _eval(args: argparse.Namespace) -> int:
         kwargs["network_config"] = config
     if not _out_file(args.json, "--json"):
         return EXIT_USAGE
-    result = evaluate(args.agent, args.episodes, env_kwargs=kwargs)
-    _print(json.dumps(result.to_dict(), indent=2))
+    with _progress() as progress:
+        task = progress.add_task(f"eval ({args.fidelity} fidelity)", total=args.episodes)
+        result = evaluate(
+            args.agent,
+            args.episodes,
+            env_kwargs=kwargs,
+            on_episode=lambda done, total: progress.update(task, completed=done),
+        )
+    _print(json.dumps(_rounded(result.to_dict()), indent=2))
     if args.json:
-        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2))
+        atomic_write_text(args.json, json.dumps(result.to_dict(), indent=2))
     return 0
 
 
@@ -295,6 +397,25 @@ def _plot(args: argparse.Namespace) -> int:
     return 0
 
 
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """Help with each option's default shown (unless its help states it, or it is an off
+    flag), descriptions kept as written."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "(default" in text or isinstance(action, argparse._StoreTrueAction):
+            return text
+        return super()._get_help_string(action) or ""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose help shows defaults (subcommand parsers are of this class too)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from agents.scripted import SCRIPTED_AGENTS
     from pipe_env.envs import FIDELITIES
@@ -303,37 +424,62 @@ def build_parser() -> argparse.ArgumentParser:
 
     agents = sorted(SCRIPTED_AGENTS)
     lidars = sorted(PRESETS)
-    parser = argparse.ArgumentParser(
-        prog="pipenav", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    sub = parser.add_subparsers(dest="command", required=True)
+    fidelity_help = "fast: kinematic motion, modelled sensing; full: MuJoCo robot and LiDAR"
+    detector_help = "structure detector (ground_truth: the network's own structures)"
+    lidar_help = "simulated LiDAR preset"
+    parser = _Parser(prog="pipenav", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"pipenav {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    demo = sub.add_parser("demo", help="one closed-loop episode on the embedded default")
+    demo = sub.add_parser(
+        "demo", help="one closed-loop episode on the embedded default", description=_demo_doc
+    )
     demo.add_argument("--out", default="results/demo", help="output folder")
-    demo.add_argument("--seed", type=int, default=7)
+    demo.add_argument("--seed", type=int, default=7, help="seed of the network and the episode")
     demo.add_argument(
         "--fittings", type=_int_at_least(1), default=6, help="fittings in the network"
     )
-    demo.add_argument("--agent", default="route_planner", choices=agents)
-    demo.add_argument("--fidelity", default="full", choices=FIDELITIES)
-    demo.add_argument("--detector", default="improved", choices=DETECTORS)
-    demo.add_argument("--lidar", default="ideal", choices=lidars)
-    demo.add_argument("--no-render", action="store_true", help="skip the MuJoCo render")
+    demo.add_argument("--agent", default="route_planner", choices=agents, help="who decides")
+    demo.add_argument("--fidelity", default="full", choices=FIDELITIES, help=fidelity_help)
+    demo.add_argument("--detector", default="improved", choices=DETECTORS, help=detector_help)
+    demo.add_argument("--lidar", default="ideal", choices=lidars, help=lidar_help)
+    demo.add_argument(
+        "--no-render",
+        action="store_true",
+        help="skip the 3D MuJoCo render (render.png); without a working OpenGL backend it is "
+        "skipped anyway, with the reason",
+    )
     demo.set_defaults(func=_demo)
 
     sc = sub.add_parser("scenarios", help="the autonomy scenario suite")
-    scs = sc.add_subparsers(dest="action", required=True)
+    scs = sc.add_subparsers(dest="action", required=True, metavar="ACTION")
     ls = scs.add_parser("list", help="list scenarios")
-    ls.add_argument("glob", nargs="?", default="*")
+    ls.add_argument("glob", nargs="?", default="*", help="scenario names matching this glob")
     ls.add_argument("--dir", default=None, help="a folder of scenario files (default: packaged)")
     ls.set_defaults(func=_scenarios_list)
     run = scs.add_parser("run", help="run scenarios; non-zero exit if any fails")
-    run.add_argument("glob", nargs="?", default="*")
+    run.add_argument("glob", nargs="?", default="*", help="scenario names matching this glob")
     run.add_argument("--dir", default=None, help="a folder of scenario files (default: packaged)")
     run.add_argument("--junit", default=None, help="write JUnit XML here")
     run.add_argument("--json", default=None, help="write the JSON report here")
-    run.add_argument("--jobs", type=_int_at_least(1), default=1, help="worker processes")
-    run.add_argument("--backend", default="local", choices=["local", "ray"])
+    run.add_argument(
+        "--jobs",
+        type=_int_at_least(1),
+        default=1,
+        help="worker processes (local backend) or CPUs of the local Ray instance",
+    )
+    run.add_argument(
+        "--backend",
+        default="local",
+        choices=["local", "ray"],
+        help="local: a process pool on this machine; ray: Ray tasks (the 'ray' extra)",
+    )
+    run.add_argument(
+        "--ray-address",
+        default=None,
+        help="with --backend ray: the cluster to connect to (default: $RAY_ADDRESS; when "
+        "neither is set, a local Ray instance is started for the run and stopped after it)",
+    )
     run.add_argument(
         "--seed",
         type=int,
@@ -342,49 +488,83 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.set_defaults(func=_scenarios_run)
 
-    tr = sub.add_parser("train", help="train MaskablePPO from a YAML config")
-    tr.add_argument("--config", default=None, help="YAML (default: the packaged one)")
-    tr.add_argument("--out", default="runs/ppo")
-    tr.add_argument(
-        "--minutes", type=_positive_float, default=None, help="wall-clock budget override"
+    tr = sub.add_parser(
+        "train",
+        help="train MaskablePPO from a YAML config",
+        description="Train MaskablePPO (action masking; see the RL Zoo note in the README for "
+        "plain PPO). Ends with an evaluation on held-out networks.",
     )
-    tr.add_argument("--timesteps", type=_int_at_least(1), default=None)
-    tr.add_argument("--no-progress", action="store_true")
+    tr.add_argument("--config", default=None, help="YAML (default: the packaged one)")
+    tr.add_argument("--out", default="runs/ppo", help="output folder (models, logs, summary)")
+    tr.add_argument(
+        "--minutes",
+        type=_positive_float,
+        default=None,
+        help="wall-clock budget override (default: the config's max_minutes)",
+    )
+    tr.add_argument(
+        "--timesteps",
+        type=_int_at_least(1),
+        default=None,
+        help="timestep budget override (default: the config's total_timesteps)",
+    )
+    tr.add_argument(
+        "--eval-episodes",
+        type=_int_at_least(0),
+        default=None,
+        help="episodes of the closing held-out evaluation; 0 skips it (default: the config's "
+        "eval.final_episodes, else eval.episodes)",
+    )
+    tr.add_argument("--no-progress", action="store_true", help="no progress bars")
     tr.set_defaults(func=_train)
 
     ev = sub.add_parser("eval", help="evaluate an agent on held-out networks")
-    ev.add_argument("agent", help="scripted agent name or a model .zip")
-    ev.add_argument("--episodes", type=_int_at_least(1), default=200)
-    ev.add_argument("--detector", default="improved", choices=DETECTORS)
-    ev.add_argument("--fidelity", default="fast", choices=FIDELITIES)
+    ev.add_argument(
+        "agent",
+        help=f"a scripted agent {agents}, or a model .zip: MaskablePPO (masked) or plain SB3 PPO "
+        "(unmasked)",
+    )
+    ev.add_argument("--episodes", type=_int_at_least(1), default=200, help="held-out episodes")
+    ev.add_argument("--detector", default="improved", choices=DETECTORS, help=detector_help)
+    ev.add_argument("--fidelity", default="fast", choices=FIDELITIES, help=fidelity_help)
     ev.add_argument(
         "--network-config",
         default=None,
         help="NetworkConfig as JSON (default: the training distribution)",
     )
-    ev.add_argument("--json", default=None)
+    ev.add_argument("--json", default=None, help="write the result (full precision) here")
     ev.set_defaults(func=_eval)
 
     dr = sub.add_parser("drive", help="operator console: you choose, the robot acts")
     dr.add_argument("--layout", default=None, help="a canonical layout instead of a network")
     dr.add_argument("--params", default="{}", help="layout parameters as JSON")
-    dr.add_argument("--network", default=None, help="a network file (.json/.yaml)")
-    dr.add_argument("--seed", type=int, default=0)
-    dr.add_argument("--fidelity", default="full", choices=FIDELITIES)
-    dr.add_argument("--detector", default="improved", choices=DETECTORS)
-    dr.add_argument("--lidar", default="ideal", choices=lidars)
+    dr.add_argument(
+        "--network", default=None, help="a network file (.json/.yaml) (default: a generated one)"
+    )
+    dr.add_argument("--seed", type=int, default=0, help="seed of the network and the episode")
+    dr.add_argument("--fidelity", default="full", choices=FIDELITIES, help=fidelity_help)
+    dr.add_argument("--detector", default="improved", choices=DETECTORS, help=detector_help)
+    dr.add_argument("--lidar", default="ideal", choices=lidars, help=lidar_help)
     dr.add_argument("--out", default="results/drive", help="where scan images go headless")
     dr.set_defaults(func=_drive)
 
-    be = sub.add_parser("bench", help="run a benchmark script from benchmarks/")
-    be.add_argument("name", choices=BENCHES)
+    be = sub.add_parser(
+        "bench",
+        help="run a benchmark script (source checkout only)",
+        description="Run benchmarks/bench_NAME.py of a pipenav source checkout (the scripts "
+        "are not part of the installed package): from the checkout's folder, or with pipenav "
+        "installed from it in editable mode (pip install -e .).",
+    )
+    be.add_argument("name", choices=BENCHES, help="which benchmark")
     be.add_argument("extra", nargs=argparse.REMAINDER, help="arguments for the script")
     be.set_defaults(func=_bench)
 
     pl = sub.add_parser("plot", help="plots from an episode log (episode.json)")
-    pl.add_argument("episode")
-    pl.add_argument("--what", default="all", choices=["all", "map", "detection"])
-    pl.add_argument("--out", default="results/plots")
+    pl.add_argument("episode", help="an episode.json written by demo")
+    pl.add_argument(
+        "--what", default="all", choices=["all", "map", "detection"], help="which plots"
+    )
+    pl.add_argument("--out", default="results/plots", help="output folder")
     pl.set_defaults(func=_plot)
     from agents.cli_data import add_commands  # detect, record, export
 

@@ -141,7 +141,8 @@ class OperatorConsole:
 
     def run(self) -> int:
         obs, info = self.env.reset(seed=self.seed)
-        done = False
+        # the reset's drive can end the episode (a goal before any decision): nothing to ask
+        done = self.env.unwrapped.decision is None
         while True:
             self.console.print(self.table(info))
             where = self.picture()

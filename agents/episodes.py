@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -37,8 +38,10 @@ def run_episode(
     render: bool = False,
     out: Path | None = None,
     max_decisions: int = 40,
+    on_decision: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
-    """Run one PipeNav episode and return its log (see module docstring)."""
+    """Run one PipeNav episode and return its log (see module docstring);
+    ``on_decision(n)`` is called after the n-th decision (e.g. for a progress display)."""
     config = NetworkConfig.from_dict({**DEMO_CONFIG, "n_fittings": n_fittings})
     kwargs: dict[str, Any] = {
         "network_config": config,
@@ -67,14 +70,20 @@ def run_episode(
         obs, reward, term, trunc, info = env.step(action)
         rewards.append(float(reward))
         done = term or trunc
+        if on_decision:
+            on_decision(len(choices))
     wall = time.perf_counter() - t0
     base = env.unwrapped
     files = []
+    render_skipped = None
     if render and out is not None:
-        from pipe_env.rendering import save_image
+        from pipe_env.rendering import RenderingUnavailable, save_image
 
-        save_image(env.render(), str(Path(out) / "render.png"))
-        files.append("render.png")
+        try:
+            save_image(env.render(), str(Path(out) / "render.png"))
+            files.append("render.png")
+        except RenderingUnavailable as exc:  # no OpenGL here: the rest of the episode stands
+            render_skipped = str(exc)
     log = {
         "network": base.network.to_dict(),
         "path": np.asarray(base.path).tolist(),
@@ -100,6 +109,7 @@ def run_episode(
             "detections": len(base.plant.detection_log),
         },
         "files": files,
+        "render_skipped": render_skipped,
     }
     env.close()
     if out is not None:

@@ -4,14 +4,19 @@ Metrics per agent: success rate, jams per episode, decisions per episode, and pa
 the shortest drivable route (median over successful episodes). The held-out networks are
 ``pool_network(config, EVAL_POOL_SEED, i)`` for i = 0, 1, ...: a pool seed that training uses
 for neither its episodes nor its model selection (``VALIDATION_POOL_SEED``), so the same
-``n_episodes`` give the same networks. A learned policy is evaluated with sb3-contrib's
-``evaluate_policy`` (action masks on, deterministic actions).
+``n_episodes`` give the same networks. A learned policy is evaluated with ``evaluate_policy``
+(deterministic actions): a MaskablePPO model (sb3-contrib) with action masks on; a plain SB3 PPO
+model (e.g. trained with RL Zoo) without masks, so a masked choice it makes costs a decision and
+the invalid-action penalty, as in its training.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import time
+import zipfile
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -139,8 +144,10 @@ def evaluate(
     env_id: str = "pipenav/PipeNav-v0",
     env_kwargs: dict[str, Any] | None = None,
     pool_seed: int = EVAL_POOL_SEED,
+    on_episode: Callable[[int, int], None] | None = None,
 ) -> EvalResult:
-    """Run ``agent`` (a scripted name or a model .zip path) on ``n_episodes`` held-out networks."""
+    """Run ``agent`` (a scripted name or a model .zip path: MaskablePPO or plain PPO) on
+    ``n_episodes`` held-out networks; ``on_episode(done, n_episodes)`` after each episode."""
     kwargs = dict(env_kwargs or {})
     kwargs.pop("network_pool", None)
     kwargs.pop("pool_seed", None)
@@ -162,8 +169,10 @@ def evaluate(
                 obs, _, term, trunc, info = env.step(actor.act(obs, info))
                 done = term or trunc
             infos.append(info)
+            if on_episode:
+                on_episode(len(infos), n_episodes)
     elif str(agent).endswith(".zip") and Path(agent).exists():
-        infos = _evaluate_policy(agent, env, n_episodes)
+        infos = _evaluate_policy(agent, env, n_episodes, on_episode)
     else:
         raise ValueError(
             f"agent {agent!r} is neither a scripted agent {sorted(SCRIPTED_AGENTS)} "
@@ -173,30 +182,63 @@ def evaluate(
     return _summarise(agent, infos, time.perf_counter() - t0)
 
 
-def _evaluate_policy(path: str, env: gym.Env, n_episodes: int) -> list[dict]:
-    """sb3-contrib's ``evaluate_policy`` (masks on, deterministic) on ``env``, a
-    :class:`SequentialNetworks` that seeds each episode itself; the final info of each."""
+def is_maskable_model(path: str | Path) -> bool:
+    """Was the SB3 model file ``path`` saved by sb3-contrib's MaskablePPO (its policy class is a
+    maskable one)? False for a plain SB3 PPO model.
+
+    Raises:
+        ValueError: ``path`` is not an SB3 model file.
+    """
+    try:
+        with zipfile.ZipFile(path) as zf:
+            data = json.loads(zf.read("data"))
+        module = str(data["policy_class"]["__module__"])
+    except (OSError, KeyError, TypeError, ValueError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"{path}: not a Stable-Baselines3 model file ({exc!r})") from None
+    return "maskable" in module
+
+
+def _evaluate_policy(
+    path: str,
+    env: gym.Env,
+    n_episodes: int,
+    on_episode: Callable[[int, int], None] | None = None,
+) -> list[dict]:
+    """``evaluate_policy`` (deterministic; masks on for MaskablePPO, see module docstring) on
+    ``env``, a :class:`SequentialNetworks` that seeds each episode itself; the final info of
+    each."""
     import torch
-    from sb3_contrib import MaskablePPO
-    from sb3_contrib.common.maskable.evaluation import evaluate_policy
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     torch.set_num_threads(1)
-    model = MaskablePPO.load(str(path), device="cpu")
+    if is_maskable_model(path):
+        from sb3_contrib import MaskablePPO
+        from sb3_contrib.common.maskable.evaluation import evaluate_policy
+
+        model: Any = MaskablePPO.load(str(path), device="cpu")
+        masking: dict[str, Any] = {"use_masking": True}
+    else:
+        from stable_baselines3 import PPO
+        from stable_baselines3.common.evaluation import evaluate_policy  # type: ignore[no-redef]
+
+        model = PPO.load(str(path), device="cpu")
+        masking = {}
     venv = DummyVecEnv([lambda: env])
     finals: list[dict] = []
 
     def keep_final_info(local: dict, _global: dict) -> None:
         if local["dones"][local["i"]]:
             finals.append(dict(local["infos"][local["i"]]))
+            if on_episode and len(finals) <= n_episodes:
+                on_episode(len(finals), n_episodes)
 
     evaluate_policy(
         model,
         venv,
         n_eval_episodes=n_episodes,
         deterministic=True,
-        use_masking=True,
         callback=keep_final_info,
         warn=False,
+        **masking,
     )
     return finals[:n_episodes]

@@ -3,11 +3,18 @@
 Each task is identified by the scenario file and the seed, so workers load the scenario
 themselves and the same seeds give the same results on every backend. Results come back in the
 order of the task list whatever the backend finished first.
+
+Ray, as Ray users run it (:func:`ray_init_kwargs`): with an address (``ray_address``, else the
+``RAY_ADDRESS`` environment variable) the run connects to that existing cluster and leaves it
+running, its size set by the cluster (``jobs`` is not used); without one it starts a private
+local Ray instance with ``jobs`` CPUs and shuts it down at the end. An already initialised Ray
+(``ray.init`` called by the caller) is used as it is.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import platform
 import time
 from collections.abc import Callable, Sequence
@@ -50,15 +57,17 @@ def run_tasks(
     jobs: int = 1,
     backend: str = "local",
     on_result: Callable[[ScenarioResult], None] | None = None,
+    ray_address: str | None = None,
 ) -> list[ScenarioResult]:
-    """Run the tasks on ``backend`` with ``jobs`` workers; results in task order."""
+    """Run the tasks on ``backend`` with ``jobs`` workers; results in task order
+    (``ray_address``: see module docstring)."""
     if backend not in BACKENDS:
         raise ValueError(f"backend={backend!r} is not allowed; use one of {BACKENDS}")
     if jobs < 1:
         raise ValueError(f"jobs={jobs} is not allowed; use an int >= 1")
     results: list[ScenarioResult | None] = [None] * len(tasks)
     if backend == "ray":
-        return _run_ray(tasks, jobs, on_result)
+        return _run_ray(tasks, jobs, on_result, ray_address)
     if jobs == 1:
         for i, (src, seed) in enumerate(tasks):
             results[i] = _task(src, seed)
@@ -79,8 +88,22 @@ def run_tasks(
     return results  # type: ignore[return-value]
 
 
+def ray_init_kwargs(jobs: int, address: str | None = None) -> dict[str, Any]:
+    """The ``ray.init`` arguments of a run: connect to ``address`` (else ``$RAY_ADDRESS``) when
+    one is given, else start a new local instance with ``jobs`` CPUs (``address="local"``, so
+    Ray does not attach to some other cluster it finds on this machine)."""
+    address = address or os.environ.get("RAY_ADDRESS") or None
+    common: dict[str, Any] = {"log_to_driver": False, "ignore_reinit_error": True}
+    if address:
+        return {"address": address, **common}
+    return {"address": "local", "num_cpus": jobs, "include_dashboard": False, **common}
+
+
 def _run_ray(
-    tasks: Sequence[tuple[str, int]], jobs: int, on_result: Callable[[ScenarioResult], None] | None
+    tasks: Sequence[tuple[str, int]],
+    jobs: int,
+    on_result: Callable[[ScenarioResult], None] | None,
+    address: str | None = None,
 ) -> list[ScenarioResult]:
     try:
         import ray
@@ -90,9 +113,7 @@ def _run_ray(
         ) from exc
     started = False
     if not ray.is_initialized():
-        ray.init(
-            num_cpus=jobs, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True
-        )
+        ray.init(**ray_init_kwargs(jobs, address))
         started = True
     try:
         remote = ray.remote(num_cpus=1)(_task)
@@ -201,10 +222,11 @@ def run_and_report(
     junit: str | Path | None = None,
     json_path: str | Path | None = None,
     on_result: Callable[[ScenarioResult], None] | None = None,
+    ray_address: str | None = None,
 ) -> list[ScenarioResult]:
     """Run scenarios and write the reports that were asked for."""
     t0 = time.perf_counter()
-    results = run_tasks(tasks_of(scenarios, seeds), jobs, backend, on_result)
+    results = run_tasks(tasks_of(scenarios, seeds), jobs, backend, on_result, ray_address)
     wall = time.perf_counter() - t0
     if junit:
         write_junit(results, junit)

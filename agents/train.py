@@ -3,22 +3,39 @@
 A run is described by a YAML file (see ``agents/configs/maskable_ppo.yaml``): environment id and
 keyword arguments, vectorisation, PPO hyperparameters, evaluation on a held-out network pool,
 checkpoints and a wall-clock budget. The output folder gets TensorBoard logs (``tb/``),
-checkpoints (``checkpoints/``), the best model by held-out success (``best/best_model.zip``), the
-final model (``final_model.zip``) and ``summary.json`` (timesteps, wall time, evaluation).
+checkpoints (``checkpoints/``), the best model by validation success (``best/best_model.zip``,
+only when the run lasted long enough for a validation evaluation), the final model
+(``final_model.zip``) and ``summary.json`` (timesteps, wall time, and a closing evaluation of
+the best model, else the final one, on the held-out networks that neither training nor model
+selection saw; see :mod:`agents.evaluate`).
+
+Every key is checked before any work: the top-level keys, the ``eval`` keys
+(:data:`EVAL_KEYS`) and the ``ppo`` keys (MaskablePPO's own keyword arguments); a mistyped key
+is a ValueError naming it and the allowed ones.
 """
 
 from __future__ import annotations
 
+import inspect
 import json
+import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from detector.atomic import atomic_write_text
+
 DEFAULT_CONFIG = Path(__file__).with_name("configs") / "maskable_ppo.yaml"
 VEC_ENVS = ("subproc", "dummy")
+#: Keys of a config's ``eval`` mapping: validation episodes and interval (timesteps) during
+#: training, the validation pool seed, and the episodes of the closing held-out evaluation.
+EVAL_KEYS = ("episodes", "every_timesteps", "pool_seed", "final_episodes")
+#: MaskablePPO arguments train() sets itself (not allowed under ``ppo``).
+_PPO_SET_BY_TRAIN = ("self", "policy", "env", "seed", "verbose", "tensorboard_log")
 
 
 @dataclass
@@ -48,6 +65,23 @@ class TrainConfig:
             raise ValueError(f"total_timesteps={self.total_timesteps!r}: use a positive int")
         if not self.max_minutes > 0:
             raise ValueError(f"max_minutes={self.max_minutes!r}: use a positive number")
+        for name in ("env_kwargs", "ppo", "eval"):
+            if not isinstance(getattr(self, name), dict):
+                raise ValueError(f"{name}={getattr(self, name)!r}: use a mapping")
+        unknown = sorted(set(self.eval) - set(EVAL_KEYS))
+        if unknown:
+            raise ValueError(f"eval: unknown keys {unknown}; allowed: {list(EVAL_KEYS)}")
+
+    def check_ppo_keys(self) -> None:
+        """Raise ValueError naming any ``ppo`` key MaskablePPO does not take (imports
+        sb3-contrib, so it is not part of loading a config)."""
+        from sb3_contrib import MaskablePPO
+
+        params = inspect.signature(MaskablePPO.__init__).parameters
+        allowed = sorted(set(params) - set(_PPO_SET_BY_TRAIN))
+        unknown = sorted(set(self.ppo) - set(allowed))
+        if unknown:
+            raise ValueError(f"ppo: unknown keys {unknown}; allowed: {allowed}")
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> TrainConfig:
@@ -85,14 +119,77 @@ def make_env_fns(cfg: TrainConfig, pool_seed: int | None = None, n: int | None =
     return [make(i) for i in range(n or cfg.n_envs)]
 
 
-def train(cfg: TrainConfig, out: str | Path, progress_bar: bool = True) -> dict[str, Any]:
-    """Train MaskablePPO per ``cfg`` into folder ``out``; returns the run summary."""
+class _BudgetProgress:
+    """A rich progress bar whose fraction is the larger of timesteps / ``total_timesteps`` and
+    elapsed / ``max_minutes``: training stops at whichever comes first, so the bar and its ETA
+    follow the budget that will end the run."""
+
+    def __init__(self, total_timesteps: int, minutes: float) -> None:
+        from rich.console import Console
+        from rich.progress import (
+            BarColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        self.total = total_timesteps
+        self.seconds = 60.0 * minutes
+        self.t0 = time.monotonic()
+        self.last = -math.inf
+        self.progress = Progress(
+            TextColumn("train"),
+            BarColumn(),
+            TextColumn("{task.percentage:>3.0f}%"),
+            TextColumn("{task.fields[timesteps]} timesteps"),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            console=Console(stderr=True),
+        )
+        self.task = self.progress.add_task("train", total=1000, timesteps=0)
+        self.progress.start()
+
+    def update(self, timesteps: int, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now - self.last < 0.5:
+            return
+        self.last = now
+        frac = max(timesteps / self.total, (now - self.t0) / self.seconds)
+        self.progress.update(self.task, completed=min(1000.0, 1000.0 * frac), timesteps=timesteps)
+
+    def close(self, timesteps: int) -> None:
+        self.update(timesteps, force=True)
+        self.progress.update(self.task, completed=1000)
+        self.progress.stop()
+
+
+def train(
+    cfg: TrainConfig,
+    out: str | Path,
+    progress_bar: bool = True,
+    final_episodes: int | None = None,
+    on_final_episode: Callable[[int, int], None] | None = None,
+) -> dict[str, Any]:
+    """Train MaskablePPO per ``cfg`` into folder ``out``; returns the run summary.
+
+    Args:
+        cfg: the run.
+        out: output folder (see module docstring).
+        progress_bar: show a progress bar that follows the timestep or minutes budget,
+            whichever ends the run first.
+        final_episodes: episodes of the closing held-out evaluation (default
+            ``eval.final_episodes``, else ``eval.episodes``); 0 skips it.
+        on_final_episode: called with (episodes done, total) during that evaluation.
+    """
     import torch
     from sb3_contrib import MaskablePPO
     from sb3_contrib.common.maskable.callbacks import MaskableEvalCallback
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
+    cfg.check_ppo_keys()
     torch.set_num_threads(cfg.torch_threads)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -124,9 +221,20 @@ def train(cfg: TrainConfig, out: str | Path, progress_bar: bool = True) -> dict[
         def _on_step(self) -> bool:
             return time.monotonic() < self.deadline
 
+    class ShowProgress(BaseCallback):
+        def __init__(self, bar: _BudgetProgress) -> None:
+            super().__init__()
+            self.bar = bar
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.num_timesteps)
+            return True
+
+    bar = _BudgetProgress(cfg.total_timesteps, cfg.max_minutes) if progress_bar else None
     every = max(int(eval_cfg["every_timesteps"]) // cfg.n_envs, 1)
     callbacks = CallbackList(
         [
+            *([ShowProgress(bar)] if bar is not None else []),
             Budget(cfg.max_minutes),
             CheckpointCallback(
                 max(cfg.checkpoint_every_timesteps // cfg.n_envs, 1),
@@ -145,21 +253,46 @@ def train(cfg: TrainConfig, out: str | Path, progress_bar: bool = True) -> dict[
         ]
     )
     t0 = time.monotonic()
-    model.learn(
-        cfg.total_timesteps,
-        callback=callbacks,
-        progress_bar=progress_bar,
-        tb_log_name="maskable_ppo",
-    )
+    try:
+        model.learn(cfg.total_timesteps, callback=callbacks, tb_log_name="maskable_ppo")
+    finally:
+        if bar is not None:
+            bar.close(int(model.num_timesteps))
     wall = time.monotonic() - t0
     model.save(out / "final_model.zip")
     venv.close()
-    summary = {
+    eval_env.close()
+    best = out / "best" / "best_model.zip"
+    summary: dict[str, Any] = {
         "timesteps": int(model.num_timesteps),
         "wall_seconds": round(wall, 1),
         "timesteps_per_second": round(model.num_timesteps / max(wall, 1e-9), 1),
         "final_model": str(out / "final_model.zip"),
-        "best_model": str(out / "best" / "best_model.zip"),
+        "best_model": str(best) if best.is_file() else None,
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    if not best.is_file():
+        summary["note"] = (
+            f"no validation evaluation ran: the run stopped after {model.num_timesteps} "
+            f"timesteps, before the first one at {int(eval_cfg['every_timesteps'])} (eval."
+            "every_timesteps); so there is no best_model.zip, and final_model.zip is the model"
+        )
+    if final_episodes is None:
+        final_episodes = int(eval_cfg.get("final_episodes", eval_cfg["episodes"]))
+    if final_episodes > 0:
+        from agents.evaluate import EVAL_POOL_SEED, evaluate
+
+        chosen = best if best.is_file() else out / "final_model.zip"
+        result = evaluate(
+            str(chosen),
+            final_episodes,
+            env_id=cfg.env_id,
+            env_kwargs=cfg.env_kwargs,
+            on_episode=on_final_episode,
+        )
+        summary["held_out_evaluation"] = {
+            "model": str(chosen),
+            "pool_seed": EVAL_POOL_SEED,
+            **result.to_dict(),
+        }
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2))
     return summary

@@ -39,11 +39,15 @@ Readings of the thesis's text where it is vague (documented choices):
   thesis's cross-junction got its third, straight-on option (thesis 5.1.2).
 - Type 1: if the inliers lie within 1 cm of one axial position and reach below half the
   radius, the pipe is closed there (the thesis's "reduction to 0 mm", kind ``closure``).
-  Otherwise the new diameter is the smallest diameter detected, taken as the most frequent
-  inlier radius (1 mm bins; a far end wall spreads its radii over all values, the narrower
-  pipe's wall concentrates them), and the distance is the smallest forward distance of points
-  at that radius (the end of the taper, thesis table 5.1). Without inliers, the outliers' most
-  frequent radius is used (an expansion).
+  Otherwise the new diameter is "the smallest diameter detected" (thesis 5.1.2) on a pipe
+  wall: the smallest inlier radius (1 mm bins) whose points spread along the axis (more than
+  1 cm, 10th-90th percentile), so that an end wall seen down the narrower pipe, whose every
+  radius lies at one axial position, is not taken for it; the distance is the smallest
+  forward distance of points at that radius (the end of the taper, thesis table 5.1). Without
+  inliers, the outliers' most frequent radius is used (an expansion).
+- The sensor's known constant range error (``bias`` of the scan's sensor description) is
+  removed before step A: the thesis took the LS02's 2 cm error "into consideration in the 3D
+  detection algorithm" (5.2.2).
 - The thesis method has no confidence: 1 when it decided from enough points, 0 for a scan too
   sparse to decide.
 
@@ -63,7 +67,7 @@ from detector.detection import Detection
 from detector.ellipse import fit_ellipse
 from detector.grid import build_grid, dilate, label_regions
 from detector.options import StructureOption, option_order
-from detector.scan import Scan
+from detector.scan import Scan, corrected_ranges, radial_noise, spec_value
 from detector.transforms import SensorInPipe, option_direction
 
 #: Step B error and the categorisation margin, metres (radius).
@@ -72,6 +76,10 @@ RADIUS_ERROR = 0.0025
 MIN_REGION = 5
 #: Fewest outline points for an ellipse.
 MIN_OUTLINE = 5
+#: Type 1: fewest points at a radius to count as a wall, and the axial spread (m) above which
+#: they lie on a pipe wall rather than on an end wall facing the sensor.
+MIN_WALL_POINTS = 20
+END_WALL_SPREAD = 0.01
 #: Openings (outlier regions) examined per sweep, the largest first.
 MAX_REGIONS = 16
 
@@ -128,7 +136,11 @@ def detect_spatial_thesis(
     pose = SensorInPipe.coerce(sensor_in_pipe)
     big_r = 0.5 * float(clamped_diameter)
     grid = build_grid(scan)
-    local = scan.directions() * np.where(scan.valid, scan.ranges, 0.0)[..., None]
+    # thesis 5.2.2: the sensor's constant measurement error "is taken into consideration in
+    # the 3D detection algorithm": the known range bias of the scan's sensor is removed
+    bias = spec_value(scan.spec, "bias", 0.0)
+    ranges = corrected_ranges(scan.ranges, bias) if bias else scan.ranges
+    local = scan.directions() * np.where(scan.valid, ranges, 0.0)[..., None]
     pts = pose.to_pipe(local.reshape(-1, 3)).reshape(local.shape)
     radius = np.sqrt(np.square(pts[..., 1]) + np.square(pts[..., 2]))
     valid_g = grid.take(scan.valid, fill=False).astype(bool)
@@ -182,7 +194,8 @@ def detect_spatial_thesis(
     diag["type"] = ptype
     # C.3 properties
     if ptype == 1:
-        det = _type1(p_g, r_g, inl, outl, big_r, margin, diag)
+        sigma = range_sigma(scan.spec, np.linalg.norm(p_g - pose.position, axis=-1))
+        det = _type1(p_g, r_g, inl, outl, big_r, margin, diag, sigma)
         diag["time_s"] = time.perf_counter() - t0
         return det.with_diagnostics(time_s=time.perf_counter() - t0)
     kind = "bend" if ptype == 2 else "junction"
@@ -220,10 +233,27 @@ def detect_spatial_thesis(
     return Detection(kind, options, 1.0, diag)
 
 
+def range_sigma(spec: dict[str, Any] | None, ranges: NDArray) -> NDArray[np.float64]:
+    """Range noise (1 sigma, m) of returns at ``ranges`` (m, any shape) under the sensor
+    description ``spec`` (:func:`detector.scan.radial_noise`; 0 for a noiseless sensor)."""
+    flat = np.asarray(ranges, dtype=float).reshape(-1)
+    ones = np.ones_like(flat)
+    sigma, _ = radial_noise(spec, flat, ones, ones)
+    return sigma.reshape(np.shape(ranges))
+
+
 def _type1(
-    p_g: NDArray, r_g: NDArray, inl: NDArray, outl: NDArray, big_r: float, margin: float, diag
+    p_g: NDArray,
+    r_g: NDArray,
+    inl: NDArray,
+    outl: NDArray,
+    big_r: float,
+    margin: float,
+    diag: dict[str, Any],
+    sigma: NDArray,
 ) -> Detection:
-    """Thesis type 1: reduction (diameter, distance) or closure."""
+    """Thesis type 1: reduction (diameter, distance) or closure. ``sigma``: the range noise
+    (1 sigma, m) of every grid cell's return."""
     if inl.any():
         u = p_g[inl][:, 0]
         r = r_g[inl]
@@ -231,7 +261,7 @@ def _type1(
         if spread <= 0.01 and float(r.min()) < 0.5 * big_r:
             opt = StructureOption("closure", float(np.median(u)), 0.0, 0.0, 0.0, 1.0)
             return Detection("closure", [opt], 1.0, diag)
-        r_new = _mode(r, margin)
+        r_new = _smallest_wall_radius(u, r, margin, sigma[inl])
         at = np.abs(r - r_new) <= margin
         opt = StructureOption("reducer", float(u[at].min()), 2.0 * r_new, 0.0, 0.0, 1.0)
         return Detection("reducer", [opt], 1.0, diag)
@@ -243,6 +273,26 @@ def _type1(
         opt = StructureOption("reducer", float(u[at].min()), 2.0 * r_new, 0.0, 0.0, 1.0)
         return Detection("reducer", [opt], 1.0, diag)
     return Detection.straight(confidence=0.5, **diag)
+
+
+def _smallest_wall_radius(u: NDArray, r: NDArray, margin: float, sigma: NDArray) -> float:
+    """The smallest radius detected on a pipe wall (thesis 5.1.2: "the smallest diameter
+    detected"), metres: the smallest 1 mm radius bin whose points (within ``margin``) are at
+    least :data:`MIN_WALL_POINTS` and spread along the axis (10th to 90th percentile) by more
+    than :data:`END_WALL_SPREAD` and than 3 times their median range noise ``sigma`` (m), so
+    that a wall facing the sensor (an end wall beyond the narrower pipe, whose every radius
+    lies at one axial position, blurred only by the noise) is not taken for the narrower pipe.
+    The median radius of that bin's points; the most frequent radius when no bin qualifies."""
+    bins = np.floor(r / 0.001).astype(int)
+    for b in np.unique(bins):
+        near = np.abs(r - (b + 0.5) * 0.001) <= margin
+        if near.sum() < MIN_WALL_POINTS:
+            continue
+        uu = u[near]
+        spread = float(np.percentile(uu, 90) - np.percentile(uu, 10))
+        if spread > max(END_WALL_SPREAD, 3.0 * float(np.median(sigma[near]))):
+            return float(np.median(r[near]))
+    return _mode(r, margin)
 
 
 def _mode(r: NDArray, margin: float) -> float:

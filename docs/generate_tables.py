@@ -69,7 +69,8 @@ OPTION_DOCS: dict[str, str] = {
     "detector, executor)",
     "lidar": "sensor preset (`ideal`, `ls02`, `ydlidar_x4`) or a `LidarSpec`",
     "misalignment": "true sensor pose relative to its mount (a `Pose`; full fidelity)",
-    "render_mode": "`rgb_array` or `ansi` (the options table as text)",
+    "render_mode": "`rgb_array` (an image now), `rgb_array_list` (the frames since the last "
+    "call, taken while the robot moves) or `ansi` (the options table as text)",
     "trigger_distance": "stop this far before a structure to decide, m, in (0, 1]",
     "auto_single": "take a single way on without asking the agent",
     "max_jams": "end the episode after this many jams",

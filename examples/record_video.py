@@ -1,9 +1,10 @@
-"""A full-fidelity episode rendered to an mp4 with Gymnasium's ``RecordVideo``.
+"""A full-fidelity episode rendered to an mp4 in which the robot is seen moving.
 
 The MuJoCo robot, the rotating LiDAR, the detector and the executor run the closed loop on a
-small generated network while the RoutePlanner chooses; ``render_mode="rgb_array"`` frames are
-written by ``gymnasium.wrappers.RecordVideo`` (which needs ``moviepy``:
-``pip install "gymnasium[other]"``). Rendering needs a GL backend (EGL or OSMesa); on a machine
+small generated network while the RoutePlanner chooses; ``pipe_env.wrappers.RecordVideo``
+(Gymnasium's ``RecordVideo`` that keeps the frames the env collects while the robot drives,
+every 0.5 simulated s, instead of one per decision) writes them with ``moviepy``
+(``pip install "pipenav[video]"``). Rendering needs a GL backend (EGL or OSMesa); on a machine
 without one the example says so and exits without a video.
 
 Usage: python examples/record_video.py [--out videos] [--fittings 6] [--seed 1] [--quick]
@@ -16,10 +17,10 @@ import importlib.util
 from pathlib import Path
 
 import gymnasium as gym
-from gymnasium.wrappers import RecordVideo
 
 import pipe_env  # noqa: F401  (registers the environment ids)
 from agents.scripted import RoutePlanner
+from pipe_env.wrappers import RecordVideo
 
 #: What the example prints when it cannot render (tests look for it).
 NO_VIDEO = "no video:"
@@ -33,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="3 fittings, at most 3 decisions")
     args = parser.parse_args(argv)
     if importlib.util.find_spec("moviepy") is None:
-        print(f'{NO_VIDEO} RecordVideo needs moviepy (pip install "gymnasium[other]")')
+        print(f'{NO_VIDEO} RecordVideo needs moviepy (pip install "pipenav[video]")')
         return 0
     fittings = 3 if args.quick else args.fittings
     env = gym.make(

@@ -1,21 +1,29 @@
 """pipenav's simulator side: pipe networks, their MuJoCo worlds, the robot, the rotating LiDAR
 and the Gymnasium environments.
 
-Importing this package sets ``MUJOCO_GL=osmesa`` when no GL backend is chosen and no display
-is present (headless machines), before MuJoCo is imported.
+Importing this package never sets or needs an OpenGL backend: rendering picks one when it is
+first needed (see :mod:`pipe_env.rendering`).
 """
 
 from __future__ import annotations
 
 import os
 
-if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
-    os.environ["MUJOCO_GL"] = "osmesa"
+try:  # MuJoCo loads the OpenGL backend MUJOCO_GL names as it is imported
+    import mujoco  # noqa: F401
+except (ImportError, AttributeError, RuntimeError) as _exc:
+    if not os.environ.get("MUJOCO_GL"):
+        raise
+    raise ImportError(
+        f"mujoco cannot load the OpenGL backend MUJOCO_GL={os.environ['MUJOCO_GL']!r} names "
+        f"({type(_exc).__name__}: {_exc}); unset MUJOCO_GL (pipenav then picks a backend when it "
+        "first renders) or install that backend (e.g. libosmesa6 for osmesa)"
+    ) from _exc
 
-from gymnasium.envs.registration import register, registry  # noqa: E402
+from gymnasium.envs.registration import register, registry
 
-from pipe_env.geometry import Pose  # noqa: E402
-from pipe_env.network import PipeNetwork  # noqa: E402
+from pipe_env.geometry import Pose
+from pipe_env.network import PipeNetwork
 
 #: Environment ids registered on import, with their default decision limits.
 ENV_IDS = {

@@ -52,6 +52,19 @@ many jams, an int >= 1); ``reward_invalid``, ``reward_jam``, ``reward_time`` (fi
 terms); ``reward_goal`` (PipeNav, in [0, 1000]); ``coverage_done`` (PipeExplore: the covered
 fraction of the reachable pipe that ends an episode, in (0, 1]). A bad value raises ValueError
 naming the environment, the argument, the value and what is allowed.
+
+Rendering (``render_mode``): ``"ansi"`` returns the options table as text; ``"rgb_array"``
+returns an image of the robot in the pipe now (480x360, an isometric view following the robot,
+the walls translucent, on a light background); ``"rgb_array_list"`` returns the list of images
+since the last ``render()`` call: in full fidelity one every :attr:`frame_interval` simulated
+seconds while the robot moves (during ``reset`` and each ``step``) plus one at the end of each,
+so a video shows the motion; in fast fidelity (no simulated motion) one per ``reset``/``step``.
+To record an mp4, wrap the env in :class:`pipe_env.wrappers.RecordVideo` (Gymnasium's
+``RecordVideo``, keeping every motion frame; the stock one keeps one frame per step), with
+``render_mode="rgb_array"`` or ``"rgb_array_list"``; it needs the ``video`` extra. Videos play
+at ``metadata["render_fps"]`` frames per second. Rendering picks an OpenGL backend on first use
+and raises :class:`pipe_env.rendering.RenderingUnavailable` when none works; nothing else needs
+one.
 """
 
 from __future__ import annotations
@@ -191,7 +204,11 @@ class _ArgumentCheck:
 class _DecisionEnv(gym.Env):
     """Shared machinery of the two environments (see module docstring)."""
 
-    metadata = {"render_modes": ["rgb_array", "ansi"], "render_fps": 2}
+    metadata = {"render_modes": ["rgb_array", "rgb_array_list", "ansi"], "render_fps": 10}
+
+    #: Simulated seconds between the frames collected while the robot moves (full fidelity);
+    #: at ``render_fps`` 10 a video plays 5 times faster than the robot drives.
+    frame_interval = 0.5
 
     #: The registered id without the namespace (named in argument errors).
     env_name = "PipeNav-v0"
@@ -290,6 +307,11 @@ class _DecisionEnv(gym.Env):
         self._decision_serial = 0
         self._renderer: Any = None
         self._world_for_render: Any = None
+        #: collect frames while the robot moves (``rgb_array_list`` does; so does
+        #: :class:`pipe_env.wrappers.RecordVideo` for ``rgb_array``)
+        self.collect_frames = render_mode == "rgb_array_list"
+        self._frames: list[NDArray[np.uint8]] = []
+        self._next_frame_time = 0.0
         self._mask_cache: tuple[Any, NDArray[np.bool_]] | None = None
 
     @property
@@ -342,6 +364,7 @@ class _DecisionEnv(gym.Env):
             if self.decision is not None or given is not None or self.fixed_network is not None:
                 break
         info = self._info(self._reset_events, {})
+        self._end_frame()
         return self._observation(), info
 
     def _start_episode(self, network: PipeNetwork) -> None:
@@ -352,6 +375,11 @@ class _DecisionEnv(gym.Env):
             self.close()
         self.plant = self._make_plant(self.network)
         self.plant.reset(np.random.default_rng(self.np_random.integers(2**63)))
+        self._frames = []
+        executor = getattr(self.plant, "executor", None)
+        if self.collect_frames and executor is not None:
+            self._next_frame_time = executor.time
+            executor.on_tick = self._on_tick
         self.jams = 0
         self.decisions = 0
         self.structures = 0
@@ -424,6 +452,7 @@ class _DecisionEnv(gym.Env):
     def _finish_step(self, terms: dict[str, float], events: dict[str, Any]):
         reward = float(sum(terms.values()))
         info = self._info(events, terms)
+        self._end_frame()
         return self._observation(), reward, bool(self.terminated), bool(self.truncated), info
 
     def _reach_goal(self, events: dict[str, Any]) -> None:
@@ -637,7 +666,24 @@ class _DecisionEnv(gym.Env):
             return self.options_text()
         if self.render_mode == "rgb_array":
             return self._render_rgb()
+        if self.render_mode == "rgb_array_list":
+            return self.take_frames()
         return None
+
+    def take_frames(self) -> list[NDArray[np.uint8]]:
+        """The frames collected since the last call (see module docstring), oldest first."""
+        frames, self._frames = self._frames, []
+        return frames
+
+    def _on_tick(self, time: float) -> None:
+        """Executor hook: one frame every :attr:`frame_interval` simulated seconds (s)."""
+        if time + 1e-9 >= self._next_frame_time:
+            self._frames.append(self._render_rgb())
+            self._next_frame_time = time + self.frame_interval
+
+    def _end_frame(self) -> None:
+        if self.collect_frames and self.plant is not None:
+            self._frames.append(self._render_rgb())
 
     def options_text(self) -> str:
         """The options table as an operator would read it."""
@@ -677,7 +723,11 @@ class _DecisionEnv(gym.Env):
         if self._renderer is None or self._renderer.world is not world:
             self._renderer = WorldRenderer(world, 480, 360)
         pose = self.plant.pose()
-        cam = self._renderer.camera("iso", target=pose.position, distance=1.2)
+        robot = getattr(self.plant, "robot", None)  # full fidelity: frame the whole robot
+        target = (
+            world.data.xpos[robot.body_ids].mean(axis=0) if robot is not None else pose.position
+        )
+        cam = self._renderer.camera("iso", target=target, distance=0.9)
         return self._renderer.render(cam, markers=[(pose.position, 0.03)])
 
     def close(self) -> None:

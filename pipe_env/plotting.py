@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -80,6 +80,33 @@ def draw_network(
     ax.grid(True, alpha=0.3)
 
 
+def legend_handles(
+    network: PipeNetwork, path: ArrayLike | None = None, decisions: Sequence[ArrayLike] = ()
+) -> list[Any]:
+    """Legend entries for what :func:`draw_network` draws of ``network`` (only the fitting
+    kinds it has, the start, goals, driven path and decisions when present)."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles: list[Any] = [Patch(color="#bdc3c7", alpha=0.6, label="pipe bore")]
+    for kind in sorted({f.kind for f in network.fittings}):
+        marker, colour = FITTING_STYLE[kind]
+        handles.append(Line2D([], [], marker=marker, color=colour, ls="none", ms=6, label=kind))
+    if network.start_pose is not None:
+        handles.append(Line2D([], [], marker="o", color="#27ae60", ls="none", ms=5, label="start"))
+    if network.goals:
+        handles.append(
+            Line2D([], [], marker="*", color="#f1c40f", mec="k", ls="none", ms=12, label="goal")
+        )
+    if path is not None and len(np.asarray(path)):
+        handles.append(Line2D([], [], color="#e74c3c", lw=1.5, label="driven path"))
+    if len(decisions):
+        handles.append(
+            Line2D([], [], marker="x", color="k", ls="none", ms=8, mew=2, label="decision")
+        )
+    return handles
+
+
 def _bore_band(ax: Axes, pts2: np.ndarray, d0: float, d1: float) -> None:
     """Shade the projected bore of a centreline piece (width = diameter across the projection)."""
     if len(pts2) < 2:
@@ -118,7 +145,9 @@ def plot_network(
         or f"{network.name}: {len(network.fittings)} fittings, "
         f"{network.total_length():.2f} m of pipe"
     )
-    fig.tight_layout()
+    handles = legend_handles(network, path, decisions)
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), frameon=False)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
     return fig
 
 

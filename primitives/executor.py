@@ -224,6 +224,8 @@ class Executor:
         self.config = robot.config
         self.substeps = max(1, int(round(CONTROL_DT / self.model.opt.timestep)))
         self.time = 0.0
+        #: called with the simulated time (s) after every control period, or None (video frames)
+        self.on_tick: Callable[[float], None] | None = None
         self.odometer = 0.0
         n = self.config.n_modules
         c = self.config
@@ -434,6 +436,8 @@ class Executor:
         """Advance one control period with the current targets; returns the front's lag, m."""
         self._physics()
         self.time += self.substeps * self.model.opt.timestep
+        if self.on_tick is not None:
+            self.on_tick(self.time)
         d = self.data
         front = d.xpos[self.robot.body_ids[0]]
         diff = self._F_pos - front

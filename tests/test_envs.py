@@ -214,7 +214,7 @@ def test_masks_reach_maskable_ppo_through_subproc_vec_env() -> None:
     venv.close()
 
 
-def test_render_modes() -> None:
+def test_render_modes(needs_gl: str) -> None:
     env = gym.make("pipenav/PipeNav-v0", network_config=SMALL, render_mode="ansi")
     env.reset(seed=0)
     text = env.render()

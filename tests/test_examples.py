@@ -30,15 +30,6 @@ def run_example(name: str, *args: str, timeout: float = 600) -> str:
     return proc.stdout
 
 
-def _gl_works() -> tuple[bool, str]:
-    """Whether MuJoCo can make a GL context here (in a subprocess: a failed backend can leave
-    the process unusable for another)."""
-    code = "import mujoco; c = mujoco.GLContext(16, 16); c.make_current(); c.free()"
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    last = (proc.stderr.strip().splitlines() or [""])[-1]
-    return proc.returncode == 0, last
-
-
 def test_every_example_is_tested() -> None:
     tested = {"random_agent.py", "route_planner.py", "maskable_ppo.py", "detect_recorded_scan.py"}
     tested |= {"make_recorded_scan.py", "record_video.py"}
@@ -83,10 +74,7 @@ def test_maskable_ppo(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_record_video(tmp_path: Path) -> None:
-    works, why = _gl_works()
-    if not works:
-        pytest.skip(f"no GL backend works here ({why})")
+def test_record_video(tmp_path: Path, needs_gl: str) -> None:
     pytest.importorskip("moviepy", reason="RecordVideo needs moviepy")
     out = run_example("record_video.py", "--quick", "--out", str(tmp_path))
     if "no video:" in out:

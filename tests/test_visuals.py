@@ -28,18 +28,19 @@ def test_network_plot_is_written(tmp_path) -> None:
     assert img[..., :3].std() > 0.05  # not blank
 
 
-def test_offscreen_render_shows_the_pipes() -> None:
+def test_offscreen_render_shows_the_pipes(needs_gl: str) -> None:
     world = build_world(layouts.mitre_bend(0.1))
     renderer = WorldRenderer(world, 160, 120)
     top = renderer.render("top")
     assert top.shape == (120, 160, 3) and top.dtype == np.uint8
     background = np.median(top.reshape(-1, 3), axis=0)
+    assert background.min() > 200  # a light background, not black
     differs = np.abs(top.astype(int) - background).sum(axis=2) > 30
     assert 0.01 < differs.mean() < 0.9  # some pipe pixels, not all
     renderer.close()
 
 
-def test_demo_command_writes_report_and_images(tmp_path) -> None:
+def test_demo_command_writes_report_and_images(tmp_path, needs_gl: str) -> None:
     out = tmp_path / "demo"
     proc = subprocess.run(
         [sys.executable, "-m", "agents.cli", "demo", "--out", str(out), "--fittings", "4"],
@@ -62,3 +63,15 @@ def test_demo_command_writes_report_and_images(tmp_path) -> None:
             assert mpimg.imread(out / name).std() > 0.01, name  # a real picture, not blank
         else:
             json.loads((out / name).read_text())
+
+
+def test_network_plot_has_a_legend_for_its_markers() -> None:
+    import matplotlib.pyplot as plt
+
+    from pipe_env.plotting import plot_network
+
+    net = layouts.t_junction(0.1, direction=np.pi / 2).with_goals([[0, 0.5, 0]])
+    fig = plot_network(net, path=[[-0.4, 0, 0], [0, 0, 0]], decisions=[[0, 0, 0]])
+    labels = {t.get_text() for t in fig.legends[0].get_texts()}
+    plt.close(fig)
+    assert {"pipe bore", "tee", "closure", "start", "goal", "driven path", "decision"} == labels
