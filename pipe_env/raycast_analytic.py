@@ -1,12 +1,12 @@
-"""Exact ray casting against the bore of a pipe network, vectorised in numpy.
+"""Exact ray casting against the bore of a pipe network.
 
 This module owns the analytic LiDAR backend: instead of the faceted CSG ray meshes
 (:mod:`pipe_env.meshes`), every network element is described by the exact solids whose union is
 the pipe's bore (the air inside the pipe), and a ray cast from inside the bore hits the wall where
 it first leaves that union:
 
-- straight runs: finite cylinders between their ports (long runs are split into segments of at most
-  ``segment_length`` so that spatial culling stays tight);
+- straight runs: finite cylinders between their ports (for the numpy path, long runs are split
+  into segments of at most ``segment_length`` so that its spatial culling stays tight);
 - reducers: cone frustums between the two ports;
 - closures: a cylinder whose inner cap is the end wall;
 - mitre bends: two cylinders, each clipped by the bisector plane;
@@ -16,11 +16,16 @@ it first leaves that union:
 - long-radius bends: a torus sector (a quartic per ray) between the two port planes.
 
 All quadric pieces (cylinders, cones) share one parameterisation, a frustum of a cone (slope 0: a
-cylinder) along an axis, clipped by two planes, so a batch of rays is intersected with all of
-them at once. Each piece contributes, per ray, the interval of ray parameters inside it (a torus
-sector up to two); the first exit from the union is found by extending ``t`` from 0 while some
-interval contains it. Seams between pieces are shared planes, so no ray can slip through them and
-no ray escapes a closed network.
+cylinder) along an axis, clipped by two planes. Each piece contributes, per ray, the interval of
+ray parameters inside it (a torus sector up to two); the first exit from the union is found by
+extending ``t`` from 0 while some interval contains it. Seams between pieces are shared planes,
+so no ray can slip through them and no ray escapes a closed network.
+
+Two implementations of the same arithmetic: :meth:`AnalyticBore.cast` (and
+:meth:`AnalyticBore.cast_groups` for a sweep, one origin per plane), compiled per ray in
+:mod:`pipe_env.raycast_kernels` (the backend); and :meth:`AnalyticBore.cast_numpy`, vectorised
+over (ray, piece) pairs in numpy, the former backend kept as the reference the kernels are tested
+against (same hits within rounding, about 1e-13 m).
 
 Units: metres. Conventions: ``dist`` is ``inf`` where nothing is hit within ``cutoff`` and 0 where
 the ray starts outside the bore (inside a wall or outside the network); ``normal`` is the unit
@@ -41,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from pipe_env.fittings import FittingGeometry
 from pipe_env.network import PipeNetwork
+from pipe_env.raycast_kernels import N_FIELDS, QUADRIC, TORUS, axial_safe_bands, cast_rays
 
 #: Longest piece a straight run is split into, metres (tighter spatial culling).
 SEGMENT_LENGTH = 0.25
@@ -226,6 +232,64 @@ def _add_fitting(b: _PieceBuilder, g: FittingGeometry, element: int) -> None:
                 b.frustum(g.centre, p.position, p.radius, p.radius, element)
 
 
+def _pieces(
+    network: PipeNetwork, segment_length: float
+) -> tuple[QuadricPieces, TorusPieces, list[str]]:
+    """The pieces of a validated network, runs split into at most ``segment_length`` (m)."""
+    b = _PieceBuilder()
+    elements: list[str] = []
+    for r in network.runs:
+        if network.straight_length(r.id) <= 1e-6:
+            continue
+        pa = network.geometry[r.a].port(r.id).position
+        pb = network.geometry[r.b].port(r.id).position
+        element = len(elements)
+        elements.append(f"run:{r.id}")
+        n_seg = max(1, math.ceil(float(np.linalg.norm(pb - pa)) / segment_length))
+        cuts = [pa + (pb - pa) * (i / n_seg) for i in range(n_seg + 1)]
+        for i in range(n_seg):
+            b.frustum(cuts[i], cuts[i + 1], 0.5 * r.diameter, 0.5 * r.diameter, element)
+    for f in network.fittings:
+        element = len(elements)
+        elements.append(f"fitting:{f.id}")
+        _add_fitting(b, network.geometry[f.id], element)
+    quadrics, tori = b.build()
+    return quadrics, tori, elements
+
+
+def _pack(
+    quadrics: QuadricPieces, tori: TorusPieces
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
+    """The pieces as the compiled kernels read them: a (K, 22) table (columns in
+    :data:`pipe_env.raycast_kernels.FIELDS`), kinds and element ids; quadrics, then tori."""
+    rows = []
+    for pc in (quadrics, tori):
+        rows.append(
+            np.column_stack(
+                [
+                    pc.origin if isinstance(pc, QuadricPieces) else pc.centre,
+                    pc.axis,
+                    pc.radius0 if isinstance(pc, QuadricPieces) else pc.major,
+                    pc.slope if isinstance(pc, QuadricPieces) else pc.minor,
+                    pc.plane_normals[:, 0],
+                    pc.plane_offsets[:, 0],
+                    pc.plane_normals[:, 1],
+                    pc.plane_offsets[:, 1],
+                    pc.bound_centre,
+                    pc.bound_radius,
+                    np.zeros((len(pc), 2)),  # safe bands, below
+                ]
+            ).reshape(-1, N_FIELDS)
+        )
+    table = np.ascontiguousarray(np.concatenate(rows), dtype=np.float64)
+    kind = np.concatenate(
+        [np.full(len(quadrics), QUADRIC, dtype=np.int64), np.full(len(tori), TORUS, dtype=np.int64)]
+    )
+    table[:, N_FIELDS - 2 :] = axial_safe_bands(table, kind)
+    element = np.ascontiguousarray(np.concatenate([quadrics.element, tori.element]), dtype=np.int64)
+    return table, kind, element
+
+
 class AnalyticBore:
     """The exact bore of a network as a union of convex quadric pieces and torus sectors.
 
@@ -233,38 +297,36 @@ class AnalyticBore:
     elements (``run:<id>``, ``fitting:<id>``) as :func:`pipe_env.world.network_meshes` does.
     """
 
-    def __init__(self, quadrics: QuadricPieces, tori: TorusPieces, elements: list[str]) -> None:
+    def __init__(
+        self,
+        quadrics: QuadricPieces,
+        tori: TorusPieces,
+        elements: list[str],
+        kernel_pieces: tuple[QuadricPieces, TorusPieces] | None = None,
+    ) -> None:
+        """``quadrics``, ``tori``: the pieces of the numpy path (:meth:`cast_numpy`,
+        :meth:`contains`); ``kernel_pieces``: the same solids as the compiled kernels read them
+        (runs not split into segments: their broad phase is per ray), default the same pieces."""
         self.quadrics = quadrics
         self.tori = tori
         self.elements = elements
+        kq, kt = kernel_pieces if kernel_pieces is not None else (quadrics, tori)
+        self._table, self._kind, self._element = _pack(kq, kt)
 
     @classmethod
     def from_network(
         cls, network: PipeNetwork, segment_length: float = SEGMENT_LENGTH
     ) -> AnalyticBore:
-        """Pieces of every run (with a straight part) and every fitting of ``network``."""
+        """Pieces of every run (with a straight part) and every fitting of ``network``.
+
+        ``segment_length`` (m) splits long runs for the numpy path's culling; the compiled
+        kernels read every run as one piece (they cull per ray)."""
         if not (math.isfinite(segment_length) and segment_length > 0):
             raise ValueError(f"segment_length = {segment_length!r} m is invalid; allowed > 0")
         network.validate()
-        b = _PieceBuilder()
-        elements: list[str] = []
-        for r in network.runs:
-            if network.straight_length(r.id) <= 1e-6:
-                continue
-            pa = network.geometry[r.a].port(r.id).position
-            pb = network.geometry[r.b].port(r.id).position
-            element = len(elements)
-            elements.append(f"run:{r.id}")
-            n_seg = max(1, math.ceil(float(np.linalg.norm(pb - pa)) / segment_length))
-            cuts = [pa + (pb - pa) * (i / n_seg) for i in range(n_seg + 1)]
-            for i in range(n_seg):
-                b.frustum(cuts[i], cuts[i + 1], 0.5 * r.diameter, 0.5 * r.diameter, element)
-        for f in network.fittings:
-            element = len(elements)
-            elements.append(f"fitting:{f.id}")
-            _add_fitting(b, network.geometry[f.id], element)
-        quadrics, tori = b.build()
-        return cls(quadrics, tori, elements)
+        quadrics, tori, elements = _pieces(network, segment_length)
+        kq, kt, _ = _pieces(network, math.inf)
+        return cls(quadrics, tori, elements, (kq, kt))
 
     # ------------------------------------------------------------------ queries
     def contains(self, points: ArrayLike) -> NDArray[np.bool_]:
@@ -296,7 +358,101 @@ class AnalyticBore:
         cutoff: float = math.inf,
         normals: bool = True,
     ) -> RayHits:
-        """Intersect N rays with the bore's wall.
+        """Intersect N rays with the bore's wall (compiled kernels, one ray at a time).
+
+        Args:
+            origins: (N, 3) or (3,) ray origins, metres (world frame).
+            directions: (N, 3) unit directions.
+            cutoff: hits farther than this (m) are reported as ``inf``; pieces whose bounding
+                sphere the ray does not reach within it are skipped (spatial culling).
+            normals: compute the wall normals (else ``RayHits.normal`` is all zeros).
+        """
+        d = np.ascontiguousarray(np.asarray(directions, dtype=float).reshape(-1, 3))
+        n = len(d)
+        if not (cutoff > 0):
+            raise ValueError(f"cutoff = {cutoff!r} m is invalid; allowed > 0")
+        o_in = np.asarray(origins, dtype=float)
+        if o_in.ndim == 1:
+            if o_in.shape != (3,):
+                raise ValueError(f"origins has shape {o_in.shape}; allowed (3,) or (N, 3)")
+            o, per = o_in.reshape(1, 3), max(n, 1)
+        else:
+            o = o_in.reshape(-1, 3)
+            if len(o) == 1:
+                per = max(n, 1)
+            elif len(o) == n:
+                per = 1
+            else:
+                raise ValueError(f"origins has {len(o)} rows for {n} directions; allowed 1 or {n}")
+        return self._cast_grouped(np.ascontiguousarray(o), per, d, float(cutoff), normals)
+
+    def cast_groups(
+        self,
+        origins: ArrayLike,
+        directions: ArrayLike,
+        cutoff: float = math.inf,
+        normals: bool = True,
+    ) -> RayHits:
+        """Intersect M groups of B rays, group ``m`` cast from ``origins[m]`` (a LiDAR sweep:
+        one origin per plane) without repeating the origins per ray.
+
+        Args:
+            origins: (M, 3) origins, metres.
+            directions: (M, B, 3) unit directions.
+            cutoff, normals: as :meth:`cast`.
+
+        Returns:
+            :class:`RayHits` of the M * B rays, group-major.
+        """
+        o = np.ascontiguousarray(np.asarray(origins, dtype=float))
+        d = np.asarray(directions, dtype=float)
+        if o.ndim != 2 or o.shape[1] != 3 or d.ndim != 3 or d.shape[0] != len(o) or d.shape[2] != 3:
+            raise ValueError(
+                f"origins {o.shape} and directions {d.shape} are invalid; allowed (M, 3) and "
+                "(M, B, 3)"
+            )
+        if not (cutoff > 0):
+            raise ValueError(f"cutoff = {cutoff!r} m is invalid; allowed > 0")
+        per = max(d.shape[1], 1)
+        return self._cast_grouped(
+            o, per, np.ascontiguousarray(d.reshape(-1, 3)), float(cutoff), normals
+        )
+
+    def _cast_grouped(
+        self, origins: NDArray, per: int, d: NDArray, cutoff: float, normals: bool
+    ) -> RayHits:
+        n = len(d)
+        dist = np.empty(n)
+        normal = np.empty((n, 3))
+        element = np.empty(n, dtype=np.int64)
+        if n == 0:
+            return RayHits(dist, normal, element)
+        cast_rays(
+            self._table,
+            self._kind,
+            self._element,
+            origins,
+            per,
+            d,
+            cutoff,
+            normals,
+            dist,
+            normal,
+            element,
+        )
+        return RayHits(dist, normal, element)
+
+    def cast_numpy(
+        self,
+        origins: ArrayLike,
+        directions: ArrayLike,
+        cutoff: float = math.inf,
+        normals: bool = True,
+    ) -> RayHits:
+        """Intersect N rays with the bore's wall: the vectorised numpy reference.
+
+        The backend as it was before the compiled kernels, kept as an independent check of
+        :meth:`cast` (same results within rounding) and as a benchmark reference.
 
         Args:
             origins: (N, 3) or (3,) ray origins, metres (world frame).

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import functools
+import importlib.util
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -11,7 +16,8 @@ from pipe_env import layouts
 from pipe_env.generator import NetworkConfig, generate_network
 from pipe_env.meshes import circle_segments, polygon_radius
 from pipe_env.network import PipeNetwork
-from pipe_env.raycast_analytic import AnalyticBore, solve_depressed_quartic
+from pipe_env.raycast_analytic import AnalyticBore, RayHits, solve_depressed_quartic
+from pipe_env.raycast_kernels import axial_safe_bands, depressed_quartic_roots
 from pipe_env.raycast_mujoco import EDGE_GUARD, MujocoCaster
 from pipe_env.world import build_world
 
@@ -122,6 +128,180 @@ def test_quartic_solver_matches_numpy_roots() -> None:
     x = got
     residual = np.abs((x * x + p[:, None]) * x * x + q[:, None] * x + s[:, None])
     assert np.nanmax(residual) < 1e-10
+
+
+def test_compiled_quartic_matches_the_vectorised_solver() -> None:
+    """The kernels' scalar quartic gives the numpy solver's real roots (count and values)."""
+    rng = np.random.default_rng(7)
+    p, q, s = rng.normal(size=(3, 3000)) * rng.choice([0.01, 1.0, 30.0], size=(3, 3000))
+    q[:400] = 0.0  # biquadratic
+    want = np.sort(solve_depressed_quartic(p, q, s), axis=1)
+    for i in range(len(p)):
+        n, *roots = depressed_quartic_roots(p[i], q[i], s[i])
+        got = np.array(roots)
+        assert n == np.isfinite(want[i]).sum()
+        np.testing.assert_allclose(got[:n], want[i, :n], rtol=0, atol=1e-12)
+        assert np.isnan(got[n:]).all()
+
+
+# ------------------------------------------------------------ compiled kernels versus numpy
+#: The worlds the compiled backend is checked in against the numpy reference.
+COMPARED_LAYOUTS = ("t_junction", "long_bend", "reducer", "cross_junction", "closure")
+
+
+def assert_same_hits(a: RayHits, b: RayHits, label: str, at_rims: bool = False) -> None:
+    """Same misses (inf) and outside starts (0), hits within 1e-9 m, and (nearly always) the
+    same element and normal.
+
+    ``at_rims``: the rays are aimed at the rims where two elements' walls meet; there both
+    walls end within rounding of each other and either element is right."""
+    assert (np.isfinite(a.dist) == np.isfinite(b.dist)).all(), f"{label}: misses differ"
+    assert ((a.dist == 0) == (b.dist == 0)).all(), f"{label}: outside starts differ"
+    hit = np.isfinite(a.dist)
+    err = np.abs(a.dist[hit] - b.dist[hit])
+    assert err.max(initial=0.0) <= 1e-9, f"{label}: hits differ by {err.max():.3g} m"
+    assert ((a.element >= 0) == (b.element >= 0)).all(), f"{label}: hit or not differs"
+    same = (a.element == b.element) & (np.abs(a.normal - b.normal).max(axis=1) <= 1e-7)
+    if not at_rims:
+        assert same.mean() > 0.999, f"{label}: surfaces differ on {np.sum(~same)} rays"
+
+
+def seam_rays(
+    network: PipeNetwork, rng: np.random.Generator, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rays that meet the seams between elements: from interior points to points on the rims
+    of the ports (where a run meets a fitting) and through the port planes' interiors, and
+    rays grazing along a seam: in a port plane, or moved off it by 0.1 nm to 0.1 um.
+
+    Returns origins (n, 3), directions (n, 3) and which rays lie exactly in a port plane."""
+    ports = [p for g in network.geometry.values() for p in g.ports]
+    origins, dirs, exact = [], [], []
+    while len(origins) < n:
+        port = ports[rng.integers(len(ports))]
+        side = np.cross(port.axis, rng.normal(size=3))
+        side /= np.linalg.norm(side)
+        kind = rng.integers(3)
+        if kind == 0:  # at the rim
+            target = port.position + side * port.radius
+        else:  # through the port plane's interior
+            target = port.position + side * port.radius * rng.uniform(0.0, 0.95)
+        shift = 0.0
+        if kind == 2:  # in the port plane, starting inside on the seam: graze along it
+            shift = float(rng.choice([0.0, -1e-10, 1e-10, -1e-7, 1e-7]))
+            start = port.position - side * port.radius * rng.uniform(0.0, 0.9)
+            start, target = start + shift * port.axis, target + shift * port.axis
+        else:
+            start = port.position + port.axis * rng.uniform(-1.2, 1.2) * port.radius
+            start += np.cross(port.axis, rng.normal(size=3)) * 0.3 * port.radius
+        d = target - start
+        if np.linalg.norm(d) < 1e-6:
+            continue
+        origins.append(start)
+        dirs.append(d / np.linalg.norm(d))
+        exact.append(kind == 2 and shift == 0.0)
+    return np.array(origins), np.array(dirs), np.array(exact)
+
+
+def assert_same_seam_hits(bore: AnalyticBore, network: PipeNetwork, seed: int, n: int) -> None:
+    """Rays at the seams hit where the numpy reference hits them.
+
+    A ray exactly in a seam plane starts on both elements' boundary planes and runs along
+    them: rounding alone decides whether its start is inside one, the other or neither
+    element, and the two paths round differently (the reference works relative to the first
+    ray's origin), so those rays are not compared; rays 0.1 nm off the plane are."""
+    origins, dirs, exact = seam_rays(network, np.random.default_rng(seed), n)
+    o, d = origins[~exact], dirs[~exact]
+    assert_same_hits(bore.cast(o, d), bore.cast_numpy(o, d), "seams", at_rims=True)
+
+
+@pytest.mark.parametrize("name", COMPARED_LAYOUTS)
+def test_compiled_backend_matches_numpy_reference(name: str) -> None:
+    """The compiled kernels give the numpy path's hits on many random rays: one origin and
+    one origin per ray, with and without a cutoff, and rays grazing the seams."""
+    net = layouts.make_layout(name)
+    bore = AnalyticBore.from_network(net)
+    rng = np.random.default_rng(11)
+    for origin in interior_points(net, 6, rng):
+        dirs = sample_directions(3000, rng)
+        for cutoff in (np.inf, 0.35):
+            assert_same_hits(
+                bore.cast(origin, dirs, cutoff),
+                bore.cast_numpy(origin, dirs, cutoff),
+                f"{name} one origin, cutoff {cutoff}",
+            )
+    origins = interior_points(net, 4000, rng)
+    dirs = sample_directions(4000, rng)
+    assert_same_hits(
+        bore.cast(origins, dirs), bore.cast_numpy(origins, dirs), f"{name} per-ray origins"
+    )
+    assert_same_seam_hits(bore, net, 13, 4000)
+    # rays from outside the bore (inside walls, beyond the ends) report 0 on both
+    outside = origins + rng.normal(size=origins.shape) * 0.2
+    assert_same_hits(bore.cast(outside, dirs), bore.cast_numpy(outside, dirs), f"{name} outside")
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), planar=st.booleans())
+def test_compiled_backend_matches_numpy_on_generated_networks(seed: int, planar: bool) -> None:
+    net = generate_network(NetworkConfig(n_fittings=6, planar=planar), np.random.default_rng(seed))
+    bore = AnalyticBore.from_network(net)
+    rng = np.random.default_rng(seed)
+    origins = interior_points(net, 1500, rng)
+    dirs = sample_directions(1500, rng)
+    assert_same_hits(bore.cast(origins, dirs), bore.cast_numpy(origins, dirs), "generated")
+    assert_same_seam_hits(bore, net, seed, 1500)
+
+
+@pytest.mark.parametrize("name", COMPARED_LAYOUTS)
+def test_safe_bands_are_out_of_every_other_pieces_reach(name: str) -> None:
+    """Wall points of a quadric within its safe band lie outside every other piece's
+    bounding sphere (which is what lets a ray leaving there stop), and the straight runs
+    have a band (so the shortcut is taken)."""
+    bore = AnalyticBore.from_network(layouts.make_layout(name))
+    table, kind = bore._table, bore._kind
+    bands = axial_safe_bands(table, kind)
+    rng = np.random.default_rng(14)
+    runs = [k for k in range(len(table)) if bore.elements[bore._element[k]].startswith("run:")]
+    assert all(bands[k, 0] < bands[k, 1] for k in runs)
+    for k in np.flatnonzero(bands[:, 0] <= bands[:, 1]):
+        p, u, r0, slope = table[k, 0:3], table[k, 3:6], table[k, 6], table[k, 7]
+        s = rng.uniform(bands[k, 0], bands[k, 1], 2000)
+        side = np.cross(u, rng.normal(size=(2000, 3)))
+        side /= np.linalg.norm(side, axis=1)[:, None]
+        wall = p + s[:, None] * u + (r0 + slope * s)[:, None] * side
+        for j in range(len(table)):
+            if j != k:
+                gap = np.linalg.norm(wall - table[j, 16:19], axis=1) - table[j, 19]
+                assert gap.min() > 0.0
+
+
+def test_cast_groups_equals_cast_with_repeated_origins() -> None:
+    """A sweep cast as groups (one origin per plane) gives the per-ray cast's bytes."""
+    net = layouts.long_bend(diameter=0.08, distance=0.3)
+    bore = AnalyticBore.from_network(net)
+    rng = np.random.default_rng(12)
+    origins = interior_points(net, 7, rng)
+    dirs = np.stack([sample_directions(50, rng) for _ in origins])
+    grouped = bore.cast_groups(origins, dirs, 1.5, normals=True)
+    flat = bore.cast(np.repeat(origins, 50, axis=0), dirs.reshape(-1, 3), 1.5, normals=True)
+    assert grouped.dist.tobytes() == flat.dist.tobytes()
+    assert grouped.normal.tobytes() == flat.normal.tobytes()
+    assert (grouped.element == flat.element).all()
+    empty = bore.cast_groups(origins[:0], dirs[:0], 1.0)
+    assert empty.dist.shape == (0,) and empty.normal.shape == (0, 3)
+
+
+def test_cast_rejects_bad_shapes_and_cutoffs() -> None:
+    bore = AnalyticBore.from_network(layouts.straight())
+    dirs = sample_directions(4, np.random.default_rng(0))
+    with pytest.raises(ValueError, match="cutoff"):
+        bore.cast(np.zeros(3), dirs, cutoff=0.0)
+    with pytest.raises(ValueError, match="origins"):
+        bore.cast(np.zeros((3, 3)), dirs)
+    with pytest.raises(ValueError, match="origins"):
+        bore.cast_groups(np.zeros((2, 3)), dirs[None])
+    with pytest.raises(ValueError, match="cutoff"):
+        bore.cast_groups(np.zeros((1, 3)), dirs[None], cutoff=-1.0)
 
 
 # ------------------------------------------------------------------------------ analytic bore
@@ -301,3 +481,31 @@ def test_analytic_hits_are_where_rays_leave_the_bore(name: str, diameter: float,
         assert bore.contains(before).all()
         assert not bore.contains(after).any()
         np.testing.assert_allclose(np.linalg.norm(hits.normal, axis=1), 1.0, atol=1e-9)
+
+
+# ------------------------------------------------------------------------------- benchmark
+def test_bench_lidar_prints_embree_beside_the_backend_and_writes_its_section(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``bench_lidar.py --write-docs`` prints both worlds' rates with Embree's and the ratio,
+    and writes the same table as the stamped 'lidar' section (here into a temporary file)."""
+    pytest.importorskip("embreex")
+    import benchmarks.report as report
+
+    path = tmp_path / "benchmarks.md"
+    monkeypatch.setattr(report, "write_section", functools.partial(report.write_section, path=path))
+    monkeypatch.setattr(sys, "argv", ["bench_lidar.py", "--repeat", "1", "--write-docs"])
+    root = Path(__file__).resolve().parent.parent
+    spec = importlib.util.spec_from_file_location("bench_lidar", root / "benchmarks/bench_lidar.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.main()
+    out = capsys.readouterr().out
+    for row in ("analytic backend (compiled kernels)", "Embree (embreex), 1 thread"):
+        assert row in out
+    assert out.count("analytic backend / Embree = ") == 2
+    text = path.read_text()
+    assert "<!-- begin lidar -->" in text
+    assert "`python benchmarks/bench_lidar.py --repeat 1`" in text
+    assert "| Embree (embreex), 1 thread, same meshes |" in text
