@@ -12,10 +12,12 @@ import math
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from detector.detection import Detection
-from detector.grid import label_regions
+from detector.fit_kernels import MODEL_CYLINDER, wall_distances, wall_fit
+from detector.grid import label_grid
 from detector.improved_config import ImprovedConfig
 from detector.pipe_cloud import (
     ANNEAL,
@@ -26,9 +28,8 @@ from detector.pipe_cloud import (
     _pct,
     _subsample,
     _tolerance_v,
-    _transform,
 )
-from detector.robust import mad_sigma, robust_gauss_newton
+from detector.robust import mad_sigma, median, robust_fit
 from detector.transforms import SensorInPipe
 
 #: The wall's own radius replaces the clamped one when they differ by more than this, m.
@@ -62,33 +63,6 @@ def _axis_pose(params: NDArray[np.float64], sensor_origin: NDArray[np.float64]) 
     return SensorInPipe.trusted(pos, rot)
 
 
-def _cyl_axis_residual(
-    sub: NDArray[np.float64], big_r: float, x: NDArray[np.float64], want_jac: bool
-) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """Residual (distance to the axis - R) of ``(3, N)`` points for the axis through
-    (0, y0, z0) along (1, a, b), and its analytic Jacobian ``(N, 4)``."""
-    y0, z0, a, b = (float(v) for v in x)
-    n = math.sqrt(1.0 + a * a + b * b)
-    qu = sub[0]
-    qy = sub[1] - y0
-    qz = sub[2] - z0
-    t = (qu + a * qy + b * qz) * (1.0 / n)
-    dist = qu * qu + qy * qy + qz * qz - t * t
-    np.maximum(dist, 1e-18, out=dist)
-    np.sqrt(dist, out=dist)
-    res = dist - big_r
-    if not want_jac:
-        return res, None
-    inv = 1.0 / dist
-    jac = np.empty((4, qu.size))
-    jac[0] = (t * (a / n) - qy) * inv
-    jac[1] = (t * (b / n) - qz) * inv
-    tn = t * (1.0 / n)
-    jac[2] = tn * jac[0]
-    jac[3] = tn * jac[1]
-    return res, jac.T
-
-
 def _refine_axis(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float | None = None
 ) -> tuple[SensorInPipe, dict[str, Any]]:
@@ -99,32 +73,21 @@ def _refine_axis(
     info: dict[str, Any] = {"axis_points": 0}
     if xyz.shape[1] < 20:
         return cloud.pose, info
-    r = cloud.r_v
     gate = max(0.35 * big_r, 0.01)
-    cand = np.flatnonzero(np.abs(r - big_r) < gate)
-    if cand.size < 20:
+    sub = _axis_returns(xyz, cloud.r_v, big_r, gate, math.nan if u_max is None else u_max)
+    if sub.shape[1] == 0:
         return cloud.pose, info
-    u = xyz[0, cand]
-    if u_max is None:
-        keep = max(400, int(0.6 * cand.size))
-        if keep < cand.size:
-            cut = float(np.partition(u, keep - 1)[keep - 1])
-            cand = cand[u <= cut]
-    else:
-        cand = cand[u < u_max]
-        if cand.size < 40:
-            return cloud.pose, info
-    sub = np.ascontiguousarray(xyz[:, _subsample(cand, cfg.axis_points)])
+    sub = np.ascontiguousarray(sub[:, _subsample(np.arange(sub.shape[1]), cfg.axis_points)])
     # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
     # gentle taper would pass for a tilted wall), so it is held at the prior
     span = float(_pct(sub[0], 95) - _pct(sub[0], 5))
     tilt_sigma = cfg.prior_tilt if span >= 0.05 else math.radians(0.05)
     prior = np.array([cfg.prior_offset, cfg.prior_offset, tilt_sigma, tilt_sigma])
     info["axis_span"] = span
-    x, res, w = robust_gauss_newton(
-        None,
+    x, res, w = robust_fit(
+        MODEL_CYLINDER,
+        sub,
         np.zeros(4),
-        np.full(4, 1e-5),
         c=gate,
         iterations=10,
         prior_sigma=prior,
@@ -132,7 +95,7 @@ def _refine_axis(
         step_tol=STEP_TOL,
         anneal=ANNEAL,
         cost_tol=COST_TOL,
-        resjac=lambda p: _cyl_axis_residual(sub, big_r, p, True),
+        fpar=np.array([big_r]),
     )
     info.update(
         axis_points=int((w > 0).sum()),
@@ -145,6 +108,45 @@ def _refine_axis(
     if math.hypot(x[2], x[3]) > math.tan(math.radians(8.0)):
         return cloud.pose, info
     return _axis_pose(x, cloud.pose.position).compose(cloud.pose), info
+
+
+@njit(cache=True)
+def _axis_returns(xyz, r, big_r, gate, u_max):  # type: ignore[no-untyped-def]
+    """The wall-like returns (within ``gate`` of the radius ``big_r``, m) an axis refinement
+    fits, ``(3, n)`` in their order: with ``u_max`` NaN, the nearest 60 % of them along the
+    axis (at least 400); else those nearer than ``u_max`` (m). None (``(3, 0)``) when fewer
+    than 20, or 40 before ``u_max``, are left."""
+    n = r.size
+    cand = np.empty(n, dtype=np.intp)
+    m = 0
+    for i in range(n):
+        if abs(r[i] - big_r) < gate:
+            cand[m] = i
+            m += 1
+    if m < 20:
+        return np.empty((3, 0))
+    u = np.empty(m)
+    for j in range(m):
+        u[j] = xyz[0, cand[j]]
+    if math.isnan(u_max):
+        keep = max(400, int(0.6 * m))
+        cut = np.inf
+        if keep < m:
+            cut = np.partition(u, keep - 1)[keep - 1]
+        sel = u <= cut
+    else:
+        sel = u < u_max
+        if np.count_nonzero(sel) < 40:
+            return np.empty((3, 0))
+    out = np.empty((3, np.count_nonzero(sel)))
+    k = 0
+    for j in range(m):
+        if sel[j]:
+            out[0, k] = xyz[0, cand[j]]
+            out[1, k] = xyz[1, cand[j]]
+            out[2, k] = xyz[2, cand[j]]
+            k += 1
+    return out
 
 
 def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
@@ -166,16 +168,15 @@ def _wall_radius(
     about it (``wall_radius_rms``, 1.4826 MAD, m) in ``diag``. Corrections below
     ``RADIUS_DEAD_BAND`` are not made (the clamp reading is as good as the fit there)."""
     xyz = cloud.xyz_v
-    e = cloud.r_v - big_r
-    sel = (xyz[0] < u_max) & (np.abs(e) <= cfg.max_radius_correction + _tolerance_v(cloud, cfg))
-    n = int(np.count_nonzero(sel))
-    if n < 100:
+    idx, e_sel = _wall_returns(
+        xyz[0], cloud.r_v, _tolerance_v(cloud, cfg), big_r, u_max, cfg.max_radius_correction
+    )
+    if idx.size < 100:
         return big_r
-    e_sel = e[sel]
-    de = float(np.median(e_sel))
+    de = median(e_sel)
     if not RADIUS_DEAD_BAND <= abs(de) <= cfg.max_radius_correction:
         return big_r
-    if not _covers(xyz, np.flatnonzero(sel), 0.75):
+    if not _covers(xyz, idx, 0.75):
         return big_r
     spread = float(mad_sigma(e_sel - de))
     if spread > _straight_wall_rms(cloud):  # not a straight wall about this axis
@@ -185,10 +186,28 @@ def _wall_radius(
     return big_r + de
 
 
+@njit(cache=True)
+def _wall_returns(u, r, tol, big_r, u_max, reach):  # type: ignore[no-untyped-def]
+    """The returns nearer than ``u_max`` along the axis whose distance ``e`` from the wall of
+    radius ``big_r`` is within ``reach`` plus their tolerance ``tol`` (m): their indices and
+    ``e`` (m)."""
+    n = r.size
+    idx = np.empty(n, dtype=np.intp)
+    e_sel = np.empty(n)
+    m = 0
+    for i in range(n):
+        e = r[i] - big_r
+        if u[i] < u_max and abs(e) <= reach + tol[i]:
+            idx[m] = i
+            e_sel[m] = e
+            m += 1
+    return idx[:m].copy(), e_sel[:m].copy()
+
+
 def _straight_wall_rms(cloud: PipeCloud) -> float:
     """Largest scatter (m) of wall returns about a straight cylinder that the returns' own
     noise explains: 4 x their median radial noise, at least 0.6 mm."""
-    return max(4.0 * float(_pct(cloud.sigma_v, 50.0)), 0.0006)
+    return max(4.0 * cloud.sigma_percentile(50.0), 0.0006)
 
 
 def _wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float) -> bool:
@@ -239,27 +258,14 @@ def _wall_count(
     tolerance: a return off the wall costs 1, one on it costs how far in the tolerance it
     lies), and the rms distance from the wall of those within the tolerance (m)."""
     sp, tol = _thinned(cloud, cfg)
-    pts = _transform(pose, sp)
-    e = np.sqrt(np.square(pts[1]) + np.square(pts[2])) - big_r
-    near = pts[0] < u_max
+    u, e = wall_distances(sp, pose.rotation, pose.position, big_r)
+    near = u < u_max
     n_near = int(np.count_nonzero(near))
     if n_near < 40:
         near[:] = True
         n_near = int(near.size)
-    return _wall_fit(e[near], tol_scale * tol[near], n_near)
-
-
-def _wall_fit(
-    e: NDArray[np.float64], tol: NDArray[np.float64], n: int
-) -> tuple[int, int, float, float]:
-    """``(n_ok, n, cost, rms)`` of returns ``e`` off the wall (m) with tolerances ``tol``
-    (m): how many lie within their tolerance, ``n`` (passed through), the truncated quadratic
-    cost ``sum min((e / tol)^2, 1)``, and the rms of ``e`` over those within (m)."""
-    q = np.square(e / tol)
-    ok = q <= 1.0
-    n_ok = int(np.count_nonzero(ok))
-    rms = math.sqrt(float(np.mean(np.square(e[ok])))) if n_ok else math.inf
-    return n_ok, n, float(np.minimum(q, 1.0).sum()), rms
+    n_ok, cost, rms = wall_fit(e, tol, near, tol_scale)
+    return n_ok, n_near, cost, rms
 
 
 def _common_wall_fit(
@@ -273,15 +279,16 @@ def _common_wall_fit(
     nearer than ``u_max`` along the axis under every pose (a tilted pose would otherwise count
     returns the others leave out). Empty when fewer than 40 returns are in that set."""
     sp, tol = _thinned(cloud, cfg)
-    pts = [_transform(p, sp) for p in poses]
-    near = np.logical_and.reduce([q[0] < u_max for q in pts])
+    walls = [wall_distances(sp, p.rotation, p.position, big_r) for p in poses]
+    near = np.logical_and.reduce([u < u_max for u, _ in walls])
     n_near = int(np.count_nonzero(near))
     if n_near < 40:
         return []
-    return [
-        _wall_fit(np.sqrt(np.square(q[1][near]) + np.square(q[2][near])) - big_r, tol[near], n_near)
-        for q in pts
-    ]
+    fits = []
+    for _, e in walls:
+        n_ok, cost, rms = wall_fit(e, tol, near, 1.0)
+        fits.append((n_ok, n_near, cost, rms))
+    return fits
 
 
 def _intact(
@@ -290,14 +297,11 @@ def _intact(
     """Straight pipe when fewer than ``min_anomaly_points`` returns leave the wall tolerance
     (no region of anomalies can reach that size, so the classification would find nothing
     else); ``None`` otherwise."""
-    e = cloud.r_v - big_r
-    tol = _tolerance_v(cloud, cfg)
-    if cloud.n < cfg.min_anomaly_points or np.count_nonzero(np.abs(e) > tol) >= (
-        cfg.min_anomaly_points
-    ):
+    if cloud.n < cfg.min_anomaly_points:
         return None
-    n_beyond = int(np.count_nonzero(e > tol))
-    n_inside = int(np.count_nonzero(e < -tol))
+    n_beyond, n_inside = _off_wall_counts(cloud.r_v, _tolerance_v(cloud, cfg), big_r)
+    if n_beyond + n_inside >= cfg.min_anomaly_points:
+        return None
     n_wall = cloud.n - n_beyond - n_inside
     diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
     diag["sensor_offset_pipe"] = [float(v) for v in cloud.pose.position[1:]]
@@ -306,28 +310,69 @@ def _intact(
     return Detection.straight(confidence=conf, **diag)
 
 
+@njit(cache=True)
+def _off_wall_counts(r, tol, big_r):  # type: ignore[no-untyped-def]
+    """How many returns at distances ``r`` from the axis lie beyond the wall of radius
+    ``big_r`` by more than their tolerance ``tol``, and how many inside it (m)."""
+    n_beyond = 0
+    n_inside = 0
+    for i in range(r.size):
+        e = r[i] - big_r
+        if e > tol[i]:
+            n_beyond += 1
+        elif e < -tol[i]:
+            n_inside += 1
+    return n_beyond, n_inside
+
+
 def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:
-    """Axial position where the wall stops being intact (first significant anomalies); the
-    horizon when there are none."""
-    xyz = cloud.xyz_v
-    r = cloud.r_v
-    tol = _tolerance_v(cloud, cfg)
-    idx = np.flatnonzero(np.abs(r - big_r) > 2.0 * tol)  # returns off the wall
-    if idx.size < cfg.min_anomaly_points:
-        return cfg.horizon
+    """Axial position where the wall stops being intact (first significant anomalies: regions
+    of at least ``min_anomaly_points`` returns off the wall by more than twice their
+    tolerance); the horizon when there are none."""
     g, k = cloud.shape
-    mask = np.zeros(g * k, dtype=bool)
-    cells = cloud.cell[idx]
-    mask[cells] = True
-    labels, n_lab = label_regions(mask.reshape(g, k), cloud.wraps)
-    lab = labels.reshape(-1)[cells]
-    counts = np.bincount(lab, minlength=n_lab + 1)
-    good = counts >= cfg.min_anomaly_points
-    good[0] = False
-    sel = idx[good[lab]]
-    if not sel.size:
+    n_off, entry = _off_wall_entries(
+        cloud.cell,
+        g,
+        k,
+        cloud.wraps and g >= 3,
+        cloud.xyz_v[0],
+        cloud.r_v,
+        _tolerance_v(cloud, cfg),
+        big_r,
+        cfg.min_anomaly_points,
+    )
+    if n_off < cfg.min_anomaly_points or not entry.size:
         return cfg.horizon
-    u = xyz[0][sel]
-    # where the beams of those returns crossed the wall radius (sensor near the axis)
-    uc = u * big_r / np.maximum(r[sel], 1e-9)
-    return float(_pct(np.minimum(u, uc), 1)) - 0.005
+    return float(_pct(entry, 1)) - 0.005
+
+
+@njit(cache=True)
+def _off_wall_entries(cell, g, k, wraps, u, r, tol, big_r, min_points):  # type: ignore[no-untyped-def]
+    """How many returns lie off the wall by more than twice their tolerance, and for those in
+    regions (:func:`detector.grid.label_grid`) of at least ``min_points`` of them, where along
+    the axis each entered the structure: ``min(u, u R / r)``, where its beam crossed the wall
+    radius (sensor near the axis)."""
+    n = cell.size
+    off = np.empty(n, dtype=np.bool_)
+    mask = np.zeros((g, k), dtype=np.bool_)
+    n_off = 0
+    for i in range(n):
+        off[i] = abs(r[i] - big_r) > 2.0 * tol[i]
+        if off[i]:
+            n_off += 1
+            mask[cell[i] // k, cell[i] % k] = True
+    if n_off < min_points:
+        return n_off, np.empty(0)
+    labels, n_lab = label_grid(mask, wraps)
+    counts = np.zeros(n_lab + 1, dtype=np.int64)
+    for i in range(n):
+        if off[i]:
+            counts[labels[cell[i] // k, cell[i] % k]] += 1
+    out = np.empty(n_off)
+    m = 0
+    for i in range(n):
+        if off[i] and counts[labels[cell[i] // k, cell[i] % k]] >= min_points:
+            uc = u[i] * big_r / max(r[i], 1e-9)
+            out[m] = min(u[i], uc)
+            m += 1
+    return n_off, out[:m]

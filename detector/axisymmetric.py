@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.detection import Detection
+from detector.fit_kernels import MODEL_TAPER
 from detector.improved_config import ImprovedConfig
 from detector.options import StructureOption
 from detector.pipe_cloud import (
@@ -28,7 +29,7 @@ from detector.pipe_cloud import (
     _robust_line,
     _subsample,
 )
-from detector.robust import mad_sigma, robust_gauss_newton, tukey_cost
+from detector.robust import mad_sigma, robust_fit, tukey_cost
 
 #: Returns of a widening this much (m; or three times their noise) short of the wider pipe's
 #: radius lie on its cone, not on the wider pipe.
@@ -149,34 +150,35 @@ def _axisymmetric(
         rs = np.concatenate([rs, np.hypot(pw[lead, 1], pw[lead, 2])])
     t0 = max(0.01, float(_pct(u, 30)) - u_first)
 
-    def resjac(x: NDArray) -> tuple[NDArray, NDArray]:
-        big_l, t_len, rr2 = x
-        t_len = max(t_len, 1e-4)
-        raw = (us - big_l) / t_len
-        frac = np.clip(raw, 0.0, 1.0)
-        ramp = (raw > 0.0) & (raw < 1.0)
-        jac = np.empty((us.size, 3))
-        jac[:, 0] = np.where(ramp, (rr2 - big_r) / t_len, 0.0)
-        jac[:, 1] = np.where(ramp, (rr2 - big_r) * raw / t_len, 0.0)
-        jac[:, 2] = -frac
-        return rs - (big_r + (rr2 - big_r) * frac), jac
+    def fit(
+        us: NDArray, rs: NDArray, start: NDArray, lower: NDArray, upper: NDArray
+    ) -> tuple[NDArray, NDArray, NDArray]:
+        """The taper ``r(u)`` fitted to the returns at ``us`` (m along the axis), ``rs`` (m from
+        it) from ``start`` within the bounds: ``(x, residuals, weights)``."""
+        return robust_fit(
+            MODEL_TAPER,
+            np.stack([us, rs]),
+            start,
+            c=max(4.0 * c_fin, 0.01),
+            iterations=10,
+            lower=lower,
+            upper=upper,
+            c_final=c_fin,
+            step_tol=STEP_TOL,
+            anneal=ANNEAL,
+            cost_tol=COST_TOL,
+            fpar=np.array([big_r]),
+        )
 
     c_fin = max(2.0 * tol_med, 0.002)
-    x, res, w = robust_gauss_newton(
-        None,
+    x, res, w = fit(
+        us,
+        rs,
         np.array([u_first, t0, r2]),
-        np.array([1e-4, 1e-4, 1e-5]),
-        c=max(4.0 * c_fin, 0.01),
-        iterations=10,
-        resjac=resjac,
         # a widening starts where the beams leave the incoming pipe: its end edge is seen
         # directly, the cone behind it mostly not
-        lower=np.array([-0.2 if contraction else u_first, 0.002, 0.0]),
-        upper=np.array([cfg.horizon if contraction else u_first, 1.0, 3.0 * big_r]),
-        c_final=c_fin,
-        step_tol=STEP_TOL,
-        anneal=ANNEAL,
-        cost_tol=COST_TOL,
+        np.array([-0.2 if contraction else u_first, 0.002, 0.0]),
+        np.array([cfg.horizon if contraction else u_first, 1.0, 3.0 * big_r]),
     )
     if contraction:
         # an end wall far down the narrower pipe, seen through it, is no part of the taper:
@@ -220,23 +222,16 @@ def _axisymmetric(
                 t_fresh = max(0.01, float(_pct(u_rest, 30)) - u_first)
                 best = None
                 for k, start in enumerate(((x[0], x[1], r2_far), (u_first, t_fresh, r2_far))):
-                    fit = robust_gauss_newton(
-                        None,
+                    refit = fit(
+                        us,
+                        rs,
                         np.array(start),
-                        np.array([1e-4, 1e-4, 1e-5]),
-                        c=max(4.0 * c_fin, 0.01),
-                        iterations=10,
-                        resjac=resjac,
-                        lower=np.array([-0.2, 0.002, r_end]),
-                        upper=np.array([cfg.horizon, 1.0, big_r]),
-                        c_final=c_fin,
-                        step_tol=STEP_TOL,
-                        anneal=ANNEAL,
-                        cost_tol=COST_TOL,
+                        np.array([-0.2, 0.002, r_end]),
+                        np.array([cfg.horizon, 1.0, big_r]),
                     )
-                    cost = tukey_cost(fit[1], c_fin)
+                    cost = tukey_cost(refit[1], c_fin)
                     if best is None or cost < best[0]:
-                        best = (cost, fit)
+                        best = (cost, refit)
                         diag["reducer_refit_start"] = ("first fit", "returns left")[k]
                 x, res, w = best[1]
                 diag["reducer_end_wall_radius"] = r_end

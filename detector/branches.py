@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.detection import Detection
+from detector.fit_kernels import MODEL_LINES, MODEL_OWN_LINES, coarse_branch_cost, residuals
 from detector.grid import label_regions
 from detector.improved_config import ImprovedConfig
 from detector.long_bend import _fit_torus, _spread_along_axis
@@ -35,7 +35,7 @@ from detector.pipe_cloud import (
     _region_stats,
     _subsample,
 )
-from detector.robust import robust_gauss_newton, tukey_cost, tukey_weights
+from detector.robust import robust_fit, tukey_cost, tukey_weights
 from detector.transforms import option_direction
 
 #: A region of returns beyond the wall covering this fraction of the azimuth goes all round.
@@ -151,85 +151,23 @@ class BranchFit:
     rb: float = 0.0
 
 
-def _line_points(p: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """(x, y, z, y^2 + z^2) of ``(N, 3)`` points as contiguous arrays, for :func:`_line_resjac`."""
-    px, py, pz = (np.ascontiguousarray(p[:, k]) for k in range(3))
-    return px, py, pz, py * py + pz * pz
+def _line_points(p: NDArray) -> NDArray[np.float64]:
+    """(4, N) rows x, y, z, y^2 + z^2 of ``(N, 3)`` points: the returns of the outgoing-pipe
+    models (:data:`detector.fit_kernels.MODEL_LINES`)."""
+    out = np.empty((4, p.shape[0]))
+    out[:3] = p.T
+    np.add(np.square(out[1]), np.square(out[2]), out=out[3])
+    return out
 
 
-def _line_resjac(
-    pts: tuple[NDArray, NDArray, NDArray, NDArray], x: NDArray, n_l: int, want_jac: bool
-) -> tuple[NDArray, NDArray | None]:
-    """Residuals of points (:func:`_line_points`) to the nearest of ``n_l`` outgoing cylinders
-    whose axes meet the incoming axis at ``(x[0], 0, 0)``; parameters per lobe:
-    (theta, phi, rho)."""
-    px, py, pz, r2 = pts
-    qx = px - x[0]
-    qq = qx * qx + r2
-    if n_l == 1:
-        th, ph, rho = float(x[1]), float(x[2]), float(x[3])
-        ct, st, cp, sp = math.cos(th), math.sin(th), math.cos(ph), math.sin(ph)
-        lat = py * cp + pz * sp
-        t = ct * qx + st * lat
-        dist = qq - t * t
-        np.maximum(dist, 1e-18, out=dist)
-        np.sqrt(dist, out=dist)
-        res = dist - rho
-        if not want_jac:
-            return res, None
-        g = t / dist
-        jac = np.empty((4, px.size))
-        jac[0] = ct * g - qx / dist
-        jac[1] = (st * qx - ct * lat) * g
-        jac[2] = (py * sp - pz * cp) * (st * g)
-        jac[3] = -1.0
-        return res, jac.T
-    th, ph, rho = x[1::3], x[2::3], x[3::3]
-    ct, st, cp, sp = np.cos(th), np.sin(th), np.cos(ph), np.sin(ph)
-    lat_all = cp[:, None] * py + sp[:, None] * pz  # (n_l, N)
-    t_all = ct[:, None] * qx + st[:, None] * lat_all
-    dist_all = qq - t_all * t_all
-    np.maximum(dist_all, 1e-18, out=dist_all)
-    np.sqrt(dist_all, out=dist_all)
-    res_all = dist_all - rho[:, None]
-    arg = np.argmin(np.abs(res_all), axis=0)  # each return on its nearest cylinder
-    cols = np.arange(px.size)
-    best = res_all[arg, cols]
-    if not want_jac:
-        return best, None
-    t, dist, lat = t_all[arg, cols], dist_all[arg, cols], lat_all[arg, cols]
-    ctk, stk, cpk, spk = ct[arg], st[arg], cp[arg], sp[arg]
-    g = t / dist
-    jac = np.zeros((px.size, 1 + 3 * n_l))
-    jac[:, 0] = ctk * g - qx / dist
-    k = 1 + 3 * arg
-    jac[cols, k] = (stk * qx - ctk * lat) * g
-    jac[cols, k + 1] = (py * spk - pz * cpk) * (stk * g)
-    jac[cols, k + 2] = -1.0
-    return best, jac
-
-
-def _own_branch_resjac(
-    pts: tuple[NDArray, NDArray, NDArray, NDArray], labels: NDArray[np.intp], n_l: int
-) -> Callable[[NDArray], tuple[NDArray, NDArray]]:
-    """Residuals and Jacobian (as :func:`_line_resjac`) of the returns to the outgoing cylinder
-    of their own lobe: ``labels[i]`` (in ``0 .. n_l - 1``) is the lobe of return ``i``."""
-    groups = [np.flatnonzero(labels == k) for k in range(n_l)]
-    sub = [tuple(np.ascontiguousarray(a[g]) for a in pts) for g in groups]
-    n = labels.size
-
-    def resjac(v: NDArray) -> tuple[NDArray, NDArray]:
-        res = np.empty(n)
-        jac = np.zeros((n, v.size))
-        for k, (g, pk) in enumerate(zip(groups, sub)):
-            vk = np.concatenate([v[:1], v[1 + 3 * k : 4 + 3 * k]])
-            r, jk = _line_resjac(pk, vk, 1, True)
-            res[g] = r
-            jac[g, 0] = jk[:, 0]
-            jac[g, 1 + 3 * k : 4 + 3 * k] = jk[:, 1:]
-        return res, jac
-
-    return resjac
+def _line_residuals(
+    pts: NDArray[np.float64], x: NDArray[np.float64], own: NDArray[np.intp] | None
+) -> NDArray[np.float64]:
+    """Residuals of the returns ``pts`` (:func:`_line_points`) to the nearest outgoing
+    cylinder of ``x`` (``[L, theta, phi, rho] x n``), or with ``own`` to their own lobe's."""
+    if own is None:
+        return residuals(MODEL_LINES, pts, x)
+    return residuals(MODEL_OWN_LINES, pts, x, ipar=own)
 
 
 def _fit_axes(
@@ -241,24 +179,17 @@ def _fit_axes(
     c: float,
     c_final: float,
     iterations: int = 8,
-    own: Callable[[NDArray], tuple[NDArray, NDArray]] | None = None,
+    own: NDArray[np.intp] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Robust fit of ``n`` outgoing pipes (``[L, theta, phi, rho] x n``, the reference point
-    shared) to the returns ``pts`` from ``x0`` within the bounds: Tukey cut-off shrinking from
-    ``c`` to ``c_final`` (m). Each return is fitted to the nearest pipe, or with ``own`` (from
-    :func:`_own_branch_resjac` on the same returns) to its own. Returns ``(x, residuals,
-    weights)``."""
-    if own is not None:
-        resjac = own
-    else:
-
-        def resjac(v: NDArray) -> tuple[NDArray, NDArray]:
-            return _line_resjac(pts, v, n, True)
-
-    return robust_gauss_newton(
-        None,
+    shared) to the returns ``pts`` (:func:`_line_points`) from ``x0`` within the bounds: Tukey
+    cut-off shrinking from ``c`` to ``c_final`` (m). Each return is fitted to the nearest pipe,
+    or with ``own`` (the lobe of each return, ``0 .. n - 1``) to its own. Returns ``(x,
+    residuals, weights)``."""
+    return robust_fit(
+        MODEL_LINES if own is None else MODEL_OWN_LINES,
+        pts,
         x0,
-        np.full(x0.size, 1e-5),
         c=c,
         iterations=iterations,
         lower=lower,
@@ -267,7 +198,7 @@ def _fit_axes(
         step_tol=STEP_TOL,
         anneal=ANNEAL,
         cost_tol=COST_TOL,
-        resjac=resjac,
+        ipar=own,
     )
 
 
@@ -346,27 +277,10 @@ def _branches(
             ]
         )  # (3, RT)
         lq = lp[_subsample(np.arange(lp.shape[0]), 50 if any_roll else 60)]
-        qx = lq[None, :, 0] - l_grid[:, None]  # (L, n)
-        qq = qx * qx + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]
-        lat = lq[:, 1:] @ dirs[1:]  # (n, RT)
-        t = qx[:, :, None] * dirs[0] + lat[None]  # (L, n, RT)
-        # squared residual to the wall, capped (in place: these arrays are the largest here)
-        sq = t * t
-        np.subtract(qq[..., None], sq, out=sq)
-        np.maximum(sq, 0.0, out=sq)
-        np.sqrt(sq, out=sq)
-        sq -= big_r
-        np.square(sq, out=sq)
-        np.minimum(sq, c0 * c0, out=sq)
-        # the sensor sees every wall from inside its pipe: the wall normal (away from the
-        # axis) must not face the sensor; a cylinder behind the returns (the same patch
+        # the mean squared distance of the returns from the pipe's wall, capped; the sensor
+        # sees every wall from inside its pipe: a cylinder behind the returns (the same patch
         # seen from outside) is penalised like an outlier
-        qp = qx * lq[None, :, 0] + (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]  # q . p
-        dp = lq[:, 0:1] * dirs[0] + lat  # (n, RT): d . p
-        t *= dp[None]
-        np.subtract(qp[..., None], t, out=t)
-        np.copyto(sq, c0 * c0, where=t < 0.0)
-        cost = sq.mean(axis=1)  # (L, RT)
+        cost = coarse_branch_cost(np.ascontiguousarray(lq), l_grid, dirs, big_r, c0)  # (L, RT)
         per_lobe.append(cost)
         total += cost.min(axis=1)
     i_l = int(np.argmin(total))
@@ -403,7 +317,7 @@ def _branches(
         labels = np.concatenate(
             [np.full(ix.size, k) for k, ix in enumerate(lobe_sub)] + [np.argmax(side, axis=0)]
         )
-        own = _own_branch_resjac(pts_all, labels, n_l)
+        own = labels.astype(np.intp)
 
     def free_fit(xs: NDArray, lo: NDArray, up: NDArray) -> tuple[NDArray, NDArray, NDArray]:
         return _fit_axes(pts_all, xs, n_l, lo, up, c=2.0 * c0, c_final=c_fin, own=own)
@@ -431,7 +345,7 @@ def _branches(
     up_eq[3::3] = std_r
     if not any_roll and bool(np.all(np.abs(x[3::3] - std_r) <= 0.01 * big_r)):
         # the free fit found the clamped radius already: clamping it moves nothing that matters
-        res_eq = _line_resjac(pts_all, x_eq, n_l, False)[0] if own is None else own(x_eq)[0]
+        res_eq = _line_residuals(pts_all, x_eq, own)
         w_eq = tukey_weights(res_eq, c_fin)
     else:
         x_eq, res_eq, w_eq = _fit_axes(
@@ -655,7 +569,7 @@ def _standard_angles(
     sigma2: float,
     diag: dict[str, Any],
     radius_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
-    own: Callable[[NDArray], tuple[NDArray, NDArray]] | None = None,
+    own: NDArray[np.intp] | None = None,
     run_radius: float | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The branch fit ``x`` (``[L, theta, phi, rho] x n_b``, its residuals and weights) with

@@ -16,12 +16,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy import ndimage
 
 from detector.scan import Scan
-
-_EIGHT = np.ones((3, 3), dtype=bool)
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,45 +83,96 @@ def build_grid(scan: Scan) -> ScanGrid:
 
 def label_regions(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32], int]:
     """Connected regions (8-neighbourhood) of a grid mask, joined across the row seam when the
-    grid wraps. Returns ``(labels, n)`` with labels 1..n and 0 for background."""
-    cols = np.flatnonzero(mask.any(axis=0))
-    if cols.size == 0:
-        return np.zeros(mask.shape, dtype=np.int32), 0
-    c0, c1 = int(cols[0]), int(cols[-1]) + 1
-    if c1 - c0 < mask.shape[1]:
-        # only the columns that hold the mask (the numbering is the same: raster order)
-        part, n = ndimage.label(mask[:, c0:c1], structure=_EIGHT)
-        labels = np.zeros(mask.shape, dtype=np.int32)
-        labels[:, c0:c1] = part
-    else:
-        labels, n = ndimage.label(mask, structure=_EIGHT)
-        labels = labels.astype(np.int32, copy=False)
-    if n == 0 or not wraps or mask.shape[0] < 3:
-        return labels, int(n)
-    first, last = labels[0], labels[-1]
-    # label pairs touching across the seam (same column or a diagonal neighbour)
-    a = np.concatenate([last, last[1:], last[:-1]])
-    b = np.concatenate([first, first[:-1], first[1:]])
-    touch = (a != 0) & (b != 0) & (a != b)
-    if not touch.any():
-        return labels, int(n)
-    parent = np.arange(n + 1)
+    grid wraps (and has at least three rows). Returns ``(labels, n)`` with labels 1..n,
+    numbered in the raster order of each region's first cell, and 0 for background (compiled:
+    :func:`label_grid`)."""
+    m = np.ascontiguousarray(mask, dtype=np.bool_)
+    if m.ndim != 2:
+        raise ValueError(f"mask must be a 2D grid, got shape {m.shape}")
+    labels, n = label_grid(m, bool(wraps) and m.shape[0] >= 3)
+    return labels, int(n)
 
-    def find(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
 
-    for la, lb in set(zip(a[touch].tolist(), b[touch].tolist())):
-        ra, rb = find(la), find(lb)
-        if ra != rb:
-            parent[max(ra, rb)] = min(ra, rb)
-    involved = np.unique(np.concatenate([a[touch], b[touch]]))
-    for i in involved.tolist():
-        parent[i] = find(i)
-    uniq, relabel = np.unique(parent, return_inverse=True)
-    return relabel[labels].astype(np.int32), int(uniq.size - 1)
+@njit(cache=True)
+def _find(parent: NDArray[np.int64], x: int) -> int:
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]
+        x = parent[x]
+    return x
+
+
+@njit(cache=True)
+def _union(parent: NDArray[np.int64], a: int, b: int) -> None:
+    ra, rb = _find(parent, a), _find(parent, b)
+    if ra < rb:
+        parent[rb] = ra
+    elif rb < ra:
+        parent[ra] = rb
+
+
+@njit(cache=True)
+def label_grid(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32], int]:
+    """The labelling of :func:`label_regions`, compiled (callable from other compiled code):
+    union-find; ``wraps``: the first and last rows are neighbours."""
+    g, k = mask.shape
+    parent = np.arange(g * k)
+    for r in range(g):
+        for c in range(k):
+            if not mask[r, c]:
+                continue
+            i = r * k + c
+            if c > 0 and mask[r, c - 1]:
+                _union(parent, i, i - 1)
+            if r > 0:
+                for dc in (-1, 0, 1):
+                    cc = c + dc
+                    if 0 <= cc < k and mask[r - 1, cc]:
+                        _union(parent, i, (r - 1) * k + cc)
+    if wraps:
+        last = (g - 1) * k
+        for c in range(k):
+            if not mask[g - 1, c]:
+                continue
+            for dc in (-1, 0, 1):
+                cc = c + dc
+                if 0 <= cc < k and mask[0, cc]:
+                    _union(parent, last + c, cc)
+    labels = np.zeros((g, k), dtype=np.int32)
+    number = np.zeros(g * k, dtype=np.int32)
+    n = 0
+    for r in range(g):
+        for c in range(k):
+            if mask[r, c]:
+                root = _find(parent, r * k + c)
+                if number[root] == 0:
+                    n += 1
+                    number[root] = n
+                labels[r, c] = number[root]
+    return labels, n
+
+
+def region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
+    """(cells, grid rows spanned) of each label 0..n_lab of a labelled grid (both (n_lab + 1,)
+    integers; 0 for the background, label 0)."""
+    return _region_stats(np.ascontiguousarray(labels, dtype=np.int32), int(n_lab))
+
+
+@njit(cache=True)
+def _region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
+    g, k = labels.shape
+    counts = np.zeros(n_lab + 1, dtype=np.int64)
+    rows = np.zeros(n_lab + 1, dtype=np.int64)
+    last_row = np.full(n_lab + 1, -1, dtype=np.int64)
+    for r in range(g):
+        for c in range(k):
+            lab = labels[r, c]
+            if lab == 0:
+                continue
+            counts[lab] += 1
+            if last_row[lab] != r:
+                last_row[lab] = r
+                rows[lab] += 1
+    return counts, rows
 
 
 def dilate(mask: NDArray[np.bool_], wraps: bool, iterations: int = 1) -> NDArray[np.bool_]:

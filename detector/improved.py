@@ -123,7 +123,6 @@ All lengths in metres, angles in radians.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -155,12 +154,12 @@ from detector.pipe_cloud import (
     PipeCloud,
     _azimuth_coverage,
     _azimuth_uniformity,
+    _classify,
     _confidence,
     _dir,
     _pct,
     _prepare,
     _region_stats,
-    _tolerance,
 )
 from detector.robust import mad_sigma
 from detector.scan import Scan
@@ -232,7 +231,6 @@ def detect_improved(
             default: ``scan.spec["bias"]`` (0 if absent).
         refine_axis: refine the pipe axis from the wall returns.
     """
-    t0 = time.perf_counter()
     d_clamped = float(clamped_diameter)
     if not (math.isfinite(d_clamped) and d_clamped > 0.0):
         raise ValueError(f"clamped_diameter must be a positive length (m), got {clamped_diameter}")
@@ -242,164 +240,165 @@ def detect_improved(
     if not math.isfinite(bias):
         bias = 0.0
     diag: dict[str, Any] = {"method": "improved", "n_points": int(scan.n_valid)}
-    # (the given pose, its points, the radius and the wall's extent the pose was chosen on)
-    recheck: GivenPose | None = None
     try:
         cloud = _prepare(scan, pose0, bias, config)
         reach = _blocked_within_min_range(scan, cloud, big_r)
         if reach is not None:
             diag["blocked_within_min_range"] = reach
             opt = StructureOption("closure", reach, 0.0, 0.0, 0.0, BLIND_CONFIDENCE)
-            return _timed(Detection("closure", [opt], BLIND_CONFIDENCE, diag), t0)
+            return Detection("closure", [opt], BLIND_CONFIDENCE, diag)
         # the given pose and the clamp reading explain every return already: straight pipe,
         # nothing to measure or refine (the common case, kept cheap)
         if refine_axis:
             diag["axis_pass"] = 0
             straight = _intact(cloud, big_r, config, diag)
             if straight is not None:
-                return _timed(_with_ring_holes(cloud, big_r, straight), t0)
+                return _with_ring_holes(cloud, big_r, straight)
         # the clamp's encoders read the diameter to a millimetre or two: the wall right around
         # the sensor (nearer than any structure in view) measures it first, the wall before
         # the structure again once the axis is refined
         u_nearest = _pct(cloud.xyz_v[0], 1.0)
         r_clamped = big_r
         big_r = _wall_radius(cloud, big_r, config, u_nearest + NEAR_WALL, diag)
+        given: GivenPose | None = None
         if refine_axis:
-            if big_r != r_clamped:  # (straight pipe after all, at its measured radius?)
-                straight = _intact(cloud, big_r, config, diag)
-                if straight is not None:
-                    return _timed(_with_ring_holes(cloud, big_r, straight), t0)
-            diag.pop("axis_pass")
-            candidates = [(pose0, {})]
-            passes = [0]  # the pass each candidate pose comes from
-            xyz_of = [cloud.xyz_v]
-            u_start0 = _structure_start(cloud, big_r, config)
-            moved = False
-            first_pass = not _wall_consistent(cloud, big_r, config, u_start0)
-            diag["axis_first_pass"] = first_pass
-            if not first_pass:
-                # the given pose explains the wall before the structure: only the second
-                # pass (from that pose) refines it
-                u_start = u_start0
-            else:
-                pose1, info1 = _refine_axis(cloud, big_r, config)
-                candidates.append((pose1, info1))
-                passes.append(1)
-                cloud.set_pose(pose1)
-                xyz_of.append(cloud.xyz_v)
-                diag.update(info1)
-                diag["axis_pass"] = 1
-                straight = _intact(cloud, big_r, config, diag)
-                if straight is not None:  # no return off the wall under the refined axis
-                    return _timed(_with_ring_holes(cloud, big_r, straight), t0)
-                for key in info1:
-                    diag.pop(key)
-                diag.pop("axis_pass")
-                u_start = _structure_start(cloud, big_r, config)
-                moved = _pose_moved(pose0, pose1, big_r)
-            # does the given pose explain the wall before the structure (seen under it, within
-            # the tolerance that found the structure's start)?
-            n_ok, n_seen, _, _ = _wall_count(cloud, big_r, config, pose0, u_start0, tol_scale=2.0)
-            given_fits = n_seen >= 40 and n_ok >= 0.9 * n_seen
-            # second pass: all of the intact wall before the structure (not a thin ring of it
-            # right before the structure when the given pose explains the wall: where a wide
-            # arc starts, already curving, the ring pulls the axis off)
-            pose2, info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
-            thin_ring = info2.get("axis_span", 1.0) < 0.02
-            if info2.get("axis_points", 0) >= 40 and not (thin_ring and given_fits):
-                info2["axis_wall_until"] = u_start
-                candidates.append((pose2, info2))
-                passes.append(2)
-            # keep the pose that explains the most wall returns before the structure (a fit
-            # pulled by the structure's own returns, e.g. tilted onto one side of a taper,
-            # explains fewer of them)
-            cloud.restore(pose0, xyz_of[0])
-            u_near = min(u_start, u_start0) if moved else u_start
-            counts = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
-            scores = [c[0] for c in counts]
-            # a refinement whose cylinder misses its own wall returns by several times their
-            # noise fitted a curved wall (the arc of a wide bend filling the whole view): the
-            # given pose stands when it explains the wall
-            rms_cap = _straight_wall_rms(cloud)
-            for k, (_, inf) in enumerate(candidates):
-                if k and given_fits and inf.get("axis_rms", 0.0) > rms_cap:
-                    scores[k] = -1
-            # (of the poses explaining as many returns, the one that fits them most closely:
-            # a cylinder tilted onto the start of a gentle taper explains no more of them, within
-            # the tolerance, but fits them more loosely)
-            tied = [k for k, sc in enumerate(scores) if sc == max(scores)]
-            best = min(tied, key=lambda k: (counts[k][2], -k))
-            if (
-                best
-                and u_start0 < u_nearest + NO_WALL_VIEW
-                and scores[best] <= scores[0] + max(GIVEN_POSE_MARGIN * scores[0], 10)
-            ):
-                # no wall in view before the structure (the stem of a tee ending before the
-                # nearest returns): a refinement that explains hardly more returns than the
-                # given pose (a few of thousands) rests on the structure
-                best = 0
-            if best and given_fits and u_start0 - u_nearest < SHORT_WALL_VIEW:
-                # hardly any straight wall in view before the structure: a refinement can only
-                # lean on the structure (a cylinder tilted about the nearest wall, pivoting
-                # onto the arc of a turn); the given pose stands, as it explains that wall,
-                # unless a refinement explains as many returns and fits a long straight wall
-                # to a fraction of its noise (then the given pose is the misaligned one, its
-                # wall drifting off the tolerance some way ahead)
-                long_straight = [
-                    k
-                    for k, sc in enumerate(scores)
-                    if k
-                    and sc >= scores[best] - max(GIVEN_POSE_MARGIN * scores[best], 2)
-                    and candidates[k][1].get("axis_span", 0.0) >= LONG_WALL_SPAN
-                    and candidates[k][1].get("axis_rms", 1.0) <= LONG_WALL_RMS * rms_cap
-                ]
-                best = long_straight[-1] if long_straight else 0
-            pose, info = candidates[best]
-            diag.update(info)
-            diag["axis_pass"] = passes[best]
-            if best < len(xyz_of):
-                cloud.restore(pose, xyz_of[best])
-            else:
-                cloud.set_pose(pose)
-            recheck = GivenPose(pose0, xyz_of[0], big_r, u_near)
-            big_r = _wall_radius(cloud, big_r, config, u_near, diag)
-            # a noiseless wall fitted closely: the tolerance floor shrinks towards its scatter
-            # (under the given pose, the wall returns' own scatter about it)
-            rms = diag.get("wall_radius_rms", info.get("axis_rms", counts[best][3]))
-            if rms is not None and float(_pct(cloud.sigma_v, 90.0)) < 0.0005:
-                cloud.floor = _scatter_floor(config, rms)
-                diag["tolerance_floor"] = cloud.floor
+            chosen = _choose_pose(cloud, pose0, big_r, r_clamped, u_nearest, config, diag)
+            if isinstance(chosen, Detection):
+                return chosen
+            big_r, given = chosen
         # (what the pose and radius left in the diagnostics, for a fit again under a new pose)
-        diag_pose = dict(diag) if recheck is not None else diag
+        diag_pose = dict(diag) if given is not None else diag
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
-        if recheck is not None:
-            redone = _start_recheck(cloud, det, config, diag_pose, recheck)
-            if redone is not None:
-                big_r, det = redone
-            redone = _torus_pose_check(cloud, det, config, diag_pose, recheck)
-            if redone is not None:
-                big_r, det = redone
-            redone = _taper_pose_check(cloud, det, config, diag_pose, recheck)
-            if redone is not None:
-                big_r, det = redone
-            redone = _short_wall_pose_check(cloud, det, config, diag_pose, recheck)
-            if redone is not None:
-                big_r, det = redone
-            redone = _taper_radius_check(cloud, det, config, diag_pose, r_clamped, big_r)
-            if redone is not None:
-                big_r, det = redone
+        if given is not None:
+            big_r, det = _check_pose_again(cloud, det, config, diag_pose, given, big_r)
         det = _with_ring_holes(cloud, big_r, det, config)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
-    return _timed(det, t0)
-
-
-def _timed(det: Detection, t0: float) -> Detection:
-    """``det`` with the time since ``t0`` (seconds) in its diagnostics (a finite number added
-    to the detection's own dictionary: nothing to check again)."""
-    det.diagnostics["time_s"] = time.perf_counter() - t0
     return det
+
+
+def _choose_pose(
+    cloud: PipeCloud,
+    pose0: SensorInPipe,
+    big_r: float,
+    r_clamped: float,
+    u_nearest: float,
+    config: ImprovedConfig,
+    diag: dict[str, Any],
+) -> Detection | tuple[float, GivenPose]:
+    """Step 1 of the module docstring: the pose of the pipe axis (the given pose ``pose0`` or
+    an axis refined from the wall), chosen by the wall returns it explains, with the pipe's
+    radius measured on the wall before the structure (``big_r``: measured on the wall near the
+    sensor, m; ``r_clamped``: the clamp's reading, m; ``u_nearest``: the nearest returns
+    along the axis, m). The cloud is left under the chosen pose. Returns ``(radius, the given
+    pose to check the choice against)``, or a straight pipe's detection when every return lies
+    on the wall."""
+    if big_r != r_clamped:  # (straight pipe after all, at its measured radius?)
+        straight = _intact(cloud, big_r, config, diag)
+        if straight is not None:
+            return _with_ring_holes(cloud, big_r, straight)
+    diag.pop("axis_pass")
+    candidates = [(pose0, {})]
+    passes = [0]  # the pass each candidate pose comes from
+    xyz_of = [cloud.xyz_v]
+    u_start0 = _structure_start(cloud, big_r, config)
+    moved = False
+    first_pass = not _wall_consistent(cloud, big_r, config, u_start0)
+    diag["axis_first_pass"] = first_pass
+    if not first_pass:
+        # the given pose explains the wall before the structure: only the second
+        # pass (from that pose) refines it
+        u_start = u_start0
+    else:
+        pose1, info1 = _refine_axis(cloud, big_r, config)
+        candidates.append((pose1, info1))
+        passes.append(1)
+        cloud.set_pose(pose1)
+        xyz_of.append(cloud.xyz_v)
+        diag.update(info1)
+        diag["axis_pass"] = 1
+        straight = _intact(cloud, big_r, config, diag)
+        if straight is not None:  # no return off the wall under the refined axis
+            return _with_ring_holes(cloud, big_r, straight)
+        for key in info1:
+            diag.pop(key)
+        diag.pop("axis_pass")
+        u_start = _structure_start(cloud, big_r, config)
+        moved = _pose_moved(pose0, pose1, big_r)
+    # does the given pose explain the wall before the structure (seen under it, within
+    # the tolerance that found the structure's start)?
+    n_ok, n_seen, _, _ = _wall_count(cloud, big_r, config, pose0, u_start0, tol_scale=2.0)
+    given_fits = n_seen >= 40 and n_ok >= 0.9 * n_seen
+    # second pass: all of the intact wall before the structure (not a thin ring of it
+    # right before the structure when the given pose explains the wall: where a wide
+    # arc starts, already curving, the ring pulls the axis off)
+    pose2, info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
+    thin_ring = info2.get("axis_span", 1.0) < 0.02
+    if info2.get("axis_points", 0) >= 40 and not (thin_ring and given_fits):
+        info2["axis_wall_until"] = u_start
+        candidates.append((pose2, info2))
+        passes.append(2)
+    # keep the pose that explains the most wall returns before the structure (a fit
+    # pulled by the structure's own returns, e.g. tilted onto one side of a taper,
+    # explains fewer of them)
+    cloud.restore(pose0, xyz_of[0])
+    u_near = min(u_start, u_start0) if moved else u_start
+    counts = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
+    scores = [c[0] for c in counts]
+    # a refinement whose cylinder misses its own wall returns by several times their
+    # noise fitted a curved wall (the arc of a wide bend filling the whole view): the
+    # given pose stands when it explains the wall
+    rms_cap = _straight_wall_rms(cloud)
+    for k, (_, inf) in enumerate(candidates):
+        if k and given_fits and inf.get("axis_rms", 0.0) > rms_cap:
+            scores[k] = -1
+    # (of the poses explaining as many returns, the one that fits them most closely:
+    # a cylinder tilted onto the start of a gentle taper explains no more of them, within
+    # the tolerance, but fits them more loosely)
+    tied = [k for k, sc in enumerate(scores) if sc == max(scores)]
+    best = min(tied, key=lambda k: (counts[k][2], -k))
+    if (
+        best
+        and u_start0 < u_nearest + NO_WALL_VIEW
+        and scores[best] <= scores[0] + max(GIVEN_POSE_MARGIN * scores[0], 10)
+    ):
+        # no wall in view before the structure (the stem of a tee ending before the
+        # nearest returns): a refinement that explains hardly more returns than the
+        # given pose (a few of thousands) rests on the structure
+        best = 0
+    if best and given_fits and u_start0 - u_nearest < SHORT_WALL_VIEW:
+        # hardly any straight wall in view before the structure: a refinement can only
+        # lean on the structure (a cylinder tilted about the nearest wall, pivoting
+        # onto the arc of a turn); the given pose stands, as it explains that wall,
+        # unless a refinement explains as many returns and fits a long straight wall
+        # to a fraction of its noise (then the given pose is the misaligned one, its
+        # wall drifting off the tolerance some way ahead)
+        long_straight = [
+            k
+            for k, sc in enumerate(scores)
+            if k
+            and sc >= scores[best] - max(GIVEN_POSE_MARGIN * scores[best], 2)
+            and candidates[k][1].get("axis_span", 0.0) >= LONG_WALL_SPAN
+            and candidates[k][1].get("axis_rms", 1.0) <= LONG_WALL_RMS * rms_cap
+        ]
+        best = long_straight[-1] if long_straight else 0
+    pose, info = candidates[best]
+    diag.update(info)
+    diag["axis_pass"] = passes[best]
+    if best < len(xyz_of):
+        cloud.restore(pose, xyz_of[best])
+    else:
+        cloud.set_pose(pose)
+    given = GivenPose(pose0, xyz_of[0], big_r, u_near, r_clamped)
+    big_r = _wall_radius(cloud, big_r, config, u_near, diag)
+    # a noiseless wall fitted closely: the tolerance floor shrinks towards its scatter
+    # (under the given pose, the wall returns' own scatter about it)
+    rms = diag.get("wall_radius_rms", info.get("axis_rms", counts[best][3]))
+    if rms is not None and cloud.sigma_percentile(90.0) < 0.0005:
+        cloud.floor = _scatter_floor(config, rms)
+        diag["tolerance_floor"] = cloud.floor
+    return big_r, given
 
 
 def _blocked_within_min_range(scan: Scan, cloud: PipeCloud, big_r: float) -> float | None:
@@ -530,13 +529,14 @@ def _with_ring_holes(
 @dataclass(frozen=True)
 class GivenPose:
     """What a check of the chosen pose goes back to: the given pose, its points (``(3, N)``,
-    pipe frame), the pipe radius (m) and how far along the axis the wall the pose was chosen
-    on reaches (m)."""
+    pipe frame), the pipe radius (m), how far along the axis the wall the pose was chosen on
+    reaches (m), and the clamp's reading of the radius (m)."""
 
     pose: SensorInPipe
     xyz: NDArray[np.float64]
     radius: float
     wall_until: float
+    clamped_radius: float
 
 
 def _gentle_start(det: Detection) -> float | None:
@@ -590,6 +590,7 @@ def _start_recheck(
     cfg: ImprovedConfig,
     diag_pose: dict[str, Any],
     given: GivenPose,
+    big_r: float,
 ) -> tuple[float, Detection] | None:
     """A long-radius bend's arc, or a gentle taper, leaves the straight wall so slowly that its
     first centimetres lie within the wall tolerance: the pose was chosen on wall returns up to
@@ -641,6 +642,7 @@ def _torus_pose_check(
     cfg: ImprovedConfig,
     diag_pose: dict[str, Any],
     given: GivenPose,
+    big_r: float,
 ) -> tuple[float, Detection] | None:
     """A long-radius bend whose arc starts a few centimetres ahead fills the view with curved
     wall: an axis refined on the nearest wall-like returns is a cylinder laid into the arc's
@@ -719,6 +721,7 @@ def _taper_pose_check(
     cfg: ImprovedConfig,
     diag_pose: dict[str, Any],
     given: GivenPose,
+    big_r: float,
 ) -> tuple[float, Detection] | None:
     """Under range noise the first centimetres of a gentle taper lie within the wall
     tolerance, so the wall the pose was chosen on runs onto it, and an axis refined there leans
@@ -754,6 +757,7 @@ def _short_wall_pose_check(
     cfg: ImprovedConfig,
     diag_pose: dict[str, Any],
     given: GivenPose,
+    big_r: float,
 ) -> tuple[float, Detection] | None:
     """A structure right ahead of a sensor with a long minimum range leaves a few centimetres
     of wall in view (a mitre bend 10 cm ahead of a ydlidar_x4, 12 cm): an axis refined on them
@@ -798,14 +802,14 @@ def _taper_radius_check(
     det: Detection,
     cfg: ImprovedConfig,
     diag_pose: dict[str, Any],
-    r_clamped: float,
+    given: GivenPose,
     big_r: float,
 ) -> tuple[float, Detection] | None:
     """Under range noise the first centimetres of a gentle contraction lie within the wall
     tolerance, and the pipe radius measured on the wall up to where the returns leave it takes
     them in: it comes out short (by up to 3.5 mm in a 100 mm pipe), and the taper's fitted start
     moves on (1-3 cm). Measure the radius again on the wall before the fitted start (the
-    clamp's reading ``r_clamped``, m, when too little wall lies there) and detect again.
+    clamp's reading, m, when too little wall lies there) and detect again.
     ``(radius, detection)`` when the radius changed and the structure is still a reducer, else
     ``None`` (the detection under radius ``big_r`` stands)."""
     if det.kind != "reducer" or not det.options or det.diagnostics.get("start_recheck"):
@@ -819,7 +823,7 @@ def _taper_radius_check(
     sub = _pose_diagnostics(
         diag_pose, {k: v for k, v in det.diagnostics.items() if k.startswith(records)}
     )
-    radius = _wall_radius(cloud, r_clamped, cfg, u_cap, sub)
+    radius = _wall_radius(cloud, given.clamped_radius, cfg, u_cap, sub)
     if abs(radius - big_r) < RADIUS_DEAD_BAND:
         return None
     redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
@@ -829,24 +833,56 @@ def _taper_radius_check(
     return radius, redone
 
 
+#: A check of the chosen pose: ``(cloud, detection, config, diagnostics of the pose choice,
+#: the given pose, the pipe radius (m))`` -> ``(radius, detection)`` found again under another
+#: pose or radius, or ``None`` when the detection stands.
+PoseCheck = Callable[
+    [PipeCloud, Detection, ImprovedConfig, dict[str, Any], GivenPose, float],
+    "tuple[float, Detection] | None",
+]
+
+#: The checks of the chosen pose, in order; each sees the detection the ones before left.
+POSE_CHECKS: tuple[tuple[str, PoseCheck], ...] = (
+    ("start_recheck", _start_recheck),
+    ("torus_pose_check", _torus_pose_check),
+    ("taper_pose_check", _taper_pose_check),
+    ("short_wall_pose_check", _short_wall_pose_check),
+    ("taper_radius_check", _taper_radius_check),
+)
+
+
+def _check_pose_again(
+    cloud: PipeCloud,
+    det: Detection,
+    cfg: ImprovedConfig,
+    diag_pose: dict[str, Any],
+    given: GivenPose,
+    big_r: float,
+) -> tuple[float, Detection]:
+    """The detection ``det`` (radius ``big_r``, m) after the checks of :data:`POSE_CHECKS`:
+    ``(radius, detection)``."""
+    for _, check in POSE_CHECKS:
+        redone = check(cloud, det, cfg, diag_pose, given, big_r)
+        if redone is not None:
+            big_r, det = redone
+    return big_r, det
+
+
 # --------------------------------------------------------------------------- classification
 def _detect_in_pipe_frame(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, diag: dict[str, Any]
 ) -> Detection:
-    valid = cloud.valid
     diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
     diag["sensor_offset_pipe"] = [float(v) for v in cloud.pose.position[1:]]
-    r = np.sqrt(np.square(cloud.xyz[1]) + np.square(cloud.xyz[2]))
-    # residual axis error grows with the distance along the axis
-    tol = _tolerance(cloud, cfg)
-    e = np.where(valid, r - big_r, 0.0)
-    # (a lowered floor serves the openings only: returns beyond the wall)
-    tol_in = tol if cloud.floor is None else tol + (cfg.tol_floor - cloud.floor)
-    wall = valid & (e <= tol) & (e >= -tol_in)
-    beyond = valid & (e > tol)
-    inside = valid & (e < -tol_in)
-    n_valid = int(valid.sum())
-    diag.update(n_wall=int(wall.sum()), n_beyond=int(beyond.sum()), n_inside=int(inside.sum()))
+    # (the tolerance: the residual axis error grows with the distance along the axis)
+    tol, wall, beyond, inside = _classify(cloud, big_r, cfg)
+    n_valid = cloud.n
+    n_wall = int(np.count_nonzero(wall))
+    diag.update(
+        n_wall=n_wall,
+        n_beyond=int(np.count_nonzero(beyond)),
+        n_inside=int(np.count_nonzero(inside)),
+    )
     if n_valid < cfg.min_anomaly_points:
         diag["reason"] = "too few returns"
         return Detection.straight(confidence=0.0, **diag)
@@ -859,11 +895,11 @@ def _detect_in_pipe_frame(
         good = (counts >= cfg.min_anomaly_points) & (row_span >= cfg.min_region_rows)
         good[0] = False
         keep = good[labels] & anomaly
-    n_keep = int(keep.sum())
+    n_keep = int(np.count_nonzero(keep))
     diag["n_anomaly"] = n_keep
-    wall_frac = float(wall.sum()) / max(n_valid, 1)
+    wall_frac = float(n_wall) / max(n_valid, 1)
     if n_keep < cfg.min_anomaly_points:
-        conf = min(1.0, float(wall.sum()) / 200.0) * wall_frac
+        conf = min(1.0, float(n_wall) / 200.0) * wall_frac
         return Detection.straight(confidence=conf, **diag)
     beyond_k = beyond & keep
     inside_k = inside & keep

@@ -9,73 +9,38 @@ Lengths in metres, angles in radians.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from detector.pipe_cloud import ANNEAL, COST_TOL, STEP_TOL, _dir, _pct, _subsample
-from detector.robust import robust_gauss_newton, tukey_cost
+from detector.fit_kernels import MODEL_TORUS, torus_distance
+from detector.pipe_cloud import ANNEAL, COST_TOL, STEP_TOL, _pct, _subsample
+from detector.robust import robust_fit, tukey_cost
 
 if TYPE_CHECKING:
     from detector.branches import BranchFit
 
 
-def _line_dist(p: NDArray, c: NDArray, d: NDArray) -> NDArray:
-    q = p - c
-    t = q @ d
-    return np.sqrt(np.maximum(np.einsum("ij,ij->i", q, q) - t * t, 0.0))
-
-
 def _torus_dist(p: NDArray, big_l: float, theta: float, phi: float, rb: float) -> NDArray:
-    """Distance from points to the centreline of a long-radius bend: the incoming axis up to the
-    tangent point, an arc of radius ``rb`` turning by ``theta`` towards roll ``phi``, then the
-    outgoing straight axis. The straight axes meet at ``(big_l, 0, 0)``."""
-    d, _ = _torus_parts(p, big_l, theta, phi, rb)
-    return d
+    """Distance (m) from the ``(N, 3)`` points to the centreline of a long-radius bend: the
+    incoming axis up to the tangent point, an arc of radius ``rb`` turning by ``theta`` towards
+    roll ``phi``, then the outgoing straight axis. The straight axes meet at ``(big_l, 0, 0)``
+    (:func:`detector.fit_kernels.torus_distance`)."""
+    out = np.empty(p.shape[0])
+    torus_distance(np.ascontiguousarray(p.T), big_l, theta, phi, rb, out)
+    return out
 
 
-def _torus_dist_batch(p: NDArray, params: NDArray) -> NDArray:
-    """:func:`_torus_dist` for ``M`` parameter sets at once: ``params`` (M, 4) of
-    ``(big_l, theta, phi, rb)``; returns (M, N)."""
-    big_l, theta, phi, rb = (params[:, k : k + 1] for k in range(4))
-    cp, sp = np.cos(phi), np.sin(phi)
-    ct, st = np.cos(theta), np.sin(theta)
-    px, py, pz = p[:, 0], p[:, 1], p[:, 2]
-    qa = px - (big_l - rb * np.tan(0.5 * theta))
-    qy = py - rb * cp
-    qz = pz - rb * sp
-    qw = -(qy * cp + qz * sp)
-    qn = qz * cp - qy * sp
-    d_arc = np.sqrt((np.sqrt(qa * qa + qw * qw) - rb) ** 2 + qn * qn)
-    # outgoing straight axis through (big_l, 0, 0) along (ct, st cp, st sp)
-    ox = px - big_l
-    t = ox * ct + (py * cp + pz * sp) * st
-    d_out = np.sqrt(np.maximum(ox * ox + py * py + pz * pz - t * t, 0.0))
-    d_in = np.sqrt(py * py + pz * pz)
-    # arc angle of the projection: < 0 before the tangent point, > theta past the arc end
-    # (theta < pi), tested without arctan2
-    past = (qa >= 0.0) & (ct * qa - st * qw > 0.0)
-    return np.where(qa < 0.0, d_in, np.where(past, d_out, d_arc))
-
-
-def _torus_parts(
-    p: NDArray, big_l: float, theta: float, phi: float, rb: float
-) -> tuple[NDArray, NDArray]:
-    """(distance to the bend centreline, arc angle of each point's projection)."""
+def _arc_angle(p: NDArray, big_l: float, theta: float, phi: float, rb: float) -> NDArray:
+    """Arc angle (rad) of each ``(N, 3)`` point's projection on the bend of
+    :func:`_torus_dist`: 0 at the tangent point on the incoming axis, ``theta`` at the arc's
+    end."""
     cp, sp = math.cos(phi), math.sin(phi)
     t1 = big_l - rb * math.tan(theta / 2.0)
     qa = p[:, 0] - t1
-    py = p[:, 1] - rb * cp
-    pz = p[:, 2] - rb * sp
-    qw = -(py * cp + pz * sp)
-    qn = pz * cp - py * sp
-    ang = np.arctan2(qa, qw)  # 0 at the tangent point on the incoming axis
-    d_arc = np.sqrt((np.sqrt(np.square(qa) + np.square(qw)) - rb) ** 2 + qn**2)
-    d_out = _line_dist(p, np.array([big_l, 0.0, 0.0]), _dir(theta, phi))
-    d_in = np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2]))
-    return np.where(ang < 0.0, d_in, np.where(ang > theta, d_out, d_arc)), ang
+    qw = -((p[:, 1] - rb * cp) * cp + (p[:, 2] - rb * sp) * sp)
+    return np.arctan2(qa, qw)
 
 
 def _fit_torus(
@@ -94,21 +59,7 @@ def _fit_torus(
     seen): ``x`` polished, the rms (m) and support of the fit before the polish, the arc angle
     (rad) of the polished bend; the last three over ``p``."""
     sub = p[_subsample(np.arange(p.shape[0]), 300)]
-    steps = np.vstack([np.zeros(4), np.diag(np.full(4, 1e-6))])  # (5, 4)
-    cols = np.array([0, 1, 2, 4])
-
-    def resjac_on(pts: NDArray) -> Callable[[NDArray], tuple[NDArray, NDArray]]:
-        def resjac(x: NDArray) -> tuple[NDArray, NDArray]:
-            # residual and forward-difference Jacobian from one batched evaluation
-            dist = _torus_dist_batch(pts, x[cols] + steps)
-            jac = np.empty((pts.shape[0], 5))
-            jac[:, cols] = ((dist[1:] - dist[0]) / 1e-6).T
-            jac[:, 3] = -1.0
-            return dist[0] - x[3], jac
-
-        return resjac
-
-    resjac = resjac_on(sub)
+    data = np.ascontiguousarray(sub.T)
 
     lower = np.array([-0.5, math.radians(5.0), -10.0, 0.5 * big_r, 0.2 * big_r])
     upper = np.array([3.0, math.radians(175.0), 10.0, 2.0 * big_r, 8.0 * big_r])
@@ -131,11 +82,10 @@ def _fit_torus(
         ),
     ]
     for x0 in starts:
-        x, res, w = robust_gauss_newton(
-            None,
+        x, res, w = robust_fit(
+            MODEL_TORUS,
+            data,
             x0,
-            np.full(5, 1e-6),
-            resjac=resjac,
             c=c0 * 2,
             iterations=20,  # (a narrow valley: length, angle and arc radius trade off)
             lower=lower,
@@ -172,11 +122,10 @@ def _fit_torus(
         def spread_cost(xx: NDArray) -> float:
             return tukey_cost(_torus_dist(spread, xx[0], xx[1], xx[2], xx[4]) - xx[3], c_fin)
 
-        x2, _, _ = robust_gauss_newton(
-            None,
+        x2, _, _ = robust_fit(
+            MODEL_TORUS,
+            np.ascontiguousarray(spread.T),
             x,
-            np.full(5, 1e-6),
-            resjac=resjac_on(spread),
             c=c_fin,
             iterations=10,
             prior_sigma=np.array([math.inf, math.inf, math.inf, 1e-9, math.inf]),  # (rho held)
@@ -189,7 +138,7 @@ def _fit_torus(
         if spread_cost(x2) < spread_cost(x):
             x = x2
             ok = np.abs(_torus_dist(p, x[0], x[1], x[2], x[4]) - x[3]) < c_fin
-    _, ang = _torus_parts(p, x[0], x[1], x[2], x[4])
+    ang = _arc_angle(p, x[0], x[1], x[2], x[4])
     vis = float(np.max(ang[ok])) if ok.any() else 0.0
     return x, rms_full, n_ok, vis
 

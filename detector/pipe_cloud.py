@@ -13,12 +13,13 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
-from detector.grid import build_grid
+from detector.grid import build_grid, region_stats
 from detector.improved_config import ImprovedConfig
 from detector.robust import mad_sigma, tukey_weights
-from detector.scan import Scan, corrected_ranges, radial_noise
+from detector.scan import Scan, radial_noise
 from detector.transforms import SensorInPipe
 
 #: Fits stop when no parameter moves by more than this (metres, radians): far below the
@@ -57,6 +58,7 @@ class PipeCloud:
     _xyz: NDArray[np.float64] | None = field(init=False, default=None)
     _r_v: NDArray[np.float64] | None = field(init=False, default=None)
     _tol_v: NDArray[np.float64] | None = field(init=False, default=None)
+    _sigma_pct: dict[float, float] = field(init=False, default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -98,6 +100,13 @@ class PipeCloud:
     def pts(self) -> NDArray[np.float64]:
         """(G, K, 3) view of the pipe-frame points."""
         return self.xyz.transpose(1, 2, 0)
+
+    def sigma_percentile(self, q: float) -> float:
+        """The ``q``-th percentile of the returns' radial noise (m; computed once)."""
+        v = self._sigma_pct.get(q)
+        if v is None:
+            v = self._sigma_pct[q] = _pct(self.sigma_v, q)
+        return v
 
     def values(self, mask: NDArray[np.bool_], per_return: NDArray) -> NDArray:
         """Per-return values (``(N,)`` compact order) of the grid cells in ``mask``."""
@@ -188,39 +197,96 @@ def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray,
 
 def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig) -> PipeCloud:
     wraps, k_cols, src, dirs, trig, src_missing, beam_step = _pattern(scan)
-    ok = scan.valid.reshape(-1)[src]  # (missing cells point at a copy of a real one ...)
-    ok[src_missing] = False  # (... and are dropped here)
-    cell = np.flatnonzero(ok)
-    pb = src[cell]
-    ranges = corrected_ranges(scan.ranges.reshape(-1)[pb], range_bias)
-    local = np.take(dirs, cell, axis=1)
-    local *= ranges
+    # (missing cells point at a copy of a real one and are dropped)
+    cell, pb, ranges, local = _gather_returns(
+        scan.valid.reshape(-1), scan.ranges.reshape(-1), src, src_missing, dirs, range_bias
+    )
     if _moves(scan):
         # continuous sweep: express every plane in the last plane's sensor frame (odometry)
         plane = pb // scan.n_beams
         world = np.einsum("nij,jn->in", scan.nominal_rotations[plane], local)
         world += scan.nominal_positions[plane].T
         local = scan.nominal_rotations[-1].T @ (world - scan.nominal_positions[-1][:, None])
-    near = local[0] <= cfg.horizon
-    if not near.all():
-        keep = np.flatnonzero(near)
-        cell, ranges, local = cell[keep], ranges[keep], np.take(local, keep, axis=1)
-    tr = np.take(trig, cell, axis=1)
-    # crop the grid to the beam-angle columns that hold returns
+    # (the returns within the horizon, on the grid cropped to the columns that hold returns)
     g = src.size // max(k_cols, 1)
-    row, col = np.divmod(cell, k_cols)
-    if cell.size:
-        k0, k1 = int(col.min()), int(col.max()) + 1
-    else:
-        k0, k1 = 0, 1
-    shape = (g, k1 - k0)
-    cell = row * shape[1] + (col - k0)
+    cell, ranges, local, tr, k = _crop(cell, ranges, local, trig, k_cols, cfg.horizon)
+    shape = (g, k)
     sigma_range, sigma_r = radial_noise(scan.spec, ranges, tr[0], tr[1])
     cloud = PipeCloud(
         wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose, beam_step
     )
     cloud.set_pose(pose)
     return cloud
+
+
+@njit(cache=True)
+def _gather_returns(valid, ranges, src, missing, dirs, bias):  # type: ignore[no-untyped-def]
+    """The valid returns of the grid cells in raster order: their cells, scan indices, ranges
+    less ``bias`` (clamped at 0 m, as :func:`detector.scan.corrected_ranges`) and sensor-frame
+    points ``(3, n)``; ``missing``: cells without a beam."""
+    m = src.size
+    keep = np.ones(m, dtype=np.bool_)
+    for c in missing:
+        keep[c] = False
+    n = 0
+    for c in range(m):
+        if keep[c] and valid[src[c]]:
+            n += 1
+        else:
+            keep[c] = False
+    cell = np.empty(n, dtype=np.intp)
+    pb = np.empty(n, dtype=np.intp)
+    rng = np.empty(n)
+    local = np.empty((3, n))
+    k = 0
+    for c in range(m):
+        if keep[c]:
+            r = max(ranges[src[c]] - bias, 0.0)
+            cell[k] = c
+            pb[k] = src[c]
+            rng[k] = r
+            local[0, k] = dirs[0, c] * r
+            local[1, k] = dirs[1, c] * r
+            local[2, k] = dirs[2, c] * r
+            k += 1
+    return cell, pb, rng, local
+
+
+@njit(cache=True)
+def _crop(cell, ranges, local, trig, k_cols, horizon):  # type: ignore[no-untyped-def]
+    """The returns nearer than ``horizon`` along the sensor's axis, with their cells on the
+    grid cropped to the beam-angle columns that hold returns, their ranges, points ``(3, n)``
+    and ``|sin|, |cos|`` of their beam angles ``(2, n)``; and the cropped grid's width."""
+    n = cell.size
+    m = 0
+    k0 = k_cols
+    k1 = -1
+    for i in range(n):
+        if local[0, i] <= horizon:
+            m += 1
+            col = cell[i] % k_cols
+            k0 = min(k0, col)
+            k1 = max(k1, col)
+    if m == 0:
+        k0, k1 = 0, 0
+    width = k1 + 1 - k0
+    out_cell = np.empty(m, dtype=np.intp)
+    out_range = np.empty(m)
+    out_local = np.empty((3, m))
+    out_trig = np.empty((2, m))
+    j = 0
+    for i in range(n):
+        if local[0, i] <= horizon:
+            row = cell[i] // k_cols
+            out_cell[j] = row * width + (cell[i] - row * k_cols - k0)
+            out_range[j] = ranges[i]
+            out_local[0, j] = local[0, i]
+            out_local[1, j] = local[1, i]
+            out_local[2, j] = local[2, i]
+            out_trig[0, j] = trig[0, cell[i]]
+            out_trig[1, j] = trig[1, cell[i]]
+            j += 1
+    return out_cell, out_range, out_local, out_trig, width
 
 
 def _moves(scan: Scan) -> bool:
@@ -233,10 +299,44 @@ def _moves(scan: Scan) -> bool:
     return float(np.ptp(scan.nominal_rotations, axis=0).max()) > 1e-9
 
 
-def _tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
-    """(G, K) radial tolerance of each return: floor, sensor noise and residual axis error."""
+def _classify(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]:
+    """The returns on the grid, by their distance ``e`` from the wall of radius ``big_r`` (m)
+    under the current pose: ``(tol, wall, beyond, inside)``, the (G, K) radial tolerance of
+    each return (floor, sensor noise and residual axis error: as :func:`_tolerance_v`; the
+    floor where there is no return) and the masks of ``-tol_in <= e <= tol``, ``e > tol`` and
+    ``e < -tol_in``, where ``tol_in`` is ``tol`` less any lowering of the floor (a lowered
+    floor serves the openings only: returns beyond the wall)."""
     floor = cfg.tol_floor if cloud.floor is None else cloud.floor
-    return floor + cfg.noise_k * cloud.sigma_r + cfg.axis_slope * np.abs(cloud.xyz[0])
+    lift = 0.0 if cloud.floor is None else cfg.tol_floor - cloud.floor
+    g, k = cloud.shape
+    return _classify_kernel(
+        cloud.cell, g, k, cloud.r_v, cloud.sigma_v, cloud.xyz_v[0], big_r, floor,
+        cfg.noise_k, cfg.axis_slope, lift,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _classify_kernel(cell, g, k, r_v, sigma_v, u_v, big_r, floor, noise_k, slope, lift):  # type: ignore[no-untyped-def]
+    tol = np.full((g, k), floor + noise_k * 0.0 + slope * 0.0)
+    wall = np.zeros((g, k), dtype=np.bool_)
+    beyond = np.zeros((g, k), dtype=np.bool_)
+    inside = np.zeros((g, k), dtype=np.bool_)
+    for i in range(cell.size):
+        row = cell[i] // k
+        col = cell[i] - row * k
+        t = floor + noise_k * sigma_v[i] + slope * abs(u_v[i])
+        tol[row, col] = t
+        e = r_v[i] - big_r
+        t_in = t + lift
+        if e > t:
+            beyond[row, col] = True
+        elif e < -t_in:
+            inside[row, col] = True
+        elif e <= t and e >= -t_in:
+            wall[row, col] = True
+    return tol, wall, beyond, inside
 
 
 def _tolerance_v(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
@@ -274,14 +374,9 @@ def _dir(theta: float, phi: float) -> NDArray[np.float64]:
 
 
 def _region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
-    """(cells, grid rows spanned) of each label 0..n_lab of a labelled grid."""
-    flat = labels.reshape(-1)
-    nz = np.flatnonzero(flat)
-    lab = flat[nz]
-    counts = np.bincount(lab, minlength=n_lab + 1)
-    occupied = np.zeros((n_lab + 1, labels.shape[0]), dtype=bool)
-    occupied[lab, nz // labels.shape[1]] = True
-    return counts, np.count_nonzero(occupied, axis=1)
+    """(cells, grid rows spanned) of each label 0..n_lab of a labelled grid
+    (:func:`detector.grid.region_stats`)."""
+    return region_stats(labels, n_lab)
 
 
 def _covers(xyz: NDArray, idx: NDArray[np.intp], fraction: float, bins: int = 36) -> bool:

@@ -29,7 +29,6 @@ Never NaN: degenerate inputs give ``straight`` with a low confidence. Metres and
 from __future__ import annotations
 
 import math
-import time
 from typing import Any
 
 import numpy as np
@@ -117,7 +116,6 @@ def detect_planar_improved(
         noise_k: tolerance = ``tol_floor`` + ``noise_k`` x the radial range noise.
         refine_axis: remove the in-plane offset and tilt fitted to the walls.
     """
-    t0 = time.perf_counter()
     diag: dict[str, Any] = {"method": "improved-planar", "plane_angle": 0.0, "n_points": 0}
     try:
         det = _detect(
@@ -127,7 +125,7 @@ def detect_planar_improved(
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
-    return det.with_diagnostics(time_s=time.perf_counter() - t0)
+    return det
 
 
 def _detect(

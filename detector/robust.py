@@ -1,8 +1,10 @@
 """Small robust least-squares tools shared by the improved detector: Tukey-weighted
-Gauss-Newton (Levenberg-Marquardt damped) with a numeric Jacobian, and robust statistics.
+Gauss-Newton (Levenberg-Marquardt damped), and robust statistics.
 
-Everything is vectorised numpy; the problems are small (a handful of parameters, a few
-thousand residuals), so a numeric Jacobian costs a few residual evaluations per iteration.
+:func:`robust_fit` runs the fit on one of the compiled residual models of
+:mod:`detector.fit_kernels` (the detector's own fits: the whole loop in one compiled call);
+:func:`robust_gauss_newton` is the same loop in numpy for a residual given as a Python function
+(with a numeric Jacobian unless one is given). The two are tested against each other.
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ from numpy.typing import NDArray
 from scipy.linalg.lapack import dgesv as _dgesv
 from scipy.linalg.lapack import dposv as _dposv
 
+from detector import fit_kernels
+
 
 def tukey_weights(res: NDArray[np.float64], c: float) -> NDArray[np.float64]:
     """Tukey biweight: ``(1 - (r/c)^2)^2`` inside ``|r| < c``, 0 outside."""
@@ -24,11 +28,25 @@ def tukey_weights(res: NDArray[np.float64], c: float) -> NDArray[np.float64]:
     return w
 
 
+def median(x: NDArray[np.float64]) -> float:
+    """``np.median`` of finite (n,) values, the same number, by partial sorting (without
+    ``np.median``'s checks and copies); 0 for empty input."""
+    n = x.size
+    if n == 0:
+        return 0.0
+    h = n // 2
+    if n % 2:
+        return float(np.partition(x, h)[h])
+    part = np.partition(x, (h - 1, h))
+    return float((part[h - 1] + part[h]) / 2.0)
+
+
 def mad_sigma(x: NDArray[np.float64]) -> float:
-    """Robust standard deviation (1.4826 x median absolute deviation); 0 for empty input."""
+    """Robust standard deviation (1.4826 x median absolute deviation) of finite values; 0 for
+    empty input."""
     if x.size == 0:
         return 0.0
-    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+    return float(1.4826 * median(np.abs(x - median(x))))
 
 
 def robust_gauss_newton(
@@ -175,6 +193,65 @@ def robust_gauss_newton(
             break
     w = tukey_weights(r, cf)
     return x, r, w
+
+
+def robust_fit(
+    model: int,
+    data: NDArray[np.float64],
+    x0: NDArray[np.float64],
+    c: float,
+    iterations: int = 10,
+    prior_sigma: NDArray[np.float64] | None = None,
+    prior_mean: NDArray[np.float64] | None = None,
+    lower: NDArray[np.float64] | None = None,
+    upper: NDArray[np.float64] | None = None,
+    c_final: float | None = None,
+    data_sigma: float = 1e-3,
+    step_tol: float = 1e-7,
+    anneal: int | None = None,
+    cost_tol: float = 0.0,
+    ipar: NDArray[np.intp] | None = None,
+    fpar: NDArray[np.float64] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`robust_gauss_newton` on the compiled residual model ``model`` (one of
+    ``detector.fit_kernels.MODEL_*``, with its returns ``data`` (rows, N), per-return integers
+    ``ipar`` and constants ``fpar``; see :mod:`detector.fit_kernels`). The other arguments are
+    those of :func:`robust_gauss_newton`. Returns ``(x, residuals, weights)``."""
+    x0 = np.asarray(x0, dtype=float)
+    n_p = x0.size
+    cf = c if c_final is None else c_final
+    inv = np.zeros(n_p)
+    pm = np.zeros(n_p)
+    if prior_sigma is not None:
+        pm = x0 if prior_mean is None else np.asarray(prior_mean, dtype=float)
+        inv = np.where(
+            np.isfinite(prior_sigma), np.square(data_sigma / np.asarray(prior_sigma)), 0.0
+        )
+    lo = np.full(n_p, -np.inf) if lower is None else np.asarray(lower, dtype=float)
+    up = np.full(n_p, np.inf) if upper is None else np.asarray(upper, dtype=float)
+    fixed = np.zeros(n_p, dtype=np.bool_)
+    if lower is not None and upper is not None:
+        fixed = lo >= up
+    n_anneal = max(1, iterations - 1 if anneal is None else anneal)
+    x, r = fit_kernels.gauss_newton(
+        model,
+        np.ascontiguousarray(data, dtype=float),
+        fit_kernels.NO_INTS if ipar is None else np.ascontiguousarray(ipar, dtype=np.intp),
+        fit_kernels.NO_FLOATS if fpar is None else np.ascontiguousarray(fpar, dtype=float),
+        x0,
+        float(c),
+        float(cf),
+        int(iterations),
+        int(n_anneal),
+        float(step_tol),
+        float(cost_tol),
+        inv,
+        pm,
+        lo,
+        up,
+        fixed,
+    )
+    return x, r, tukey_weights(r, cf)
 
 
 def _solve_spd(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64] | None:

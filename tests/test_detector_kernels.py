@@ -1,0 +1,327 @@
+"""The compiled fit kernels (:mod:`detector.fit_kernels`) against numpy: each residual model and
+its Jacobian against a numpy implementation of the same geometry, the compiled Gauss-Newton
+loop against the numpy one (:func:`detector.robust.robust_gauss_newton`) on the same problems,
+and the small linear solve against numpy's."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import ndimage
+
+from detector import fit_kernels as fk
+from detector.grid import label_regions
+from detector.robust import mad_sigma, median, robust_fit, robust_gauss_newton
+
+
+# --------------------------------------------------------------------------- numpy references
+def cylinder_np(sub: np.ndarray, big_r: float, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance to the axis through (0, y0, z0) along (1, a, b), less ``big_r``; (N, 4)."""
+    y0, z0, a, b = x
+    n = math.sqrt(1.0 + a * a + b * b)
+    qu, qy, qz = sub[0], sub[1] - y0, sub[2] - z0
+    t = (qu + a * qy + b * qz) / n
+    dist = np.sqrt(np.maximum(qu * qu + qy * qy + qz * qz - t * t, 1e-18))
+    jac = np.empty((qu.size, 4))
+    jac[:, 0] = (t * (a / n) - qy) / dist
+    jac[:, 1] = (t * (b / n) - qz) / dist
+    jac[:, 2] = t / n * jac[:, 0]
+    jac[:, 3] = t / n * jac[:, 1]
+    return dist - big_r, jac
+
+
+def lines_np(
+    pts: np.ndarray, x: np.ndarray, own: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distance to the nearest (or own) of the outgoing cylinders ``[L, theta, phi, rho] x n``."""
+    px, py, pz, r2 = pts
+    n_l = (x.size - 1) // 3
+    th, ph, rho = x[1::3], x[2::3], x[3::3]
+    ct, stt, cp, sp = np.cos(th), np.sin(th), np.cos(ph), np.sin(ph)
+    qx = px - x[0]
+    lat = cp[:, None] * py + sp[:, None] * pz
+    t = ct[:, None] * qx + stt[:, None] * lat
+    dist = np.sqrt(np.maximum(qx * qx + r2 - t * t, 1e-18))
+    res = dist - rho[:, None]
+    arg = np.argmin(np.abs(res), axis=0) if own is None else own
+    cols = np.arange(px.size)
+    g = t[arg, cols] / dist[arg, cols]
+    jac = np.zeros((px.size, 1 + 3 * n_l))
+    jac[:, 0] = ct[arg] * g - qx / dist[arg, cols]
+    k = 1 + 3 * arg
+    jac[cols, k] = (stt[arg] * qx - ct[arg] * lat[arg, cols]) * g
+    jac[cols, k + 1] = (py * sp[arg] - pz * cp[arg]) * (stt[arg] * g)
+    jac[cols, k + 2] = -1.0
+    return res[arg, cols], jac
+
+
+def torus_dist_np(p: np.ndarray, big_l: float, theta: float, phi: float, rb: float) -> np.ndarray:
+    """Distance from (N, 3) points to a long bend's centreline (numpy, angle-based)."""
+    cp, sp = math.cos(phi), math.sin(phi)
+    qa = p[:, 0] - (big_l - rb * math.tan(theta / 2.0))
+    qy, qz = p[:, 1] - rb * cp, p[:, 2] - rb * sp
+    qw = -(qy * cp + qz * sp)
+    qn = qz * cp - qy * sp
+    ang = np.arctan2(qa, qw)
+    d_arc = np.sqrt((np.hypot(qa, qw) - rb) ** 2 + qn**2)
+    d = np.array([math.cos(theta), math.sin(theta) * cp, math.sin(theta) * sp])
+    q = p - np.array([big_l, 0.0, 0.0])
+    t = q @ d
+    d_out = np.sqrt(np.maximum(np.sum(q * q, axis=1) - t * t, 0.0))
+    d_in = np.hypot(p[:, 1], p[:, 2])
+    return np.where(ang < 0.0, d_in, np.where(ang > theta, d_out, d_arc))
+
+
+def taper_np(
+    us: np.ndarray, rs: np.ndarray, big_r: float, x: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A reducer's radius ramp from ``big_r`` to ``x[2]`` over ``[x[0], x[0] + x[1]]``."""
+    big_l, t_len, rr2 = x
+    t_len = max(t_len, 1e-4)
+    raw = (us - big_l) / t_len
+    frac = np.clip(raw, 0.0, 1.0)
+    ramp = (raw > 0.0) & (raw < 1.0)
+    jac = np.stack(
+        [
+            np.where(ramp, (rr2 - big_r) / t_len, 0.0),
+            np.where(ramp, (rr2 - big_r) * raw / t_len, 0.0),
+            -frac,
+        ],
+        axis=1,
+    )
+    return rs - (big_r + (rr2 - big_r) * frac), jac
+
+
+def pipe_wall(rng: np.random.Generator, n: int, big_r: float, noise: float) -> np.ndarray:
+    """(3, n) returns on the wall of a pipe along x (0-30 cm), offset and noisy."""
+    ang = rng.uniform(0.0, 2.0 * math.pi, n)
+    r = big_r + rng.normal(0.0, noise, n)
+    return np.stack([rng.uniform(0.0, 0.3, n), r * np.cos(ang) + 0.002, r * np.sin(ang) - 0.001])
+
+
+seeds = st.integers(0, 2**31 - 1)
+
+
+# --------------------------------------------------------------------------- the models
+@settings(max_examples=30, deadline=None)
+@given(seeds)
+def test_cylinder_model_matches_numpy(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    sub = pipe_wall(rng, 200, 0.05, 0.001)
+    x = rng.normal(0.0, [0.005, 0.005, 0.05, 0.05])
+    r, jac = fk.residuals_jacobian(fk.MODEL_CYLINDER, sub, x, fpar=np.array([0.05]))
+    r_np, jac_np = cylinder_np(sub, 0.05, x)
+    np.testing.assert_allclose(r, r_np, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(jac, jac_np, rtol=1e-9, atol=1e-11)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seeds, st.integers(1, 4), st.booleans())
+def test_line_models_match_numpy(seed: int, n_l: int, own: bool) -> None:
+    rng = np.random.default_rng(seed)
+    p = rng.normal(0.0, 0.05, (150, 3))
+    pts = np.stack([p[:, 0], p[:, 1], p[:, 2], p[:, 1] ** 2 + p[:, 2] ** 2])
+    x = np.concatenate(
+        [[rng.uniform(-0.1, 0.4)]]
+        + [[rng.uniform(0.4, 2.6), rng.uniform(-3, 3), rng.uniform(0.02, 0.06)] for _ in range(n_l)]
+    )
+    labels = rng.integers(0, n_l, p.shape[0]).astype(np.intp) if own else None
+    model = fk.MODEL_OWN_LINES if own else fk.MODEL_LINES
+    r, jac = fk.residuals_jacobian(model, pts, x, ipar=labels)
+    r_np, jac_np = lines_np(pts, x, labels)
+    np.testing.assert_allclose(r, r_np, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(jac, jac_np, rtol=1e-9, atol=1e-11)
+    np.testing.assert_array_equal(fk.residuals(model, pts, x, ipar=labels), r)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seeds)
+def test_torus_model_matches_numpy(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    big_l, theta, phi, rho, rb = (
+        rng.uniform(0.1, 0.5),
+        rng.uniform(0.3, 1.6),
+        rng.uniform(-3, 3),
+        0.05,
+        rng.uniform(0.05, 0.4),
+    )
+    p = rng.normal(0.0, 0.1, (200, 3))
+    p[:, 0] = rng.uniform(-0.1, 0.8, 200)
+    x = np.array([big_l, theta, phi, rho, rb])
+    r, jac = fk.residuals_jacobian(fk.MODEL_TORUS, np.ascontiguousarray(p.T), x)
+    np.testing.assert_allclose(r, torus_dist_np(p, big_l, theta, phi, rb) - rho, atol=1e-12)
+    # forward differences of the same distance
+    for col in (0, 1, 2, 4):
+        xs = x.copy()
+        xs[col] += fk.TORUS_FD_STEP
+        fd = (torus_dist_np(p, xs[0], xs[1], xs[2], xs[4]) - (r + rho)) / fk.TORUS_FD_STEP
+        np.testing.assert_allclose(jac[:, col], fd, atol=1e-5)
+    assert np.all(jac[:, 3] == -1.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seeds)
+def test_taper_model_matches_numpy(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    us = rng.uniform(-0.1, 0.5, 120)
+    rs = rng.uniform(0.02, 0.06, 120)
+    x = np.array([rng.uniform(0.0, 0.3), rng.uniform(0.0, 0.2), rng.uniform(0.02, 0.06)])
+    r, jac = fk.residuals_jacobian(fk.MODEL_TAPER, np.stack([us, rs]), x, fpar=np.array([0.05]))
+    r_np, jac_np = taper_np(us, rs, 0.05, x)
+    np.testing.assert_allclose(r, r_np, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(jac, jac_np, rtol=1e-9, atol=1e-11)
+
+
+# --------------------------------------------------------------------------- the loop
+@settings(max_examples=25, deadline=None)
+@given(seeds, st.booleans(), st.booleans())
+def test_compiled_loop_matches_numpy_loop(seed: int, prior: bool, bounded: bool) -> None:
+    """The same fit, step for step: the compiled loop and the numpy one on the same residuals."""
+    rng = np.random.default_rng(seed)
+    sub = pipe_wall(rng, 250, 0.05, float(rng.uniform(0.0, 0.002)))
+    sub[:, :25] *= 1.3  # (outliers)
+    kw = {
+        "c": 0.02,
+        "iterations": 10,
+        "c_final": 0.004,
+        "step_tol": 1e-6,
+        "anneal": 3,
+        "cost_tol": 1e-4,
+    }
+    if prior:
+        kw["prior_sigma"] = np.array([0.01, 0.01, 0.05, np.inf])
+    if bounded:
+        kw["lower"] = np.array([-0.01, -0.01, 0.0, -0.1])
+        kw["upper"] = np.array([0.01, 0.01, 0.0, 0.1])  # (the third pinned)
+    x0 = rng.normal(0.0, [0.002, 0.002, 0.0, 0.01])
+    x_c, r_c, w_c = robust_fit(fk.MODEL_CYLINDER, sub, x0, fpar=np.array([0.05]), **kw)
+    x_n, r_n, w_n = robust_gauss_newton(
+        None, x0, np.full(4, 1e-5), resjac=lambda v: cylinder_np(sub, 0.05, v), **kw
+    )
+    np.testing.assert_allclose(x_c, x_n, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(r_c, r_n, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(w_c, w_n, rtol=0, atol=1e-8)
+
+
+def test_compiled_loop_recovers_a_junction() -> None:
+    """Two outgoing pipes fitted from a coarse start find the ones the returns lie on."""
+    rng = np.random.default_rng(3)
+    truth = np.array([0.3, math.radians(90), 0.4, 0.05, math.radians(45), 0.4 + math.pi, 0.04])
+    pts = []
+    for k in range(2):
+        th, ph, rho = truth[1 + 3 * k : 4 + 3 * k]
+        d = np.array([math.cos(th), math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph)])
+        e1 = np.cross(d, [0.0, 0.0, 1.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(d, e1)
+        s = rng.uniform(0.06, 0.2, 150)
+        a = rng.uniform(0, 2 * math.pi, 150)
+        pts.append(
+            np.array([truth[0], 0, 0])
+            + s[:, None] * d
+            + rho * np.cos(a)[:, None] * e1
+            + rho * np.sin(a)[:, None] * e2
+        )
+    p = np.vstack(pts)
+    data = np.stack([p[:, 0], p[:, 1], p[:, 2], p[:, 1] ** 2 + p[:, 2] ** 2])
+    x0 = truth + np.array([0.02, 0.1, 0.1, 0.005, -0.1, 0.1, 0.005])
+    x, res, w = robust_fit(fk.MODEL_LINES, data, x0, c=0.02, c_final=0.003, iterations=30)
+    np.testing.assert_allclose(x, truth, atol=1e-6)
+    assert float(np.abs(res).max()) < 1e-8
+
+
+@pytest.mark.parametrize("n", [1, 3, 7, 13])
+def test_solve_matches_numpy(n: int) -> None:
+    rng = np.random.default_rng(n)
+    m = rng.normal(size=(n, n))
+    b = rng.normal(size=n)
+    out = np.empty(n)
+    spd = m @ m.T + n * np.eye(n)
+    assert fk._solve(spd, b, out)
+    np.testing.assert_allclose(out, np.linalg.solve(spd, b), rtol=1e-10)
+    sym = m + m.T  # (indefinite: the LU path)
+    assert fk._solve(sym, b, out)
+    np.testing.assert_allclose(out, np.linalg.solve(sym, b), rtol=1e-8)
+    if n > 1:
+        singular = np.zeros((n, n))
+        singular[0, 0] = 1.0
+        assert not fk._solve(singular, b, out)
+
+
+# --------------------------------------------------------------------------- region labels
+def label_regions_ndimage(mask: np.ndarray, wraps: bool) -> tuple[np.ndarray, int]:
+    """Reference labelling: scipy's 8-connected labels, regions touching across the row seam
+    joined, numbered in the raster order of their first cell."""
+    labels, n = ndimage.label(mask, structure=np.ones((3, 3), dtype=bool))
+    if n and wraps and mask.shape[0] >= 3:
+        parent = np.arange(n + 1)
+
+        def find(x: int) -> int:
+            while parent[x] != x:
+                x = parent[x]
+            return x
+
+        first, last = labels[0], labels[-1]
+        for a, b in zip(
+            np.concatenate([last, last[1:], last[:-1]]),
+            np.concatenate([first, first[:-1], first[1:]]),
+        ):
+            if a and b:
+                ra, rb = find(int(a)), find(int(b))
+                parent[max(ra, rb)] = min(ra, rb)
+        roots = np.array([find(i) for i in range(n + 1)])
+        uniq, relabel = np.unique(roots, return_inverse=True)
+        labels, n = relabel[labels], uniq.size - 1
+    return labels.astype(np.int32), int(n)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seeds, st.integers(1, 30), st.integers(1, 30), st.floats(0.05, 0.7), st.booleans())
+def test_label_regions_matches_ndimage(
+    seed: int, rows: int, cols: int, density: float, wraps: bool
+) -> None:
+    mask = np.random.default_rng(seed).random((rows, cols)) < density
+    labels, n = label_regions(mask, wraps)
+    ref, n_ref = label_regions_ndimage(mask, wraps)
+    assert n == n_ref
+    np.testing.assert_array_equal(labels, ref)
+
+
+def coarse_cost_np(lq: np.ndarray, l_grid: np.ndarray, dirs: np.ndarray, big_r: float, c0: float):
+    """Reference of :func:`detector.fit_kernels.coarse_branch_cost` in numpy."""
+    qx = lq[None, :, 0] - l_grid[:, None]
+    r2 = (lq[:, 1] ** 2 + lq[:, 2] ** 2)[None, :]
+    lat = lq[:, 1:] @ dirs[1:]
+    t = qx[:, :, None] * dirs[0] + lat[None]
+    sq = np.minimum(
+        (np.sqrt(np.maximum(qx[..., None] ** 2 + r2[..., None] - t * t, 0)) - big_r) ** 2, c0 * c0
+    )
+    dp = lq[:, 0:1] * dirs[0] + lat
+    behind = (qx * lq[None, :, 0] + r2)[..., None] - t * dp[None] < 0.0
+    return np.where(behind, c0 * c0, sq).mean(axis=1)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seeds)
+def test_coarse_branch_cost_matches_numpy(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    lq = rng.normal(0.0, 0.05, (60, 3))
+    lq[:, 0] += 0.2
+    l_grid = np.linspace(0.1, 0.3, 13)
+    th = rng.uniform(0.3, 2.6, 20)
+    ph = rng.uniform(-3, 3, 20)
+    dirs = np.stack([np.cos(th), np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph)])
+    cost = fk.coarse_branch_cost(lq, l_grid, dirs, 0.05, 0.006)
+    np.testing.assert_allclose(cost, coarse_cost_np(lq, l_grid, dirs, 0.05, 0.006), atol=1e-13)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(-1e3, 1e3), min_size=1, max_size=60))
+def test_median_is_numpys(values: list[float]) -> None:
+    x = np.array(values)
+    assert median(x) == float(np.median(x))
+    assert mad_sigma(x) == float(1.4826 * np.median(np.abs(x - np.median(x))))
