@@ -22,12 +22,12 @@ from detector.pipe_cloud import (
     COST_TOL,
     STEP_TOL,
     PipeCloud,
-    _azimuth_coverage,
-    _confidence,
-    _pct,
-    _radius_mode,
-    _robust_line,
-    _subsample,
+    azimuth_coverage,
+    even_subsample,
+    fit_confidence,
+    partial_percentile,
+    radius_mode,
+    robust_line,
 )
 from detector.robust import mad_sigma, robust_fit, tukey_cost
 
@@ -55,7 +55,7 @@ HINGE_MIN_SNR = 4.0
 HINGE_MIN_RISE = 0.0005
 
 
-def _axisymmetric(
+def detect_axisymmetric(
     cloud: PipeCloud,
     big_r: float,
     inside: NDArray[np.bool_],
@@ -73,10 +73,10 @@ def _axisymmetric(
     p = cloud.points(anomaly)
     u = p[:, 0]
     r = np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2]))
-    tol_med = float(_pct(tol[anomaly], 50.0))
+    tol_med = float(partial_percentile(tol[anomaly], 50.0))
     # --- closure: a plane perpendicular to the axis, seen down to the centre
     if contraction:
-        u_med = float(_pct(u, 50.0))
+        u_med = float(partial_percentile(u, 50.0))
         tol_u = 0.003 + 2.0 * tol_med
         on_plane = np.abs(u - u_med) <= tol_u
         frac_plane = float(on_plane.mean())
@@ -85,18 +85,20 @@ def _axisymmetric(
             up = u[on_plane]
             dist = float(np.mean(up))
             spread = float(np.std(up))
-            cov = _azimuth_coverage(p[on_plane])
+            cov = azimuth_coverage(p[on_plane])
             # a cap is flat: a plane (tilted by any residual axis error) must explain it to
             # within the range noise, where the far wall of a pipe seen head-on is curved
             # (an even sample of the wall: a few hundred returns pin a plane and a quadric)
             on_idx = np.flatnonzero(on_plane)
-            pick = on_idx[_subsample(np.arange(on_idx.size), 2 * cfg.fit_points)]
+            pick = on_idx[even_subsample(np.arange(on_idx.size), 2 * cfg.fit_points)]
             pp = p[pick]
             uq = pp[:, 0]
             design = np.stack([np.ones(uq.size), pp[:, 1], pp[:, 2]], axis=1)
             coef = np.linalg.lstsq(design, uq, rcond=None)[0]
             plane_rms = float(np.sqrt(np.mean((uq - design @ coef) ** 2)))
-            noise_u = float(_pct(cloud.values(anomaly, cloud.sigma_range_v)[pick], 50.0))
+            noise_u = float(
+                partial_percentile(cloud.values(anomaly, cloud.sigma_range_v)[pick], 50.0)
+            )
             # under range noise a curved wall can pass for a plane: a quadratic surface must
             # not explain it significantly better with a sag of millimetres (a cap's sag is
             # the quantisation, a pipe's far wall sags by a good part of its radius)
@@ -118,11 +120,13 @@ def _axisymmetric(
                 closure_coverage=cov,
                 axisymmetric_support=1.0 if flat else 0.0,
             )
-            plane_seen = frac_plane >= 0.8 and float(_pct(r[on_plane], 5)) < 0.5 * big_r
+            plane_seen = (
+                frac_plane >= 0.8 and float(partial_percentile(r[on_plane], 5)) < 0.5 * big_r
+            )
             if not plane_seen:  # (not a cap seen head-on: only a clear curvature counts)
                 diag["closure_curved"] = curved
             if plane_seen and spread <= 0.5 * tol_u and flat_plane:
-                conf = _confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
+                conf = fit_confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
                 opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
                 # (curved only by the quadratic test: an end wall unless the returns show a
                 # turn; the caller decides)
@@ -133,10 +137,10 @@ def _axisymmetric(
         u_cross = u
     else:
         u_cross = u * big_r / np.maximum(r, 1e-9)  # where the beams crossed the wall radius
-    u_first = float(_pct(u_cross, 1))
-    r2 = _radius_mode(r)
+    u_first = float(partial_percentile(u_cross, 1))
+    r2 = radius_mode(r)
     # the start of a taper is one kink in r(u): it needs a denser sample than the other fits
-    sub = _subsample(np.arange(u.size), 2 * cfg.fit_points)
+    sub = even_subsample(np.arange(u.size), 2 * cfg.fit_points)
     us, rs = u[sub], r[sub]
     n_lead = 0
     if contraction:
@@ -144,11 +148,11 @@ def _axisymmetric(
         # tolerance only some way past its start, and the kink needs both sides
         pw = cloud.points(wall)
         lead = np.flatnonzero((pw[:, 0] > u_first - 0.15) & (pw[:, 0] < u_first))
-        lead = lead[_subsample(np.arange(lead.size), cfg.fit_points // 2)]
+        lead = lead[even_subsample(np.arange(lead.size), cfg.fit_points // 2)]
         n_lead = int(lead.size)
         us = np.concatenate([us, pw[lead, 0]])
         rs = np.concatenate([rs, np.hypot(pw[lead, 1], pw[lead, 2])])
-    t0 = max(0.01, float(_pct(u, 30)) - u_first)
+    t0 = max(0.01, float(partial_percentile(u, 30)) - u_first)
 
     def fit(
         us: NDArray, rs: NDArray, start: NDArray, lower: NDArray, upper: NDArray
@@ -186,27 +190,29 @@ def _axisymmetric(
         # the way onto the end wall when grazing beams lose the narrower pipe's own wall.
         # Without them, the taper ends where its returns end; the end wall, filling the
         # narrower pipe's cross-section, still bounds its radius from below.
-        u_far = _pct(u, 97.0)
+        u_far = partial_percentile(u, 97.0)
         # (under range noise the end wall's returns spread along the axis by their range
         # noise: a metre away, a centimetre and more either side)
         sig_range = cloud.values(anomaly, cloud.sigma_range_v)
         near_far = np.abs(u - u_far) <= 0.003 + 2.0 * tol_med
-        spread_u = 3.0 * float(_pct(sig_range[near_far], 50.0)) if near_far.any() else 0.0
+        spread_u = (
+            3.0 * float(partial_percentile(sig_range[near_far], 50.0)) if near_far.any() else 0.0
+        )
         window = 0.003 + 2.0 * tol_med + spread_u
         far = np.abs(u - u_far) <= window
         n_far = int(np.count_nonzero(far))
         far_s = np.concatenate([far[sub], np.zeros(n_lead, dtype=bool)])
         if (
             30 <= n_far <= 0.9 * u.size
-            and float(_pct(r[far], 5)) < 0.3 * big_r
+            and float(partial_percentile(r[far], 5)) < 0.3 * big_r
             and np.count_nonzero(~far_s) >= 50
             # (returns spread along a taper, not mostly on one wall: the far wall of a turn)
             and diag.get("closure_plane_fraction", 0.0) < 0.8
         ):
             # (the end wall lies inside the incoming pipe; the outermost of its returns,
             # beams along the narrower pipe's wall, bound that pipe's radius from below)
-            r_end = float(_pct(r[far], 98.0))
-            if float(_pct(r[far], 90.0)) < big_r - tol_med:
+            r_end = float(partial_percentile(r[far], 98.0))
+            if float(partial_percentile(r[far], 90.0)) < big_r - tol_med:
                 us, rs = us[~far_s], rs[~far_s]
                 # (from two starts, the lower robust cost kept, both with the plateau from the
                 # farthest returns left, on the narrower pipe (the first fit, pulled onto the
@@ -217,9 +223,17 @@ def _axisymmetric(
                 # out of: a 9 cm taper 30 cm ahead came out starting 40 cm late)
                 u_rest, r_rest = u[~far], r[~far]
                 r2_far = min(
-                    max(float(_pct(r_rest[u_rest >= _pct(u_rest, 90.0)], 50.0)), r_end), big_r
+                    max(
+                        float(
+                            partial_percentile(
+                                r_rest[u_rest >= partial_percentile(u_rest, 90.0)], 50.0
+                            )
+                        ),
+                        r_end,
+                    ),
+                    big_r,
                 )
-                t_fresh = max(0.01, float(_pct(u_rest, 30)) - u_first)
+                t_fresh = max(0.01, float(partial_percentile(u_rest, 30)) - u_first)
                 best = None
                 for k, start in enumerate(((x[0], x[1], r2_far), (u_first, t_fresh, r2_far))):
                     refit = fit(
@@ -242,7 +256,7 @@ def _axisymmetric(
         big_l, along = _widening_start(cloud, big_r, r2, u_first, big_l)
         diag["widening_start_from_cone"] = bool(along)
     diag.update(reducer_r2=r2, reducer_taper=t_len, reducer_rms=rms, axisymmetric_support=support)
-    cov = _azimuth_coverage(p)
+    cov = azimuth_coverage(p)
     if not (math.isfinite(big_l) and math.isfinite(r2)):
         return Detection.straight(confidence=0.0, **diag)
     if r2 < 0.25 * big_r:
@@ -251,10 +265,10 @@ def _axisymmetric(
         if diag.get("closure_curved", False):
             diag["axisymmetric_support"] = 0.0
             return Detection.straight(confidence=0.0, **diag)
-        conf = 0.5 * _confidence(int(w.sum()), rms, c_fin) * cov
+        conf = 0.5 * fit_confidence(int(w.sum()), rms, c_fin) * cov
         opt = StructureOption("closure", max(big_l, 0.0), 0.0, 0.0, 0.0, conf)
         return Detection("closure", [opt], conf, diag)
-    conf = _confidence(int((w > 0.1).sum()), rms, c_fin) * cov * min(1.0, support / 0.6)
+    conf = fit_confidence(int((w > 0.1).sum()), rms, c_fin) * cov * min(1.0, support / 0.6)
     opt = StructureOption("reducer", max(big_l, 0.0), 2.0 * r2, 0.0, 0.0, conf)
     return Detection("reducer", [opt], conf, diag)
 
@@ -281,11 +295,11 @@ def _widening_start(
     xyz, sig = cloud.xyz_v, cloud.sigma_v
     u = xyz[0]
     e = cloud.r_v - big_r
-    noise = float(_pct(sig, 50.0))
+    noise = float(partial_percentile(sig, 50.0))
     rise = r2 - big_r
     margin = max(3.0 * noise, CONE_PLATEAU_MARGIN)
     plateau = e >= rise - margin
-    u_f = float(_pct(u[plateau], 1.0)) if np.any(plateau) else u_first * r2 / big_r
+    u_f = float(partial_percentile(u[plateau], 1.0)) if np.any(plateau) else u_first * r2 / big_r
     off_wall = np.maximum(0.00035, 4.0 * sig)
     on = (np.abs(e) <= off_wall) & (u < u_f)
     cone = (e > off_wall) & ~plateau & (u > min(u_first, u_f) - 0.1) & (u < u_f)
@@ -293,10 +307,12 @@ def _widening_start(
     cone[cone] = _full_rings(xyz[:, cone])
     n_cone = int(np.count_nonzero(cone))
     uc, ec = u[cone], e[cone]
-    if n_cone >= 20 and float(_pct(ec, 95) - _pct(ec, 5)) > max(6.0 * noise, CONE_MIN_RISE):
+    if n_cone >= 20 and float(partial_percentile(ec, 95) - partial_percentile(ec, 5)) > max(
+        6.0 * noise, CONE_MIN_RISE
+    ):
         # (near its start the cone lies within the noise of the wall: the line alone places
         # the start, bounded by the beams' crossings)
-        a_u, b_u = _robust_line(ec, uc, 1e-18, 1e-4)  # u = a + b e: the start at e = 0
+        a_u, b_u = robust_line(ec, uc, 1e-18, 1e-4)  # u = a + b e: the start at e = 0
         # (a cone: returns on one line to within their noise)
         if math.isfinite(a_u) and b_u > 0.0:
             scatter = mad_sigma(ec - (uc - a_u) / b_u)
@@ -390,7 +406,7 @@ def _rings(p: NDArray[np.float64]) -> list[NDArray[np.bool_]]:
     out = []
     for k in vals[counts >= CONE_MIN_RETURNS]:
         sel = bins == k
-        if _azimuth_coverage(p[:, sel].T) >= CONE_RING_COVERAGE:
+        if azimuth_coverage(p[:, sel].T) >= CONE_RING_COVERAGE:
             out.append(sel)
     return out
 

@@ -21,19 +21,20 @@ from detector.detection import Detection
 from detector.fit_kernels import MODEL_LINES, MODEL_OWN_LINES, coarse_branch_cost, residuals
 from detector.grid import label_regions
 from detector.improved_config import ImprovedConfig
-from detector.long_bend import _fit_torus, _spread_along_axis
+from detector.long_bend import fit_torus, spread_along_axis
 from detector.options import StructureOption, option_order, wrap_angle
+from detector.outgoing import BranchFit
 from detector.pipe_cloud import (
     ANNEAL,
     COST_TOL,
     STEP_TOL,
     PipeCloud,
-    _azimuth_coverage,
-    _confidence,
-    _dir,
-    _pct,
-    _region_stats,
-    _subsample,
+    axis_direction,
+    azimuth_coverage,
+    even_subsample,
+    fit_confidence,
+    partial_percentile,
+    region_sizes,
 )
 from detector.robust import robust_fit, tukey_cost, tukey_weights
 from detector.transforms import option_direction
@@ -73,7 +74,7 @@ class Lobe:
     n: int
 
 
-def _find_lobes(
+def find_lobes(
     cloud: PipeCloud,
     beyond: NDArray[np.bool_],
     big_r: float,
@@ -85,13 +86,15 @@ def _find_lobes(
     if n_lab == 0:
         return []
     lobes: list[Lobe] = []
-    counts, row_span = _region_stats(labels, n_lab)
+    counts, row_span = region_sizes(labels, n_lab)
     cand = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
     regions = [(labels == k, int(counts[k])) for k in cand[cand > 0].tolist()]
     regions = [part for m, n in regions for part in _split_all_round(cloud, m, n, big_r, cfg)]
     for m, n in regions:
         p = cloud.points(m)
-        depth = float(_pct(np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2])), 90)) - big_r
+        depth = (
+            float(partial_percentile(np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2])), 90)) - big_r
+        )
         floor = cfg.tol_floor if cloud.floor is None else cloud.floor
         if depth < max(3.0 * floor, 0.1 * big_r):
             continue  # a shallow sliver (seam leaks, noise), not an opening
@@ -126,15 +129,15 @@ def _split_all_round(
     along the run do the returns reach deep (beyond half the region's 90th-percentile depth).
     Otherwise the region as it is (``(mask, n)``)."""
     p = cloud.points(mask)
-    if _azimuth_coverage(p) < ALL_ROUND:
+    if azimuth_coverage(p) < ALL_ROUND:
         return [(mask, n)]
     depth = np.hypot(cloud.xyz[1][mask], cloud.xyz[2][mask]) - big_r
     deep = np.zeros_like(mask)
-    deep[mask] = depth > 0.5 * float(_pct(depth, 90.0))
+    deep[mask] = depth > 0.5 * float(partial_percentile(depth, 90.0))
     labels, n_lab = label_regions(deep, cloud.wraps)
     if n_lab < 2:
         return [(mask, n)]
-    counts, row_span = _region_stats(labels, n_lab)
+    counts, row_span = region_sizes(labels, n_lab)
     parts = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
     parts = parts[parts > 0]
     if parts.size < 2:
@@ -143,14 +146,6 @@ def _split_all_round(
 
 
 # --------------------------------------------------------------------------- outgoing pipes
-@dataclass
-class BranchFit:
-    theta: float
-    phi: float
-    rho: float
-    rb: float = 0.0
-
-
 def _line_points(p: NDArray) -> NDArray[np.float64]:
     """(4, N) rows x, y, z, y^2 + z^2 of ``(N, 3)`` points: the returns of the outgoing-pipe
     models (:data:`detector.fit_kernels.MODEL_LINES`)."""
@@ -202,7 +197,7 @@ def _fit_axes(
     )
 
 
-def _branches(
+def detect_branches(
     cloud: PipeCloud,
     big_r: float,
     lobes: list[Lobe],
@@ -222,30 +217,30 @@ def _branches(
     for lb in lobes:
         lobe_mask |= lb.mask
     u_all = cloud.xyz[0]
-    u_hi = float(_pct(u_all[lobe_mask], 95)) + 2.0 * big_r if lobe_mask.any() else 0.0
+    u_hi = float(partial_percentile(u_all[lobe_mask], 95)) + 2.0 * big_r if lobe_mask.any() else 0.0
     near_inside = keep & ~lobe_mask & (u_all <= u_hi)
     lobe_sub = [
-        _subsample(np.flatnonzero(lb.mask.reshape(-1)), cfg.fit_points // 2) for lb in lobes
+        even_subsample(np.flatnonzero(lb.mask.reshape(-1)), cfg.fit_points // 2) for lb in lobes
     ]
     lobe_idx = np.concatenate(lobe_sub)
-    near_idx = _subsample(np.flatnonzero(near_inside.reshape(-1)), cfg.fit_points // 2)
+    near_idx = even_subsample(np.flatnonzero(near_inside.reshape(-1)), cfg.fit_points // 2)
     sub_idx = np.concatenate([lobe_idx, near_idx])
     if any_roll:
-        sub_idx = _subsample(np.flatnonzero(keep.reshape(-1)), cfg.fit_points)
+        sub_idx = even_subsample(np.flatnonzero(keep.reshape(-1)), cfg.fit_points)
     p_all = np.ascontiguousarray(cloud.points_at(sub_idx))
     pts_all = _line_points(p_all)
-    tol_med = float(_pct(tol.reshape(-1)[sub_idx], 50.0))
-    noise_med = float(_pct(cloud.sigma_r.reshape(-1)[sub_idx], 50.0)) + 0.3e-3
+    tol_med = float(partial_percentile(tol.reshape(-1)[sub_idx], 50.0))
+    noise_med = float(partial_percentile(cloud.sigma_r.reshape(-1)[sub_idx], 50.0)) + 0.3e-3
     lobe_pts = []
     u_edge = math.inf
     for lb in lobes:
         lp = cloud.points(lb.mask)
-        lp = lp[_subsample(np.arange(lp.shape[0]), 200)]
+        lp = lp[even_subsample(np.arange(lp.shape[0]), 200)]
         lobe_pts.append(lp)
         # where the beams left the incoming cylinder (sensor near the axis)
         rr = np.sqrt(np.square(lp[:, 1]) + np.square(lp[:, 2]))
         uc = lp[:, 0] * big_r / np.maximum(rr, 1e-9)
-        u_edge = min(u_edge, float(_pct(uc, 1)))
+        u_edge = min(u_edge, float(partial_percentile(uc, 1)))
     # --- does the incoming pipe go on? Then this is a junction seen along its run: every
     # lobe is a side branch of a standard fitting (tee 90 deg, wye 45 deg), no wider than
     # the run
@@ -276,7 +271,7 @@ def _branches(
                 (np.sin(rolls)[:, None] * st).reshape(-1),
             ]
         )  # (3, RT)
-        lq = lp[_subsample(np.arange(lp.shape[0]), 50 if any_roll else 60)]
+        lq = lp[even_subsample(np.arange(lp.shape[0]), 50 if any_roll else 60)]
         # the mean squared distance of the returns from the pipe's wall, capped; the sensor
         # sees every wall from inside its pipe: a cylinder behind the returns (the same patch
         # seen from outside) is penalised like an outlier
@@ -404,7 +399,7 @@ def _branches(
         k_main = 0 if lobes[0].n >= lobes[1].n else 1
         r_a = float(np.mean(std_r))  # (the side pipe of a cross may be narrower than the run)
         starts = [np.array([x[0], x[1 + 3 * k_main], x[2 + 3 * k_main], r_a])]
-        if float(_dir(x[1], x[2]) @ _dir(x[4], x[5])) > -0.985:
+        if float(axis_direction(x[1], x[2]) @ axis_direction(x[4], x[5])) > -0.985:
             # (the branches not nearly in line: the pipe across may lie elsewhere)
             starts += [
                 np.array([x[0], 0.5 * math.pi, lobes[k_main].roll, r_a]),
@@ -473,7 +468,7 @@ def _branches(
     if any_roll and w.sum() > 0:
         # a cylinder's axis has no sign: the way on is the half the returns lie along
         f = fits[0]
-        along = (p_all - np.array([x[0], 0.0, 0.0])) @ _dir(f.theta, f.phi)
+        along = (p_all - np.array([x[0], 0.0, 0.0])) @ axis_direction(f.theta, f.phi)
         ahead = float(np.sum(w * (along > 0.5 * big_r))) / max(float(w.sum()), 1e-9)
         behind = float(np.sum(w * (along < -0.5 * big_r))) / max(float(w.sum()), 1e-9)
         diag.update(far_wall_ahead=ahead, far_wall_behind=behind)
@@ -504,13 +499,13 @@ def _branches(
     if n_l == 1 and not straight_on and loose:
         # (polished on returns spread evenly along the axis: the few returns from the far end
         # of the arc fix its angle, and an even subsample of all returns holds hardly any of
-        # them; not under range noise, see _fit_torus)
+        # them; not under range noise, see fit_torus)
         p_fit = None
         if noise_med <= TORUS_POLISH_MAX_NOISE:
             arc_cells = np.flatnonzero((lobe_mask | near_inside).reshape(-1))
-            spread = _spread_along_axis(arc_cells, u_all.reshape(-1)[arc_cells], cfg.fit_points)
+            spread = spread_along_axis(arc_cells, u_all.reshape(-1)[arc_cells], cfg.fit_points)
             p_fit = np.ascontiguousarray(cloud.points_at(spread))
-        tor = _fit_torus(p_all, big_r, big_l, fits[0], c0, c_fin, noise_med, p_fit)
+        tor = fit_torus(p_all, big_r, big_l, fits[0], c0, c_fin, noise_med, p_fit)
         if tor is not None:
             xt, rms_t, sup_t, vis = tor
             diag.update(torus_rms=rms_t, torus_support=sup_t, torus_rb=float(xt[4]))
@@ -527,10 +522,10 @@ def _branches(
     if not (math.isfinite(big_l) and -0.5 <= big_l <= cfg.horizon):
         diag["reason"] = "fit left the physical range"
         return Detection.straight(confidence=0.0, **diag)
-    conf = _confidence(support, rms, c_fin / 3.0) * (0.6 if lower_bound else 1.0)
+    conf = fit_confidence(support, rms, c_fin / 3.0) * (0.6 if lower_bound else 1.0)
     options: list[StructureOption] = []
     for f in fits:
-        angle, direction = option_direction(_dir(f.theta, f.phi), cloud.pose)
+        angle, direction = option_direction(axis_direction(f.theta, f.phi), cloud.pose)
         # a long bend's arc radius (torus model; 0 for the straight-axes model) for the turn
         radius = float(f.rb) if model == "torus" else 0.0
         options.append(
@@ -692,7 +687,7 @@ def _nearest_structure_lobes(
     spans = []
     for lb in lobes:
         u = cloud.points(lb.mask)[:, 0]
-        spans.append((float(_pct(u, 2.0)), float(_pct(u, 98.0))))
+        spans.append((float(partial_percentile(u, 2.0)), float(partial_percentile(u, 98.0))))
     first = min(range(len(lobes)), key=lambda i: spans[i][0])
     reach = spans[first][1] + 4.0 * big_r
     keep = [lb for lb, (u0, _) in zip(lobes, spans) if u0 <= reach]
@@ -759,7 +754,7 @@ def _hole_prior(
         # is seen, scored by the returns through the opening and by the hole length (returns
         # at the edges fall off the wall, so a hole may look longer, never shorter)
         ell_t = centre - big_r * cos_t / sin_t  # (T,)
-        lq = lp[_subsample(np.arange(lp.shape[0]), 100)]
+        lq = lp[even_subsample(np.arange(lp.shape[0]), 100)]
         qx = lq[None, :, 0] - ell_t[:, None]  # (T, n)
         lat = lq[:, 1] * math.cos(lb.roll) + lq[:, 2] * math.sin(lb.roll)  # (n,)
         t = qx * cos_t[:, None] + lat[None, :] * sin_t[:, None]
@@ -840,5 +835,5 @@ def _straight_on(
     far = wall & (u > big_l + 4.0 * big_r)
     if far.sum() < 10:
         return False, 0.0
-    cov = _azimuth_coverage(cloud.points(far))
+    cov = azimuth_coverage(cloud.points(far))
     return cov >= cfg.straight_on_coverage, cov
