@@ -742,6 +742,47 @@ def detect_branches(
     return _branch_detection(bp, om)
 
 
+def _standard_angle_candidates(
+    x: NDArray[np.float64], n_b: int
+) -> list[list[tuple[int, float, float]]]:
+    """Standard angles: per branch of the fit ``x`` (``[L, theta, phi, rho] x n_b``) whose
+    deflection lies within ``SNAP_WITHIN`` of standard ones and on none of them, the
+    (parameter index, standard angle, offset) of each, nearest first (rad)."""
+    options: list[list[tuple[int, float, float]]] = []
+    for k in range(n_b):
+        th = float(x[1 + 3 * k])
+        near = sorted(
+            (abs(float(a) - th), float(a))
+            for a in STANDARD_BRANCH_ANGLES
+            if abs(float(a) - th) <= SNAP_WITHIN
+        )
+        if near and near[0][0] > 1e-6:
+            options.append([(1 + 3 * k, a, d) for d, a in near])
+    return options
+
+
+def _hole_shift(
+    x: NDArray[np.float64], idx: list[int], angles: list[float], run_radius: float | None
+) -> float | None:
+    """Standard angles: the move (m) of the reference point that keeps the branches held at
+    ``angles`` crossing the run's wall (radius ``run_radius``, m; None: no run goes on) where
+    the free fit ``x`` has them, where their holes are; None when there is none to make."""
+    # (a free deflection resting on the limits of any branch fit measured nothing: no hole to
+    # keep; a hole's own bounds, a few degrees either side, are measured ones)
+    if run_radius is None or any(
+        x[i] <= DEFLECTION_LIMITS[0] + math.radians(1.0)
+        or x[i] >= DEFLECTION_LIMITS[1] - math.radians(1.0)
+        for i in idx
+    ):
+        return None
+    shift = float(
+        np.mean(
+            [run_radius * (1.0 / math.tan(x[i]) - 1.0 / math.tan(a)) for i, a in zip(idx, angles)]
+        )
+    )
+    return shift if abs(shift) > 1e-4 else None
+
+
 def _standard_angles(
     pts: NDArray[np.float64],
     x: NDArray[np.float64],
@@ -780,16 +821,7 @@ def _standard_angles(
     within ``SNAP_RADIUS`` of the held ones: a branch a millimetre narrower than the run, fitted
     at the run's radius, leans by a degree or two instead. ``own``: as for
     :func:`_fit_axes`."""
-    options: list[list[tuple[int, float, float]]] = []  # per branch: (index, angle, offset)
-    for k in range(n_b):
-        th = float(x[1 + 3 * k])
-        near = sorted(
-            (abs(float(a) - th), float(a))
-            for a in STANDARD_BRANCH_ANGLES
-            if abs(float(a) - th) <= SNAP_WITHIN
-        )
-        if near and near[0][0] > 1e-6:
-            options.append([(1 + 3 * k, a, d) for d, a in near])
+    options = _standard_angle_candidates(x, n_b)
     if not options:
         return x, res, w
     cost = tukey_cost(res, c_fin)
@@ -813,25 +845,11 @@ def _standard_angles(
         lo, up = lower.copy(), upper.copy()
         lo[idx] = up[idx] = angles
         starts = []
-        # (a free deflection resting on the limits of any branch fit measured nothing: no
-        # hole to keep; a hole's own bounds, a few degrees either side, are measured ones)
-        if run_radius is not None and not any(
-            x[i] <= DEFLECTION_LIMITS[0] + math.radians(1.0)
-            or x[i] >= DEFLECTION_LIMITS[1] - math.radians(1.0)
-            for i in idx
-        ):
-            shift = float(
-                np.mean(
-                    [
-                        run_radius * (1.0 / math.tan(x[i]) - 1.0 / math.tan(a))
-                        for i, a in zip(idx, angles)
-                    ]
-                )
-            )
-            if abs(shift) > 1e-4:
-                xs = x.copy()
-                xs[0] += shift
-                starts.append(xs)
+        shift = _hole_shift(x, idx, angles, run_radius)
+        if shift is not None:
+            xs = x.copy()
+            xs[0] += shift
+            starts.append(xs)
         xs = x.copy()
         starts.append(xs)
         for xs in starts:
