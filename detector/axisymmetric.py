@@ -8,6 +8,7 @@ Lengths in metres, angles in radians.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -55,6 +56,155 @@ HINGE_MIN_SNR = 4.0
 HINGE_MIN_RISE = 0.0005
 
 
+def _closure(
+    cloud: PipeCloud,
+    big_r: float,
+    anomaly: NDArray[np.bool_],
+    p: NDArray[np.float64],
+    u: NDArray[np.float64],
+    r: NDArray[np.float64],
+    tol_med: float,
+    cfg: ImprovedConfig,
+    diag: dict[str, Any],
+) -> Detection | None:
+    """A closure: the returns inside the wall ``p`` (``anomaly``; ``u`` along the axis and
+    ``r`` from it, m) on a plane perpendicular to the axis, seen down to the centre, flat to
+    within the range noise (tolerance ``tol_med``, m); None when they are no end wall."""
+    u_med = float(partial_percentile(u, 50.0))
+    tol_u = 0.003 + 2.0 * tol_med
+    on_plane = np.abs(u - u_med) <= tol_u
+    frac_plane = float(on_plane.mean())
+    diag["closure_plane_fraction"] = frac_plane
+    if np.count_nonzero(on_plane) >= cfg.min_anomaly_points:
+        up = u[on_plane]
+        dist = float(np.mean(up))
+        spread = float(np.std(up))
+        cov = azimuth_coverage(p[on_plane])
+        # a cap is flat: a plane (tilted by any residual axis error) must explain it to
+        # within the range noise, where the far wall of a pipe seen head-on is curved
+        # (an even sample of the wall: a few hundred returns pin a plane and a quadric)
+        on_idx = np.flatnonzero(on_plane)
+        pick = on_idx[even_subsample(np.arange(on_idx.size), 2 * cfg.fit_points)]
+        pp = p[pick]
+        uq = pp[:, 0]
+        design = np.stack([np.ones(uq.size), pp[:, 1], pp[:, 2]], axis=1)
+        coef = np.linalg.lstsq(design, uq, rcond=None)[0]
+        plane_rms = float(np.sqrt(np.mean((uq - design @ coef) ** 2)))
+        noise_u = float(partial_percentile(cloud.values(anomaly, cloud.sigma_range_v)[pick], 50.0))
+        # under range noise a curved wall can pass for a plane: a quadratic surface must
+        # not explain it significantly better with a sag of millimetres (a cap's sag is
+        # the quantisation, a pipe's far wall sags by a good part of its radius)
+        quad = np.concatenate([design, (pp[:, 1:, None] * pp[:, None, 1:]).reshape(-1, 4)], 1)
+        coef_q = np.linalg.lstsq(quad, uq, rcond=None)[0]
+        rss_q = float(np.sum((uq - quad @ coef_q) ** 2))
+        rss_p = plane_rms**2 * uq.size
+        lr_curv = uq.size * math.log(max(rss_p, 1e-30) / max(rss_q, 1e-30))
+        sag = float(np.abs(quad[:, 3:] @ coef_q[3:]).max())
+        curved = lr_curv > 25.0 and sag > 0.003
+        flat_plane = plane_rms <= max(3.0 * noise_u, 0.001)
+        flat = flat_plane and not curved
+        diag["closure_curved"] = not flat
+        diag.update(
+            closure_rms=spread,
+            closure_plane_rms=plane_rms,
+            closure_sag=sag,
+            closure_curvature_lr=lr_curv,
+            closure_coverage=cov,
+            axisymmetric_support=1.0 if flat else 0.0,
+        )
+        plane_seen = frac_plane >= 0.8 and float(partial_percentile(r[on_plane], 5)) < 0.5 * big_r
+        if not plane_seen:  # (not a cap seen head-on: only a clear curvature counts)
+            diag["closure_curved"] = curved
+        if plane_seen and spread <= 0.5 * tol_u and flat_plane:
+            conf = fit_confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
+            opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
+            # (curved only by the quadratic test: an end wall unless the returns show a
+            # turn; the caller decides)
+            diag["closure_tentative"] = not flat
+            return Detection("closure", [opt], conf, diag)
+    return None
+
+
+def _refit_without_end_wall(
+    cloud: PipeCloud,
+    big_r: float,
+    anomaly: NDArray[np.bool_],
+    u: NDArray[np.float64],
+    r: NDArray[np.float64],
+    sub: NDArray[np.intp],
+    n_lead: int,
+    us: NDArray[np.float64],
+    rs: NDArray[np.float64],
+    x: NDArray[np.float64],
+    u_first: float,
+    tol_med: float,
+    c_fin: float,
+    cfg: ImprovedConfig,
+    diag: dict[str, Any],
+    fit: Callable[..., tuple[NDArray, NDArray, NDArray]],
+) -> tuple[NDArray, NDArray, NDArray] | None:
+    """A narrowing's taper refitted without the end wall far down the narrower pipe (its
+    returns ``u``, ``r`` (m), the fitted ones ``us``, ``rs``: the subsample ``sub`` and
+    ``n_lead`` wall returns before it; ``x`` the first fit, ``fit`` the taper fit): the refit
+    ``(x, residuals, weights)``, or None when no end wall is seen through the taper."""
+    u_far = partial_percentile(u, 97.0)
+    # (under range noise the end wall's returns spread along the axis by their range
+    # noise: a metre away, a centimetre and more either side)
+    sig_range = cloud.values(anomaly, cloud.sigma_range_v)
+    near_far = np.abs(u - u_far) <= 0.003 + 2.0 * tol_med
+    spread_u = 3.0 * float(partial_percentile(sig_range[near_far], 50.0)) if near_far.any() else 0.0
+    window = 0.003 + 2.0 * tol_med + spread_u
+    far = np.abs(u - u_far) <= window
+    n_far = int(np.count_nonzero(far))
+    far_s = np.concatenate([far[sub], np.zeros(n_lead, dtype=bool)])
+    if (
+        30 <= n_far <= 0.9 * u.size
+        and float(partial_percentile(r[far], 5)) < 0.3 * big_r
+        and np.count_nonzero(~far_s) >= 50
+        # (returns spread along a taper, not mostly on one wall: the far wall of a turn)
+        and diag.get("closure_plane_fraction", 0.0) < 0.8
+    ):
+        # (the end wall lies inside the incoming pipe; the outermost of its returns,
+        # beams along the narrower pipe's wall, bound that pipe's radius from below)
+        r_end = float(partial_percentile(r[far], 98.0))
+        if float(partial_percentile(r[far], 90.0)) < big_r - tol_med:
+            us, rs = us[~far_s], rs[~far_s]
+            # (from two starts, the lower robust cost kept, both with the plateau from the
+            # farthest returns left, on the narrower pipe (the first fit, pulled onto the
+            # end wall, can hold the plateau at the end wall's bound): the first fit's
+            # start and length; and the first returns off the wall with a length from the
+            # returns left, since the first fit's long shallow taper reaching for the end
+            # wall can leave a minimum that the taper's own returns cannot pull the refit
+            # out of: a 9 cm taper 30 cm ahead came out starting 40 cm late)
+            u_rest, r_rest = u[~far], r[~far]
+            r2_far = min(
+                max(
+                    float(
+                        partial_percentile(r_rest[u_rest >= partial_percentile(u_rest, 90.0)], 50.0)
+                    ),
+                    r_end,
+                ),
+                big_r,
+            )
+            t_fresh = max(0.01, float(partial_percentile(u_rest, 30)) - u_first)
+            best = None
+            for k, start in enumerate(((x[0], x[1], r2_far), (u_first, t_fresh, r2_far))):
+                refit = fit(
+                    us,
+                    rs,
+                    np.array(start),
+                    np.array([-0.2, 0.002, r_end]),
+                    np.array([cfg.horizon, 1.0, big_r]),
+                )
+                cost = tukey_cost(refit[1], c_fin)
+                if best is None or cost < best[0]:
+                    best = (cost, refit)
+                    diag["reducer_refit_start"] = ("first fit", "returns left")[k]
+            diag["reducer_end_wall_radius"] = r_end
+            return best[1]
+    return None
+
+
 def detect_axisymmetric(
     cloud: PipeCloud,
     big_r: float,
@@ -76,62 +226,9 @@ def detect_axisymmetric(
     tol_med = float(partial_percentile(tol[anomaly], 50.0))
     # --- closure: a plane perpendicular to the axis, seen down to the centre
     if contraction:
-        u_med = float(partial_percentile(u, 50.0))
-        tol_u = 0.003 + 2.0 * tol_med
-        on_plane = np.abs(u - u_med) <= tol_u
-        frac_plane = float(on_plane.mean())
-        diag["closure_plane_fraction"] = frac_plane
-        if np.count_nonzero(on_plane) >= cfg.min_anomaly_points:
-            up = u[on_plane]
-            dist = float(np.mean(up))
-            spread = float(np.std(up))
-            cov = azimuth_coverage(p[on_plane])
-            # a cap is flat: a plane (tilted by any residual axis error) must explain it to
-            # within the range noise, where the far wall of a pipe seen head-on is curved
-            # (an even sample of the wall: a few hundred returns pin a plane and a quadric)
-            on_idx = np.flatnonzero(on_plane)
-            pick = on_idx[even_subsample(np.arange(on_idx.size), 2 * cfg.fit_points)]
-            pp = p[pick]
-            uq = pp[:, 0]
-            design = np.stack([np.ones(uq.size), pp[:, 1], pp[:, 2]], axis=1)
-            coef = np.linalg.lstsq(design, uq, rcond=None)[0]
-            plane_rms = float(np.sqrt(np.mean((uq - design @ coef) ** 2)))
-            noise_u = float(
-                partial_percentile(cloud.values(anomaly, cloud.sigma_range_v)[pick], 50.0)
-            )
-            # under range noise a curved wall can pass for a plane: a quadratic surface must
-            # not explain it significantly better with a sag of millimetres (a cap's sag is
-            # the quantisation, a pipe's far wall sags by a good part of its radius)
-            quad = np.concatenate([design, (pp[:, 1:, None] * pp[:, None, 1:]).reshape(-1, 4)], 1)
-            coef_q = np.linalg.lstsq(quad, uq, rcond=None)[0]
-            rss_q = float(np.sum((uq - quad @ coef_q) ** 2))
-            rss_p = plane_rms**2 * uq.size
-            lr_curv = uq.size * math.log(max(rss_p, 1e-30) / max(rss_q, 1e-30))
-            sag = float(np.abs(quad[:, 3:] @ coef_q[3:]).max())
-            curved = lr_curv > 25.0 and sag > 0.003
-            flat_plane = plane_rms <= max(3.0 * noise_u, 0.001)
-            flat = flat_plane and not curved
-            diag["closure_curved"] = not flat
-            diag.update(
-                closure_rms=spread,
-                closure_plane_rms=plane_rms,
-                closure_sag=sag,
-                closure_curvature_lr=lr_curv,
-                closure_coverage=cov,
-                axisymmetric_support=1.0 if flat else 0.0,
-            )
-            plane_seen = (
-                frac_plane >= 0.8 and float(partial_percentile(r[on_plane], 5)) < 0.5 * big_r
-            )
-            if not plane_seen:  # (not a cap seen head-on: only a clear curvature counts)
-                diag["closure_curved"] = curved
-            if plane_seen and spread <= 0.5 * tol_u and flat_plane:
-                conf = fit_confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
-                opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
-                # (curved only by the quadratic test: an end wall unless the returns show a
-                # turn; the caller decides)
-                diag["closure_tentative"] = not flat
-                return Detection("closure", [opt], conf, diag)
+        closure = _closure(cloud, big_r, anomaly, p, u, r, tol_med, cfg, diag)
+        if closure is not None:
+            return closure
     # --- reducer: r(u) = R + (R2 - R) clip((u - L) / T, 0, 1)
     if contraction:
         u_cross = u
@@ -190,65 +287,26 @@ def detect_axisymmetric(
         # the way onto the end wall when grazing beams lose the narrower pipe's own wall.
         # Without them, the taper ends where its returns end; the end wall, filling the
         # narrower pipe's cross-section, still bounds its radius from below.
-        u_far = partial_percentile(u, 97.0)
-        # (under range noise the end wall's returns spread along the axis by their range
-        # noise: a metre away, a centimetre and more either side)
-        sig_range = cloud.values(anomaly, cloud.sigma_range_v)
-        near_far = np.abs(u - u_far) <= 0.003 + 2.0 * tol_med
-        spread_u = (
-            3.0 * float(partial_percentile(sig_range[near_far], 50.0)) if near_far.any() else 0.0
+        refit = _refit_without_end_wall(
+            cloud,
+            big_r,
+            anomaly,
+            u,
+            r,
+            sub,
+            n_lead,
+            us,
+            rs,
+            x,
+            u_first,
+            tol_med,
+            c_fin,
+            cfg,
+            diag,
+            fit,
         )
-        window = 0.003 + 2.0 * tol_med + spread_u
-        far = np.abs(u - u_far) <= window
-        n_far = int(np.count_nonzero(far))
-        far_s = np.concatenate([far[sub], np.zeros(n_lead, dtype=bool)])
-        if (
-            30 <= n_far <= 0.9 * u.size
-            and float(partial_percentile(r[far], 5)) < 0.3 * big_r
-            and np.count_nonzero(~far_s) >= 50
-            # (returns spread along a taper, not mostly on one wall: the far wall of a turn)
-            and diag.get("closure_plane_fraction", 0.0) < 0.8
-        ):
-            # (the end wall lies inside the incoming pipe; the outermost of its returns,
-            # beams along the narrower pipe's wall, bound that pipe's radius from below)
-            r_end = float(partial_percentile(r[far], 98.0))
-            if float(partial_percentile(r[far], 90.0)) < big_r - tol_med:
-                us, rs = us[~far_s], rs[~far_s]
-                # (from two starts, the lower robust cost kept, both with the plateau from the
-                # farthest returns left, on the narrower pipe (the first fit, pulled onto the
-                # end wall, can hold the plateau at the end wall's bound): the first fit's
-                # start and length; and the first returns off the wall with a length from the
-                # returns left, since the first fit's long shallow taper reaching for the end
-                # wall can leave a minimum that the taper's own returns cannot pull the refit
-                # out of: a 9 cm taper 30 cm ahead came out starting 40 cm late)
-                u_rest, r_rest = u[~far], r[~far]
-                r2_far = min(
-                    max(
-                        float(
-                            partial_percentile(
-                                r_rest[u_rest >= partial_percentile(u_rest, 90.0)], 50.0
-                            )
-                        ),
-                        r_end,
-                    ),
-                    big_r,
-                )
-                t_fresh = max(0.01, float(partial_percentile(u_rest, 30)) - u_first)
-                best = None
-                for k, start in enumerate(((x[0], x[1], r2_far), (u_first, t_fresh, r2_far))):
-                    refit = fit(
-                        us,
-                        rs,
-                        np.array(start),
-                        np.array([-0.2, 0.002, r_end]),
-                        np.array([cfg.horizon, 1.0, big_r]),
-                    )
-                    cost = tukey_cost(refit[1], c_fin)
-                    if best is None or cost < best[0]:
-                        best = (cost, refit)
-                        diag["reducer_refit_start"] = ("first fit", "returns left")[k]
-                x, res, w = best[1]
-                diag["reducer_end_wall_radius"] = r_end
+        if refit is not None:
+            x, res, w = refit
     support = float((w > 0.1).mean())
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     big_l, t_len, r2 = (float(v) for v in x)
