@@ -39,31 +39,10 @@ from detector.pipe_cloud import (
 from detector.robust import robust_fit, tukey_cost, tukey_weights
 from detector.transforms import option_direction
 
-#: A region of returns beyond the wall covering this fraction of the azimuth goes all round.
-ALL_ROUND = 0.75
-#: Deflections of standard branch fittings (tees and crosses, laterals either way), rad; a
-#: junction's branch fitted within ``SNAP_WITHIN`` of one is held at it when the returns allow
-#: (likelihood ratio at most ``SNAP_LR`` per branch) and it turns by at most
-#: ``SNAP_MAX_TURN`` about the run; a radius held with it may move by ``SNAP_RADIUS`` of itself.
-#: (A small branch's opening seen along the run from 20 cm under range noise is a few dozen
-#: returns that a deflection 10-15 deg off fits as well: the returns, not the distance from
-#: the standard angle, decide. Under range noise, the few dozen returns through a far opening
-#: reject a standard angle held where the branch's hole is at ratios of 7-9 now and then, the
-#: free deflection spending itself on the noise: hence 10, not 6; the accuracy study's ideal
-#: scans are the same at either.)
+#: Deflections of standard branch fittings (tees and crosses, laterals either way), rad; the
+#: tuning of holding a branch at one is :class:`~detector.improved_config.ImprovedConfig`'s
+#: ``snap_*`` fields.
 STANDARD_BRANCH_ANGLES = np.radians([45.0, 90.0, 135.0])
-SNAP_WITHIN = math.radians(25.0)
-SNAP_LR = 10.0
-SNAP_MAX_TURN = math.radians(3.0)
-SNAP_RADIUS = 0.03
-#: The deflections an outgoing pipe's fit may take, rad (a bend's: at most 100 deg).
-DEFLECTION_LIMITS = (math.radians(25.0), math.radians(150.0))
-#: A single way on whose straight-axes fit leaves out more than this fraction of its returns
-#: is also tried as a long-radius bend (as one that fits them loosely is).
-TORUS_TRY_SUPPORT = 0.95
-#: A long bend's angle is polished on returns spread along its arc only when their range noise
-#: (median, plus 0.3 mm) is below this, m (a noiseless sensor's range resolution).
-TORUS_POLISH_MAX_NOISE = 0.001
 
 
 # --------------------------------------------------------------------------- lobes
@@ -129,7 +108,7 @@ def _split_all_round(
     along the run do the returns reach deep (beyond half the region's 90th-percentile depth).
     Otherwise the region as it is (``(mask, n)``)."""
     p = cloud.points(mask)
-    if azimuth_coverage(p) < ALL_ROUND:
+    if azimuth_coverage(p) < cfg.all_round:
         return [(mask, n)]
     depth = np.hypot(cloud.xyz[1][mask], cloud.xyz[2][mask]) - big_r
     deep = np.zeros_like(mask)
@@ -361,10 +340,10 @@ def _coarse_start(
         x0 += [float(thetas[k % thetas.size]), float(rolls[k // thetas.size]), big_r]
     n_l = bp.n_l
     # physical ranges: bends deflect 30-90 deg, branches 45, 90 or 135 deg
-    lower = np.array([-0.5] + [DEFLECTION_LIMITS[0], -10.0, 0.25 * big_r] * n_l)
+    lower = np.array([-0.5] + [bp.cfg.deflection_min, -10.0, 0.25 * big_r] * n_l)
     # (a side branch of a run that goes on is no wider than the run)
     rho_max = 1.05 * big_r if bp.straight_on else 2.5 * big_r
-    th_max = math.radians(100.0) if bend_only else DEFLECTION_LIMITS[1]
+    th_max = math.radians(100.0) if bend_only else bp.cfg.deflection_max
     upper = np.array([bp.cfg.horizon] + [th_max, 10.0, rho_max] * n_l)
     return np.array(x0), lower, upper
 
@@ -547,6 +526,7 @@ def _hold_standard_angles(
         bp.c_fin,
         rc.sigma2,
         bp.diag,
+        bp.cfg,
         radius_bounds=(lower[3::3], upper[3::3]) if across is None else None,
         own=own,
         run_radius=bp.big_r if bp.straight_on and across is None else None,
@@ -599,14 +579,14 @@ def _try_long_bend(bp: BranchProblem, om: OutgoingModel) -> OutgoingModel:
     that leaves out more than a few of the returns: the first centimetres of a gentle arc lie
     within the noise of a mitre's straight axes, its far part does not) is also fitted as a
     long-radius bend (torus), kept when it explains the returns clearly better."""
-    loose = om.rms > 2.0 * bp.noise_med or om.support < TORUS_TRY_SUPPORT * bp.p_all.shape[0]
+    loose = om.rms > 2.0 * bp.noise_med or om.support < bp.cfg.torus_try_support * bp.p_all.shape[0]
     if not (bp.n_l == 1 and not bp.straight_on and loose):
         return om
     # (polished on returns spread evenly along the axis: the few returns from the far end of
     # the arc fix its angle, and an even subsample of all returns holds hardly any of them;
     # not under range noise, see fit_torus)
     p_fit = None
-    if bp.noise_med <= TORUS_POLISH_MAX_NOISE:
+    if bp.noise_med <= bp.cfg.torus_polish_max_noise:
         arc_cells = np.flatnonzero((bp.lobe_mask | bp.near_inside).reshape(-1))
         u_flat = bp.cloud.xyz[0].reshape(-1)
         spread = spread_along_axis(arc_cells, u_flat[arc_cells], bp.cfg.fit_points)
@@ -743,10 +723,10 @@ def detect_branches(
 
 
 def _standard_angle_candidates(
-    x: NDArray[np.float64], n_b: int
+    x: NDArray[np.float64], n_b: int, snap_within: float
 ) -> list[list[tuple[int, float, float]]]:
     """Standard angles: per branch of the fit ``x`` (``[L, theta, phi, rho] x n_b``) whose
-    deflection lies within ``SNAP_WITHIN`` of standard ones and on none of them, the
+    deflection lies within ``snap_within`` (rad) of standard ones and on none of them, the
     (parameter index, standard angle, offset) of each, nearest first (rad)."""
     options: list[list[tuple[int, float, float]]] = []
     for k in range(n_b):
@@ -754,7 +734,7 @@ def _standard_angle_candidates(
         near = sorted(
             (abs(float(a) - th), float(a))
             for a in STANDARD_BRANCH_ANGLES
-            if abs(float(a) - th) <= SNAP_WITHIN
+            if abs(float(a) - th) <= snap_within
         )
         if near and near[0][0] > 1e-6:
             options.append([(1 + 3 * k, a, d) for d, a in near])
@@ -762,7 +742,11 @@ def _standard_angle_candidates(
 
 
 def _hole_shift(
-    x: NDArray[np.float64], idx: list[int], angles: list[float], run_radius: float | None
+    x: NDArray[np.float64],
+    idx: list[int],
+    angles: list[float],
+    run_radius: float | None,
+    cfg: ImprovedConfig,
 ) -> float | None:
     """Standard angles: the move (m) of the reference point that keeps the branches held at
     ``angles`` crossing the run's wall (radius ``run_radius``, m; None: no run goes on) where
@@ -770,8 +754,8 @@ def _hole_shift(
     # (a free deflection resting on the limits of any branch fit measured nothing: no hole to
     # keep; a hole's own bounds, a few degrees either side, are measured ones)
     if run_radius is None or any(
-        x[i] <= DEFLECTION_LIMITS[0] + math.radians(1.0)
-        or x[i] >= DEFLECTION_LIMITS[1] - math.radians(1.0)
+        x[i] <= cfg.deflection_min + math.radians(1.0)
+        or x[i] >= cfg.deflection_max - math.radians(1.0)
         for i in idx
     ):
         return None
@@ -794,15 +778,16 @@ def _standard_angles(
     c_fin: float,
     sigma2: float,
     diag: dict[str, Any],
+    cfg: ImprovedConfig,
     radius_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
     own: NDArray[np.intp] | None = None,
     run_radius: float | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The branch fit ``x`` (``[L, theta, phi, rho] x n_b``, its residuals and weights) with
-    each deflection within ``SNAP_WITHIN`` of a standard fitting angle (tees and crosses
+    each deflection within ``cfg.snap_within`` of a standard fitting angle (tees and crosses
     90 deg, laterals 45 deg: :data:`STANDARD_BRANCH_ANGLES`) held at that angle and the rest
     refitted, when the returns do not reject it (likelihood ratio against the residual noise
-    ``sigma2``, m^2, at most ``SNAP_LR`` per angle held). A small opening far away shows a
+    ``sigma2``, m^2, at most ``cfg.snap_lr`` per angle held). A small opening far away shows a
     patch of the branch's wall whose deflection trades against the reference point and the
     radius by a few degrees; a standard angle the patch fits as well is the better estimate.
 
@@ -818,10 +803,10 @@ def _standard_angles(
 
     When the radii are held (``lower == upper``) and the held angle is rejected, it is tried
     once more with the radii free within ``radius_bounds`` (lower, upper per branch, m) but
-    within ``SNAP_RADIUS`` of the held ones: a branch a millimetre narrower than the run, fitted
+    within ``cfg.snap_radius`` of the held ones: a branch a millimetre narrower than the run, fitted
     at the run's radius, leans by a degree or two instead. ``own``: as for
     :func:`_fit_axes`."""
-    options = _standard_angle_candidates(x, n_b)
+    options = _standard_angle_candidates(x, n_b, cfg.snap_within)
     if not options:
         return x, res, w
     cost = tukey_cost(res, c_fin)
@@ -833,7 +818,7 @@ def _standard_angles(
         # (held at the standard angle, the branch must stay where it was: a fit that turns it
         # about the run's axis to make up for the deflection rests on too few returns)
         turned = max(abs(wrap_angle(float(x_s[2 + 3 * k] - x[2 + 3 * k]))) for k in range(n_b))
-        return lr <= SNAP_LR * n_held and turned <= SNAP_MAX_TURN
+        return lr <= cfg.snap_lr * n_held and turned <= cfg.snap_max_turn
 
     Fit = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
 
@@ -845,7 +830,7 @@ def _standard_angles(
         lo, up = lower.copy(), upper.copy()
         lo[idx] = up[idx] = angles
         starts = []
-        shift = _hole_shift(x, idx, angles, run_radius)
+        shift = _hole_shift(x, idx, angles, run_radius, cfg)
         if shift is not None:
             xs = x.copy()
             xs[0] += shift
@@ -861,8 +846,8 @@ def _standard_angles(
             if radius_bounds is not None and bool(np.all(lo[rho] >= up[rho])):
                 lo_r, up_r = lo.copy(), up.copy()
                 held_r = x[rho]
-                lo_r[rho] = np.maximum(radius_bounds[0], held_r * (1.0 - SNAP_RADIUS))
-                up_r[rho] = np.minimum(radius_bounds[1], held_r * (1.0 + SNAP_RADIUS))
+                lo_r[rho] = np.maximum(radius_bounds[0], held_r * (1.0 - cfg.snap_radius))
+                up_r[rho] = np.minimum(radius_bounds[1], held_r * (1.0 + cfg.snap_radius))
                 fit = _fit_axes(pts, fit[0], n_b, lo_r, up_r, c=2.0 * c_fin, c_final=c_fin, own=own)
                 if accepted(fit[0], fit[1], len(idx)):
                     return fit, True
