@@ -30,6 +30,7 @@ from typing import Any
 
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
 
 
 def _print(*args: Any) -> None:
@@ -173,7 +174,11 @@ def _demo(args: argparse.Namespace) -> int:
     report["files"] = sorted({"episode.json", "report.json", *log["files"], *files})
     if log.get("render_skipped"):
         report["render_skipped"] = log["render_skipped"]
-    atomic_write_text(out / "report.json", json.dumps(report, indent=2))
+    from pipe_env.network_io import finite_json
+
+    atomic_write_text(
+        out / "report.json", json.dumps(finite_json(report), indent=2, allow_nan=False)
+    )
     _print(json.dumps(_rounded(report), indent=2))
     if log.get("render_skipped"):
         _print(f"3D render skipped: {log['render_skipped']}")
@@ -202,15 +207,11 @@ def _scenarios_run(args: argparse.Namespace) -> int:
     from rich.markup import escape
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
-    from agents.scenario_runner import run_and_report, tasks_of
-    from agents.scenarios import ScenarioError, discover
+    from agents.scenario_runner import RunInterrupted, run_and_report, tasks_of
+    from agents.scenarios import discover_with_errors
 
-    try:
-        found = discover(args.glob, args.dir)
-    except ScenarioError as exc:
-        _print(f"error: {exc}")
-        return EXIT_USAGE
-    if not found:
+    found, broken = discover_with_errors(args.glob, args.dir)
+    if not found and not broken:
         _print(f"error: no scenario matches {args.glob!r}")
         return EXIT_USAGE
     if args.backend == "ray" and importlib.util.find_spec("ray") is None:
@@ -219,7 +220,16 @@ def _scenarios_run(args: argparse.Namespace) -> int:
     if not (_out_file(args.junit, "--junit") and _out_file(args.json, "--json")):
         return EXIT_USAGE
     seeds = args.seed if args.seed else None
-    total = len(tasks_of(found, seeds))
+    total = len(tasks_of(found, seeds)) + len(broken)
+    marks = {
+        "passed": "[green]PASS[/green]",
+        "failed": "[red]FAIL[/red]",
+        "error": "[red]ERROR[/red]",
+        "expected_failure": "[yellow]XFAIL[/yellow]",
+        "unexpected_pass": "[yellow]XPASS[/yellow]",
+        "not_run": "[dim]NOT RUN[/dim]",
+    }
+    interrupted = False
     with Progress(
         "[progress.description]{task.description}",
         BarColumn(),
@@ -230,21 +240,52 @@ def _scenarios_run(args: argparse.Namespace) -> int:
         task = progress.add_task("scenarios", total=total)
 
         def done(r: Any) -> None:
-            mark = "[green]PASS[/green]" if r.passed else "[red]FAIL[/red]"
             # names and "[seed=N]" are text, not rich markup
             text = f"{r.scenario} [seed={r.seed}] ({sum(r.timings.values()):.1f} s)"
-            progress.console.print(f"{mark} {escape(text)}")
+            progress.console.print(f"{marks[r.status]} {escape(text)}")
             progress.advance(task)
 
-        results = run_and_report(
-            found, seeds, args.jobs, args.backend, args.junit, args.json, done, args.ray_address
-        )
-    failed = [r for r in results if not r.passed]
-    _print(f"{len(results) - len(failed)} passed, {len(failed)} failed")
+        try:
+            results = run_and_report(
+                found,
+                seeds,
+                args.jobs,
+                args.backend,
+                args.junit,
+                args.json,
+                done,
+                broken=broken,
+                timeout=args.timeout,
+                strict=args.strict,
+                ray_address=args.ray_address,
+            )
+        except RunInterrupted as exc:
+            results, interrupted = exc.results, True
+    failed = [r for r in results if r.counts_as_failure(args.strict)]
+    statuses = [r.status for r in results]
+    line = f"{statuses.count('passed')} passed, {len(failed)} failed"
+    for status, label in (
+        ("error", "errors"),
+        ("expected_failure", "expected failures"),
+        ("unexpected_pass", "unexpected passes"),
+        ("not_run", "not run"),
+    ):
+        if status in statuses:
+            line += f", {statuses.count(status)} {label}"
+    _print(line)
     for r in failed:
         for c in r.failures:
             _print(f"  {r.scenario}[seed={r.seed}]: {c.message}")
         _print(f"  replay: {r.replay_command()}")
+    for r in results:
+        if r.unexpected_pass:
+            _print(
+                f"  {r.scenario}[seed={r.seed}]: passes but is marked known_failure "
+                f"({r.known_failure}); remove the note"
+            )
+    if interrupted:
+        _print("interrupted: the reports hold every finished result; the rest is marked not run")
+        return EXIT_INTERRUPTED
     return EXIT_FAILED if failed else 0
 
 
@@ -348,7 +389,11 @@ def _eval(args: argparse.Namespace) -> int:
         )
     _print(json.dumps(_rounded(result.to_dict()), indent=2))
     if args.json:
-        atomic_write_text(args.json, json.dumps(result.to_dict(), indent=2))
+        from pipe_env.network_io import finite_json
+
+        atomic_write_text(
+            args.json, json.dumps(finite_json(result.to_dict()), indent=2, allow_nan=False)
+        )
     return 0
 
 
@@ -482,9 +527,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--seed",
-        type=int,
+        type=_int_at_least(0),
         action="append",
         help="run with this seed instead of the scenarios' own (repeatable)",
+    )
+    run.add_argument(
+        "--timeout",
+        type=_positive_float,
+        default=None,
+        help="wall-clock limit of each run in s, over the files' timeout_s (default: the "
+        "file's timeout_s, else 1800); a run past it is an error testcase",
+    )
+    run.add_argument(
+        "--strict",
+        action="store_true",
+        help="count expected failures (known_failure) and unexpected passes as failures",
     )
     run.set_defaults(func=_scenarios_run)
 

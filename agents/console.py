@@ -27,6 +27,7 @@ from rich.table import Table
 import pipe_env  # noqa: F401  (registers the environment ids)
 from detector.options import direction_name
 from pipe_env.envs import K_OPTIONS
+from pipe_env.plotting import save_figure
 
 
 class OperatorConsole:
@@ -134,14 +135,19 @@ class OperatorConsole:
             ax.set_title("map (fast fidelity has no scans)")
         self.out.mkdir(parents=True, exist_ok=True)
         target = self.out / "view.png"
-        fig.savefig(target, dpi=90)
+        save_figure(fig, target, dpi=90)
         if self.live:
             plt.pause(0.01)
         return target
 
     def run(self) -> int:
-        obs, info = self.env.reset(seed=self.seed)
-        # the reset's drive can end the episode (a goal before any decision): nothing to ask
+        try:
+            obs, info = self.env.reset(seed=self.seed)
+        except ValueError as exc:  # e.g. a network whose goal the reset's drive reaches
+            self.console.print(f"error: {escape(str(exc))}")
+            return 2
+        # the reset's drive can end the episode (jams, or a chain of single ways too long to
+        # follow): nothing to ask
         done = self.env.unwrapped.decision is None
         while True:
             self.console.print(self.table(info))

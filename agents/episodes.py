@@ -20,8 +20,11 @@ import numpy as np
 
 import pipe_env  # noqa: F401  (registers the environment ids)
 from agents.scripted import make_agent
+from detector.atomic import atomic_write_text
 from pipe_env.generator import NetworkConfig
 from pipe_env.network import PipeNetwork
+from pipe_env.network_io import finite_json
+from pipe_env.plotting import save_figure
 
 #: The embedded default of the demo: a small 3D network with junctions and a loop.
 DEMO_CONFIG = {"n_fittings": 6, "planar": False, "allow_loops": True}
@@ -114,7 +117,7 @@ def run_episode(
     env.close()
     if out is not None:
         Path(out).mkdir(parents=True, exist_ok=True)
-        (Path(out) / "episode.json").write_text(json.dumps(log))
+        atomic_write_text(Path(out) / "episode.json", json.dumps(finite_json(log), allow_nan=False))
     return log
 
 
@@ -152,12 +155,12 @@ def save_episode_plots(log: dict[str, Any], out: str | Path, which: str = "all")
             f"{s.get('decisions')} decisions, {s.get('jams')} jams"
         )
         fig = plot_network(net, path=log["path"], decisions=log.get("decisions", []), title=title)
-        fig.savefig(out / "map.png", dpi=110)
+        save_figure(fig, out / "map.png", dpi=110)
         plt.close(fig)
         files.append("map.png")
     if which in ("all", "detection"):
         fig = plot_detections(log["detections"])
-        fig.savefig(out / "detection.png", dpi=110)
+        save_figure(fig, out / "detection.png", dpi=110)
         plt.close(fig)
         files.append("detection.png")
     return files

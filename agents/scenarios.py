@@ -25,8 +25,11 @@ A scenario file (packaged ones live in ``agents/scenarios/``)::
     detect: {distances: [0.4, 0.3, 0.2, 0.1], planar: false}   # detect mode: sensor positions
                                     # before the structure (m); planar: the 2D algorithm on one
                                     # horizontal plane
-    known_failure: why it fails today  # optional: a documented gap; pytest expects the failure
-                                    # (strict: a pass is reported, so the note gets removed)
+    known_failure: why it fails today  # optional: a documented gap; a failing run is reported
+                                    # as an expected failure, a passing one is flagged (so the
+                                    # note gets removed); ``--strict`` counts both as failures
+    timeout_s: 600                  # optional: wall-clock limit of one run (s); a run that
+                                    # exceeds it is an error testcase (default 1800 s)
     criteria:
       success: true                 # expected is_success
       max_jams: 0
@@ -73,7 +76,14 @@ SCENARIO_KEYS = {
     "criteria",
     "tags",
     "known_failure",
+    "timeout_s",
 }
+#: Wall-clock limit of one scenario run when neither the file nor ``--timeout`` gives one, s.
+DEFAULT_TIMEOUT_S = 1800.0
+#: The largest seed a scenario may give.
+MAX_SEED = 2**63 - 1
+#: The largest ``timeout_s`` a file may give, s (one day).
+MAX_TIMEOUT_S = 86400.0
 MODES = ("navigate", "detect")
 ENVS = ("PipeNav-v0", "PipeExplore-v0")
 DETECTORS = ("improved", "thesis", "ground_truth")
@@ -124,6 +134,8 @@ class Scenario:
     #: why the scenario is expected to fail today (a documented gap, not a skipped check: the
     #: test suite runs it and fails if it starts passing, so the note gets removed)
     known_failure: str | None = None
+    #: wall-clock limit of one run, s (None: the runner's default)
+    timeout_s: float | None = None
 
     @property
     def base_dir(self) -> Path:
@@ -153,6 +165,16 @@ def parse_scenario(data: Any, source: str) -> Scenario:
         raise
     except Exception as exc:  # a value of a shape no check anticipated: still name the file
         raise ScenarioError(f"{source}: invalid scenario ({type(exc).__name__}: {exc})") from None
+
+
+def _number(value: Any) -> bool:
+    """Whether ``value`` is a finite real number (an int too large for a float is not)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
 
 
 def _choice(source: str, key: str, value: Any, allowed: tuple[str, ...]) -> str:
@@ -197,9 +219,13 @@ def _parse_scenario(data: Any, source: str) -> Scenario:
         if not (
             isinstance(seeds, list)
             and seeds
-            and all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds)
+            and all(
+                isinstance(s, int) and not isinstance(s, bool) and 0 <= s <= MAX_SEED for s in seeds
+            )
         ):
-            raise _fail(source, "seeds", f"got {seeds!r}; allowed: a non-empty list of ints >= 0")
+            raise _fail(
+                source, "seeds", f"got {seeds!r}; allowed: a non-empty list of ints in [0, 2**63)"
+            )
     else:
         reps = data.get("repetitions", 1)
         _expect(source, "repetitions", reps, int, "an int in [1, 100]")
@@ -213,22 +239,14 @@ def _parse_scenario(data: Any, source: str) -> Scenario:
     _validate_network(data.get("network"), source)
     if "goal" in data:
         g = data["goal"]
-        as_point = (
-            isinstance(g, list)
-            and len(g) == 3
-            and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                for v in g
-            )
-        )
+        as_point = isinstance(g, list) and len(g) == 3 and all(_number(v) for v in g)
         as_way = (
             isinstance(g, dict)
             and set(g) == {"way", "distance"}
             and isinstance(g["way"], int)
             and not isinstance(g["way"], bool)
             and g["way"] >= 0
-            and isinstance(g["distance"], (int, float))
-            and not isinstance(g["distance"], bool)
+            and _number(g["distance"])
             and 0 < g["distance"] <= 20
         )
         if not (as_point or as_way):
@@ -266,12 +284,7 @@ def _parse_scenario(data: Any, source: str) -> Scenario:
             )
         dists = det.get("distances", [0.4, 0.3, 0.2, 0.1])
         if not (
-            isinstance(dists, list)
-            and dists
-            and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v <= 5.0
-                for v in dists
-            )
+            isinstance(dists, list) and dists and all(_number(v) and 0.0 <= v <= 5.0 for v in dists)
         ):
             raise _fail(
                 source,
@@ -290,6 +303,13 @@ def _parse_scenario(data: Any, source: str) -> Scenario:
     known = data.get("known_failure")
     if known is not None and not (isinstance(known, str) and known.strip()):
         raise _fail(source, "known_failure", f"got {known!r}; allowed: a non-empty string")
+    timeout = data.get("timeout_s")
+    if timeout is not None:
+        if not (_number(timeout) and 0 < timeout <= MAX_TIMEOUT_S):
+            raise _fail(
+                source, "timeout_s", f"got {timeout!r}; allowed: seconds in (0, {MAX_TIMEOUT_S:g}]"
+            )
+        timeout = float(timeout)
     return Scenario(
         name,
         source,
@@ -305,6 +325,7 @@ def _parse_scenario(data: Any, source: str) -> Scenario:
         criteria,
         tags,
         known,
+        timeout,
     )
 
 
@@ -338,8 +359,8 @@ def _validate_network(net: Any, source: str) -> None:
         if not isinstance(net["generator"], dict):
             raise _fail(source, "network.generator", "allowed: a mapping of NetworkConfig fields")
         seed = net.get("seed", 0)
-        if not (isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0):
-            raise _fail(source, "network.seed", f"got {seed!r}; allowed: an int >= 0")
+        if not (isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed <= MAX_SEED):
+            raise _fail(source, "network.seed", f"got {seed!r}; allowed: an int in [0, 2**63)")
     if "file" in net and not isinstance(net["file"], str):
         raise _fail(source, "network.file", "allowed: a path (relative to the scenario file)")
     if "inline" in net and not isinstance(net["inline"], dict):
@@ -375,14 +396,7 @@ def _validate_sensor(sensor: Any, source: str) -> None:
         )
     for k in MISALIGNMENT_KEYS & set(mis):
         v = mis[k]
-        if not (
-            isinstance(v, list)
-            and len(v) == 3
-            and all(
-                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-                for x in v
-            )
-        ):
+        if not (isinstance(v, list) and len(v) == 3 and all(_number(x) for x in v)):
             raise _fail(source, f"sensor.misalignment.{k}", f"got {v!r}; allowed: 3 numbers")
 
 
@@ -398,7 +412,7 @@ def _validate_criteria(criteria: Any, source: str) -> None:
             )
         want = CRITERIA[key]
         if want is float:
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 0
+            ok = _number(value) and value >= 0
         elif want is int:
             ok = isinstance(value, int) and not isinstance(value, bool) and value >= 0
         else:
@@ -418,7 +432,7 @@ def _validate_criteria(criteria: Any, source: str) -> None:
                         f"criteria.max_detection_error.{f}",
                         f"unknown field; allowed: {sorted(ERROR_FIELDS)}",
                     )
-                if not (isinstance(v, (int, float)) and not isinstance(v, bool) and v >= 0):
+                if not (_number(v) and v >= 0):
                     raise _fail(
                         source,
                         f"criteria.max_detection_error.{f}",
@@ -450,25 +464,44 @@ def packaged_scenario_dir() -> Path:
     return Path(str(resources.files("agents") / "scenarios"))
 
 
-def discover(pattern: str = "*", directory: str | Path | None = None) -> list[Scenario]:
-    """Packaged (or ``directory``'s) scenarios whose name matches the glob ``pattern``."""
+def scenario_files(pattern: str = "*", directory: str | Path | None = None) -> list[Path]:
+    """Packaged (or ``directory``'s) scenario files whose stem matches the glob ``pattern``.
+
+    Only the names are read: a file the pattern does not select is never parsed. (A
+    scenario's ``name`` defaults to its file stem; select a renamed one by its file stem.)
+    """
     import fnmatch
 
     root = Path(directory) if directory is not None else packaged_scenario_dir()
-    out = []
-    for f in sorted(root.glob("*.yaml")):
-        sc = load_scenario(f)
-        if fnmatch.fnmatch(sc.name, pattern):
-            out.append(sc)
-    return out
+    return [f for f in sorted(root.glob("*.yaml")) if fnmatch.fnmatch(f.stem, pattern)]
+
+
+def discover_with_errors(
+    pattern: str = "*", directory: str | Path | None = None
+) -> tuple[list[Scenario], list[tuple[str, ScenarioError]]]:
+    """The selected scenarios, and (file, error) for each selected file that does not load."""
+    found: list[Scenario] = []
+    broken: list[tuple[str, ScenarioError]] = []
+    for f in scenario_files(pattern, directory):
+        try:
+            found.append(load_scenario(f))
+        except ScenarioError as exc:
+            broken.append((str(f), exc))
+    return found, broken
+
+
+def discover(pattern: str = "*", directory: str | Path | None = None) -> list[Scenario]:
+    """Packaged (or ``directory``'s) scenarios whose file stem matches the glob ``pattern``;
+    raises the :class:`ScenarioError` of the first selected file that does not load."""
+    return [load_scenario(f) for f in scenario_files(pattern, directory)]
 
 
 # ----------------------------------------------------------------------------- building
 def build_network(sc: Scenario) -> Any:
     """The scenario's network with its start and goal overrides applied."""
-    from pipe_env.geometry import Pose
     from pipe_env.layouts import make_layout
     from pipe_env.network import PipeNetwork
+    from pipe_env.network_io import NetworkSpecError, parse_pose
 
     spec = sc.data["network"]
     try:
@@ -486,7 +519,11 @@ def build_network(sc: Scenario) -> Any:
         else:
             net = PipeNetwork.from_dict(copy.deepcopy(spec["inline"]))
         if "start" in sc.data:
-            net = net.with_start(Pose.from_dict(sc.data["start"]))
+            try:
+                net = net.with_start(parse_pose(sc.data["start"], "start"))
+            except NetworkSpecError as exc:
+                key, _, problem = str(exc).partition(": ")
+                raise _fail(sc.source, key, problem) from None
         if "goal" in sc.data:
             net = net.with_goals([_goal_point(net, sc.data["goal"], sc.source)])
         net.validate()
@@ -494,6 +531,8 @@ def build_network(sc: Scenario) -> Any:
         raise
     except (ValueError, TypeError, KeyError, OSError) as exc:
         raise _fail(sc.source, "network", str(exc)) from None
+    except Exception as exc:  # a value no check anticipated (e.g. an int too large for a float)
+        raise _fail(sc.source, "network", f"invalid value ({type(exc).__name__})") from None
     return net
 
 
@@ -528,8 +567,12 @@ def sensor_settings(sc: Scenario) -> tuple[Any, Any]:
     try:
         if sensor.get("overrides"):
             spec = spec.with_(**sensor["overrides"])
-    except ValueError as exc:
+    except (ValueError, TypeError) as exc:
         raise _fail(sc.source, "sensor.overrides", str(exc)) from None
+    except Exception as exc:  # e.g. an int too large for a float
+        raise _fail(
+            sc.source, "sensor.overrides", f"invalid value ({type(exc).__name__})"
+        ) from None
     mis = sensor.get("misalignment")
     pose = None
     if mis:
@@ -566,10 +609,54 @@ class ScenarioResult:
     timings: dict[str, float]
     source: str
     error: str | None = None
+    #: the scenario's ``known_failure`` note (None: it is expected to pass)
+    known_failure: str | None = None
+    #: the run never started (the suite was interrupted first)
+    not_run: bool = False
 
     @property
     def failures(self) -> list[CriterionResult]:
         return [c for c in self.criteria if not c.passed]
+
+    @property
+    def expected_failure(self) -> bool:
+        """A scenario marked ``known_failure`` that failed its criteria (an error is not
+        expected: it stays an error)."""
+        return (
+            bool(self.known_failure)
+            and not self.passed
+            and not self.not_run
+            and (self.error is None)
+        )
+
+    @property
+    def unexpected_pass(self) -> bool:
+        """A scenario marked ``known_failure`` that passed: its note should be removed."""
+        return bool(self.known_failure) and self.passed
+
+    @property
+    def status(self) -> str:
+        """One of ``passed``, ``failed``, ``error``, ``expected_failure``,
+        ``unexpected_pass``, ``not_run``."""
+        if self.not_run:
+            return "not_run"
+        if self.error is not None:
+            return "error"
+        if self.expected_failure:
+            return "expected_failure"
+        if self.unexpected_pass:
+            return "unexpected_pass"
+        return "passed" if self.passed else "failed"
+
+    def counts_as_failure(self, strict: bool = False) -> bool:
+        """Whether this result fails the suite: errors and failures always; not run never;
+        an expected failure or an unexpected pass only when ``strict``."""
+        status = self.status
+        if status in ("error", "failed"):
+            return True
+        if status in ("expected_failure", "unexpected_pass"):
+            return strict
+        return False
 
     def replay_command(self) -> str:
         cmd = f"pipenav scenarios run '{self.scenario}' --seed {self.seed}"
@@ -588,8 +675,36 @@ class ScenarioResult:
             "criteria": [c.__dict__ for c in self.criteria],
             "metrics": self.metrics,
             "timings": self.timings,
-            "replay": None if self.passed else self.replay_command(),
+            "replay": None if self.passed or self.not_run else self.replay_command(),
+            "status": self.status,
+            "known_failure": self.known_failure,
+            "expected_failure": self.expected_failure,
+            "unexpected_pass": self.unexpected_pass,
         }
+
+
+def error_result(
+    source: str, seed: int, message: str, name: str | None = None, not_run: bool = False
+) -> ScenarioResult:
+    """The result of a run the runner could not complete (a scenario file that does not load,
+    a worker that died, a timeout) or never started (``not_run``)."""
+    name = name or Path(source).stem
+    criteria = (
+        []
+        if not_run
+        else [CriterionResult("runs_without_error", False, message, "no error", message)]
+    )
+    return ScenarioResult(
+        name,
+        seed,
+        False,
+        criteria,
+        {},
+        {"setup_s": 0.0, "run_s": 0.0},
+        source,
+        None if not_run else message,
+        not_run=not_run,
+    )
 
 
 def run_scenario(sc: Scenario, seed: int) -> ScenarioResult:
@@ -622,6 +737,7 @@ def run_scenario(sc: Scenario, seed: int) -> ScenarioResult:
         {"setup_s": round(t1 - t0, 3), "run_s": round(t2 - t1, 3)},
         sc.source,
         error,
+        sc.known_failure,
     )
 
 

@@ -27,7 +27,8 @@ from typing import Any
 
 import yaml
 
-from detector.atomic import atomic_write_text
+from detector.atomic import atomic_open, atomic_write_text
+from pipe_env.network_io import finite_json
 
 DEFAULT_CONFIG = Path(__file__).with_name("configs") / "maskable_ppo.yaml"
 VEC_ENVS = ("subproc", "dummy")
@@ -193,7 +194,7 @@ def train(
     torch.set_num_threads(cfg.torch_threads)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "config.yaml").write_text(yaml.safe_dump(asdict(cfg), sort_keys=False))
+    atomic_write_text(out / "config.yaml", yaml.safe_dump(asdict(cfg), sort_keys=False))
     vec_cls = SubprocVecEnv if cfg.vec_env == "subproc" and cfg.n_envs > 1 else DummyVecEnv
     venv = vec_cls(make_env_fns(cfg))
     from agents.evaluate import VALIDATION_POOL_SEED
@@ -259,7 +260,8 @@ def train(
         if bar is not None:
             bar.close(int(model.num_timesteps))
     wall = time.monotonic() - t0
-    model.save(out / "final_model.zip")
+    with atomic_open(out / "final_model.zip", "wb") as handle:
+        model.save(handle)
     venv.close()
     eval_env.close()
     best = out / "best" / "best_model.zip"
@@ -294,5 +296,7 @@ def train(
             "pool_seed": EVAL_POOL_SEED,
             **result.to_dict(),
         }
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2))
+    atomic_write_text(
+        out / "summary.json", json.dumps(finite_json(summary), indent=2, allow_nan=False)
+    )
     return summary

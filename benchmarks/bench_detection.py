@@ -62,6 +62,7 @@ from detector.scan import Scan  # noqa: E402
 from pipe_env import layouts  # noqa: E402
 from pipe_env.geometry import Pose  # noqa: E402
 from pipe_env.lidar import RotatingLidar  # noqa: E402
+from pipe_env.plotting import save_figure  # noqa: E402
 from pipe_env.world import build_world  # noqa: E402
 
 METHODS = ("thesis", "improved")
@@ -729,7 +730,7 @@ def plots(out: Path, series_3d: list, sweep: list, planar: list) -> list[str]:
     )
     fig.tight_layout()
     p = out / "fig_5_2_estimates_vs_position.png"
-    fig.savefig(p, dpi=110)
+    save_figure(fig, p, dpi=110)
     plt.close(fig)
     written.append(str(p))
     # figure 5.3: misalignment sweep
@@ -768,7 +769,7 @@ def plots(out: Path, series_3d: list, sweep: list, planar: list) -> list[str]:
     fig.suptitle("Misalignment sweep (cf. thesis fig. 5.3): 90 deg bend, X junction, closure")
     fig.tight_layout()
     p = out / "fig_5_3_misalignment.png"
-    fig.savefig(p, dpi=110)
+    save_figure(fig, p, dpi=110)
     plt.close(fig)
     written.append(str(p))
     return written

@@ -33,7 +33,6 @@ import json
 import time
 from collections import defaultdict
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -46,6 +45,7 @@ import pipe_env.world as world_mod
 import primitives.executor as executor_mod
 from agents.evaluate import random_valid_episode
 from agents.train import DEFAULT_CONFIG, TrainConfig
+from detector.atomic import atomic_write_text
 from detector.fusion import StructureTracker
 from pipe_env.lidar import RotatingLidar
 from primitives.executor import Executor
@@ -231,7 +231,7 @@ def main() -> None:
             f"{b['us_per_mj_step'] / a['us_per_mj_step']:.2f} faster"
         )
     if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=2))
+        atomic_write_text(args.json, json.dumps(results, indent=2))
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 import detector
+from detector.atomic import atomic_write_text
 from detector.fusion import StructureTracker
 from pipe_env import layouts
 from pipe_env.lidar import RotatingLidar
@@ -202,7 +203,7 @@ def main() -> None:
             "step": args.step,
             "models": models,
         }
-        OUT.write_text(json.dumps(doc, indent=1))
+        atomic_write_text(OUT, json.dumps(doc, indent=1, allow_nan=False))
         print(f"wrote {OUT}")
 
 

@@ -44,6 +44,9 @@ fast fidelity the sensor whose measured error model perturbs the options
 ``network_config`` (a :class:`~pipe_env.generator.NetworkConfig` or its dict);
 ``network`` (a fixed network, dict or file path, instead of generating one per episode);
 ``misalignment`` (a Pose: the true sensor pose relative to its nominal mount, full fidelity);
+``physics`` (full fidelity: ``"contact"``, physics where contact decides, straight drives away
+from fittings kinematic, see :meth:`primitives.executor.Executor.free_straight`; or
+``"everywhere"``, contact physics for every motion, the reference);
 ``network_pool`` (draw episodes
 from a fixed, reproducible pool of that many generated networks, seeded by ``pool_seed``; use
 another ``pool_seed`` for held-out evaluation); ``trigger_distance`` (stop this far before a
@@ -89,6 +92,7 @@ from pipe_env.plant import (
     EdgeState,
     KinematicPlant,
     Outcome,
+    Plant,
     drivable,
     goal_edge_position,
     option_errors,
@@ -163,7 +167,9 @@ class _ArgumentCheck:
 
     def fail(self, name: str, value: Any, allowed: str) -> ValueError:
         """The error for argument ``name`` given ``value`` (``allowed``: what may be given)."""
-        return ValueError(f"{self.env}: {name}={value!r} is not allowed; use {allowed}")
+        shown = repr(value)
+        shown = shown if len(shown) <= 100 else shown[:97] + "..."
+        return ValueError(f"{self.env}: {name}={shown} is not allowed; use {allowed}")
 
     def number(
         self,
@@ -176,7 +182,10 @@ class _ArgumentCheck:
     ) -> float:
         """``value`` as a finite float in ``[lo, hi]`` (``(lo, hi]`` with ``lo_open``)."""
         ok = isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
-        v = float(value) if ok else math.nan
+        try:
+            v = float(value) if ok else math.nan
+        except OverflowError:  # an int too large for a float
+            v = math.nan
         if not (math.isfinite(v) and (lo < v if lo_open else lo <= v) and v <= hi):
             raise self.fail(name, value, allowed)
         return v
@@ -231,12 +240,15 @@ class _DecisionEnv(gym.Env):
         reward_time: float = -0.05,
         network_pool: int | None = None,
         pool_seed: int = 0,
+        physics: str = "contact",
     ) -> None:
         from pipe_env.lidar import PRESETS, LidarSpec
+        from primitives.executor import PHYSICS_MODES
 
         check = _ArgumentCheck(self.env_name)
         self.detector = check.choice("detector", detector, DETECTORS)
         self.fidelity = check.choice("fidelity", fidelity, FIDELITIES)
+        self.physics = check.choice("physics", physics, PHYSICS_MODES)
         if render_mode is not None:
             check.choice("render_mode", render_mode, self.metadata["render_modes"])
         if isinstance(network_config, dict):
@@ -302,7 +314,7 @@ class _DecisionEnv(gym.Env):
         self.observation_space = spaces.Dict(obs)
         self.action_space = spaces.Discrete(K_OPTIONS)
         self.network: PipeNetwork | None = None
-        self.plant: Any = None
+        self.plant: Plant | None = None
         self._decision: Decision | None = None
         self._decision_serial = 0
         self._renderer: Any = None
@@ -335,7 +347,8 @@ class _DecisionEnv(gym.Env):
         i = int(self.np_random.integers(self.network_pool))
         return pool_network(self.network_config, self.pool_seed, i)
 
-    def _make_plant(self, network: PipeNetwork) -> Any:
+    def _make_plant(self, network: PipeNetwork) -> Plant:
+        """The plant factory: the only place that knows the fidelities' classes."""
         if self.fidelity == "fast":
             return KinematicPlant(
                 network,
@@ -352,6 +365,7 @@ class _DecisionEnv(gym.Env):
             lidar=self.lidar,
             misalignment=self.misalignment,
             scan_image=self.scan_image,
+            physics=self.physics,
         )
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -363,6 +377,13 @@ class _DecisionEnv(gym.Env):
             self._start_episode(given or self._new_network())
             if self.decision is not None or given is not None or self.fixed_network is not None:
                 break
+        if self.decision is None and self.success and (given or self.fixed_network) is not None:
+            which = "options['network']" if given is not None else "network"
+            raise ValueError(
+                f"{self.env_name}: {which}: the goal is reached inside reset(), before the "
+                "first decision (the start drives to it through single ways only); allowed: a "
+                "goal beyond the first junction or closure ahead of the start"
+            )
         info = self._info(self._reset_events, {})
         self._end_frame()
         return self._observation(), info
@@ -373,7 +394,12 @@ class _DecisionEnv(gym.Env):
             self.network
         ):
             self.close()
-        self.plant = self._make_plant(self.network)
+        if self.plant is None or self.plant.network is not network:
+            # a plant (in full fidelity its compiled MuJoCo model) is built once per network
+            # and reset between episodes on it
+            if self.plant is not None:
+                self.plant.close()
+            self.plant = self._make_plant(self.network)
         self.plant.reset(np.random.default_rng(self.np_random.integers(2**63)))
         self._frames = []
         executor = getattr(self.plant, "executor", None)
@@ -404,11 +430,21 @@ class _DecisionEnv(gym.Env):
     def step(self, action: int):
         if self.plant is None:
             raise RuntimeError("call reset() before step()")
+        # only integers of the action space: int() would turn 0.9, '1', b'1' or True into one
+        if isinstance(action, np.ndarray) and action.shape == () and action.dtype.kind in "iu":
+            action = action.item()
+        if (
+            isinstance(action, (bool, np.bool_))
+            or not isinstance(action, (numbers.Integral, np.integer))
+            or not 0 <= int(action) < K_OPTIONS
+        ):
+            raise ValueError(
+                f"action {action!r} ({type(action).__name__}) is not allowed; allowed: an "
+                f"integer (Python or numpy) in Discrete({K_OPTIONS}), 0..{K_OPTIONS - 1}"
+            )
         action = int(action)
         if self.terminated or self.truncated:  # e.g. a goal reached before any decision
             return self._finish_step({}, {"after_termination": True})
-        if not 0 <= action < K_OPTIONS:
-            raise ValueError(f"action {action} is outside Discrete({K_OPTIONS})")
         mask = self.action_masks()
         terms: dict[str, float] = {"time": self.reward_time}
         events: dict[str, Any] = {"jammed": False, "blocked": False, "invalid_action": False}
@@ -629,7 +665,7 @@ class _DecisionEnv(gym.Env):
             rel = pose.rotation.T @ (goal - pose.position)
             obs["goal"] = np.clip(rel, -GOAL_CLIP, GOAL_CLIP).astype(np.float32)
         if self.scan_image:
-            img = getattr(self.plant, "scan_image", None)
+            img = self.plant.scan_image
             obs["scan"] = (
                 np.zeros(SCAN_SHAPE, np.float32) if img is None else np.asarray(img, np.float32)
             )
@@ -710,7 +746,7 @@ class _DecisionEnv(gym.Env):
     def _render_rgb(self) -> NDArray[np.uint8]:
         from pipe_env.rendering import WorldRenderer
 
-        world = getattr(self.plant, "world", None)
+        world = self.plant.world
         if world is None:
             if self._world_for_render is None or self._world_for_render.network is not (
                 self.network
@@ -735,7 +771,7 @@ class _DecisionEnv(gym.Env):
             self._renderer.close()
             self._renderer = None
         self._world_for_render = None
-        if self.plant is not None and hasattr(self.plant, "close"):
+        if self.plant is not None:
             self.plant.close()
 
     def __getstate__(self) -> dict:
@@ -747,7 +783,7 @@ class _DecisionEnv(gym.Env):
                 environments do not need it: subprocess workers build their environments
                 from the constructor arguments.
         """
-        if self.fidelity == "full" and self.plant is not None:
+        if self.plant is not None and self.plant.world is not None:
             raise TypeError(
                 f"{self.env_name}: a fidelity='full' environment holds a live MuJoCo simulation "
                 "after reset() and cannot be pickled mid-episode; pickle it before reset(), or "
@@ -819,7 +855,7 @@ class PipeNavEnv(_DecisionEnv):
         self._last_distance = self._progress_measure()
 
     def _goal_target(self) -> Any:
-        return self.goal_edge if self.fidelity == "fast" else self.goal
+        return self.goal_edge
 
     def _progress_measure(self) -> float:
         return edge_geodesic(self.network, self.plant.edge_position(), self.goal_edge)
@@ -882,9 +918,7 @@ class PipeExploreEnv(_DecisionEnv):
     def _cover_from_here(self) -> None:
         """The scans see the pipe between the robot and the fitting ahead, and a short way
         (``branch_view`` m) into each pipe leaving that fitting."""
-        st = getattr(self.plant, "state", None)
-        if st is None:
-            return
+        st = self.plant.state
         r = self.network.run_by_id[st.run_id]
         end = edge_length(self.network, r.id) if st.towards == r.b else 0.0
         self._cover(r.id, min(st.s, end), max(st.s, end))

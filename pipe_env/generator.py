@@ -509,8 +509,9 @@ class _Builder:
             return []
         assert net.start_pose is not None
         candidates = []
+        unseen = decision_free_closures(net)
         for f in net.fittings[1:]:
-            if f.kind != "closure":
+            if f.kind != "closure" or f.id in unseen:
                 continue
             run = net.runs_at[f.id][0]
             g = net.geometry[f.id]
@@ -521,9 +522,39 @@ class _Builder:
             if r is not None:
                 candidates.append(tuple(float(v) for v in point))
         if len(candidates) < self.cfg.n_goals:
-            raise _PlacementFailed("too few reachable goals")
+            raise _PlacementFailed(
+                "too few reachable goals (a goal must need a decision: the closure that the "
+                "start reaches through bends and reducers alone does not count)"
+            )
         pick = self.rng.choice(len(candidates), size=self.cfg.n_goals, replace=False)
         return [candidates[int(i)] for i in sorted(pick)]
+
+
+def decision_free_closures(net: PipeNetwork) -> set[str]:
+    """Closures the robot reaches from the start pose without a decision: the chain of bends
+    and reducers (single ways, taken automatically) ahead of the start ends there. A goal
+    before one of them would be reached inside ``reset()``, so none is placed there."""
+    if net.start_pose is None:
+        return set()
+    run_id = net.nearest_centreline_point(net.start_pose.position).run_id
+    if run_id is None or run_id not in net.run_by_id:
+        return set()
+    run = net.run_by_id[run_id]
+    ahead = max(
+        (run.a, run.b),
+        key=lambda f: float((net.position(f) - net.start_pose.position) @ net.start_pose.forward),
+    )
+    seen: set[str] = set()
+    while ahead not in seen:
+        seen.add(ahead)
+        kind = net.fitting_by_id[ahead].kind
+        if kind == "closure":
+            return {ahead}
+        if kind not in ("bend", "reducer"):
+            return set()
+        run = next(r for r in net.runs_at[ahead] if r.id != run.id)
+        ahead = run.other(ahead)
+    return set()
 
 
 def generate_network(config: NetworkConfig, rng: np.random.Generator) -> PipeNetwork:

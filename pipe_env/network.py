@@ -25,7 +25,6 @@ here as methods.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from collections.abc import Iterable, Sequence
@@ -63,6 +62,9 @@ TAPER_LENGTH_RANGE = (0.005, 1.0)  # metres
 MAX_TAPER_HALF_ANGLE = math.radians(60.0)
 #: Wall thickness assumed when checking clearance between non-adjacent pipes, metres.
 WALL_CLEARANCE = 0.005
+#: Largest coordinate of a fitting, goal or start position, metres (absurd geometry beyond it
+#: is rejected by :meth:`PipeNetwork.validate`).
+MAX_EXTENT = 1000.0
 _ANGLE_TOL = math.degrees(AXIS_TOLERANCE)
 
 
@@ -81,7 +83,7 @@ class Fitting:
         object.__setattr__(self, "id", str(self.id))
         try:
             pos = tuple(float(v) for v in self.position)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise ValueError(
                 f"fitting {self.id!r}: position must be three numbers, got {self.position!r}"
             ) from exc
@@ -130,7 +132,7 @@ class Run:
             if isinstance(self.diameter, (bool, str)):
                 raise TypeError
             object.__setattr__(self, "diameter", float(self.diameter))
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise ValueError(
                 f"run {self.id!r}: diameter must be a number in metres, got {self.diameter!r}"
             ) from exc
@@ -165,7 +167,7 @@ class PipeNetwork:
         for i, g in enumerate(self.goals):
             try:
                 arr = np.asarray(g, dtype=float)
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):
                 arr = np.full(1, np.nan)
             if arr.shape != (3,) or not np.all(np.isfinite(arr)):
                 raise ValueError(f"goals[{i}] must be three finite numbers (m), got {g!r}")
@@ -273,6 +275,7 @@ class PipeNetwork:
         ``diameter_range`` (m), bend and junction angles, run lengths against their fittings'
         legs, clearance between pipes that do not share a fitting, the start pose and goals.
         """
+        self._validate_extent()
         self._validate_topology()
         lo, hi = diameter_range
         for r in self.runs:
@@ -293,6 +296,33 @@ class PipeNetwork:
                 )
         self._validate_clearance()
         self._validate_points()
+
+    def _validate_extent(self) -> None:
+        """Fittings, goals and the start within :data:`MAX_EXTENT` of the origin, and run
+        diameters finite (absurd geometry is rejected before any is derived)."""
+        for i, f in enumerate(self.fittings):
+            if max(abs(v) for v in f.position) > MAX_EXTENT:
+                raise ValueError(
+                    f"fittings[{i}].position: fitting {f.id!r} at {list(f.position)} m is "
+                    f"outside the allowed extent; allowed: coordinates within +-{MAX_EXTENT:g} m"
+                )
+        for i, g in enumerate(self.goals):
+            if max(abs(v) for v in g) > MAX_EXTENT:
+                raise ValueError(
+                    f"goals[{i}]: {list(g)} m is outside the allowed extent; allowed: "
+                    f"coordinates within +-{MAX_EXTENT:g} m"
+                )
+        if self.start_pose is not None and np.max(np.abs(self.start_pose.position)) > MAX_EXTENT:
+            raise ValueError(
+                f"start.position: {self.start_pose.position.tolist()} m is outside the allowed "
+                f"extent; allowed: coordinates within +-{MAX_EXTENT:g} m"
+            )
+        for i, r in enumerate(self.runs):
+            if not math.isfinite(r.diameter):
+                raise ValueError(
+                    f"runs[{i}].diameter: run {r.id!r} has diameter {r.diameter!r}; allowed: a "
+                    "finite number of metres"
+                )
 
     def _validate_fitting(self, f: Fitting) -> None:
         g = self.geometry[f.id]
@@ -501,50 +531,27 @@ class PipeNetwork:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], validate: bool = True) -> PipeNetwork:
-        """Inverse of :meth:`to_dict`; validates unless ``validate=False``."""
-        if not isinstance(d, dict):
-            raise ValueError(f"a network must be a mapping, got {type(d).__name__}")
-        version = d.get("version")
-        if version != SCHEMA_VERSION:
-            raise ValueError(
-                f"network 'version' is {version!r}; this pipenav reads version {SCHEMA_VERSION}"
-            )
-        allowed = {"version", "name", "fittings", "runs", "start", "goals", "metadata"}
-        unknown = sorted(set(d) - allowed)
-        if unknown:
-            raise ValueError(f"network has unknown keys {unknown}; allowed: {sorted(allowed)}")
-        for key in ("fittings", "runs", "goals"):
-            if not isinstance(d.get(key, []), list):
-                raise ValueError(f"network {key!r} must be a list, got {d.get(key)!r}")
-        fittings = [_make(Fitting, f, "fittings", i) for i, f in enumerate(d.get("fittings", []))]
-        runs = [_make(Run, r, "runs", i) for i, r in enumerate(d.get("runs", []))]
-        start = None
-        if d.get("start") is not None:
-            try:
-                start = Pose.from_dict(d["start"])
-            except (KeyError, TypeError) as exc:
-                raise ValueError(
-                    "network 'start' needs 'position' and 'rotation' (or 'forward'), got "
-                    f"{d['start']!r}"
-                ) from exc
-        net = cls(
-            tuple(fittings),
-            tuple(runs),
-            start,
-            tuple(tuple(g) for g in d.get("goals", [])),
-            str(d.get("name", "network")),
-            dict(d.get("metadata", {})),
-        )
-        if validate:
-            net.validate()
-        return net
+        """Inverse of :meth:`to_dict`; validates unless ``validate=False``.
+
+        Every problem is a :class:`~pipe_env.network_io.NetworkSpecError` (a ``ValueError``)
+        naming the field's path (``fittings[3].position``, ``start.forward``, ``goals[0]``).
+        """
+        from pipe_env.network_io import parse_spec
+
+        return parse_spec(d, validate=validate)
 
     def to_json(self, **kwargs: Any) -> str:
-        return json.dumps(self.to_dict(), **kwargs)
+        """JSON text; never NaN or Infinity (non-finite numbers are written as null)."""
+        from pipe_env.network_io import finite_json
+
+        kwargs["allow_nan"] = False
+        return json.dumps(finite_json(self.to_dict()), **kwargs)
 
     @classmethod
     def from_json(cls, text: str, validate: bool = True) -> PipeNetwork:
-        return cls.from_dict(json.loads(text), validate=validate)
+        from pipe_env.network_io import network_from_text
+
+        return network_from_text(text, "json", validate=validate)
 
     def to_yaml(self) -> str:
         import yaml
@@ -553,28 +560,22 @@ class PipeNetwork:
 
     @classmethod
     def from_yaml(cls, text: str, validate: bool = True) -> PipeNetwork:
-        import yaml
+        from pipe_env.network_io import network_from_text
 
-        return cls.from_dict(yaml.safe_load(text), validate=validate)
+        return network_from_text(text, "yaml", validate=validate)
 
     def save(self, path: str | Path) -> None:
-        """Write JSON or YAML, chosen by the file suffix (.json, .yaml, .yml)."""
-        p = Path(path)
-        if p.suffix in (".yaml", ".yml"):
-            p.write_text(self.to_yaml())
-        elif p.suffix == ".json":
-            p.write_text(self.to_json(indent=1))
-        else:
-            raise ValueError(f"network file suffix {p.suffix!r} unknown; use .json, .yaml or .yml")
+        """Write JSON or YAML, chosen by the file suffix (.json, .yaml, .yml), atomically."""
+        from pipe_env.network_io import save_network
+
+        save_network(self, path)
 
     @classmethod
     def load(cls, path: str | Path, validate: bool = True) -> PipeNetwork:
-        p = Path(path)
-        if p.suffix in (".yaml", ".yml"):
-            return cls.from_yaml(p.read_text(), validate=validate)
-        if p.suffix == ".json":
-            return cls.from_json(p.read_text(), validate=validate)
-        raise ValueError(f"network file suffix {p.suffix!r} unknown; use .json, .yaml or .yml")
+        """Read a network file; every error is a ``ValueError`` naming the file and field."""
+        from pipe_env.network_io import load_network
+
+        return load_network(path, validate=validate)
 
     def derived(self, **changes: Any) -> PipeNetwork:
         """A copy with ``start_pose``, ``goals``, ``name`` or ``metadata`` changed, keeping the
@@ -618,25 +619,6 @@ class PipeNetwork:
         for f in self.fittings:
             kinds[f.kind] = kinds.get(f.kind, 0) + 1
         return f"PipeNetwork({self.name!r}, runs={len(self.runs)}, fittings={kinds})"
-
-
-def _make(cls: type, d: Any, where: str, i: int) -> Any:
-    if not isinstance(d, dict):
-        raise ValueError(f"{where}[{i}] must be a mapping, got {d!r}")
-    fields = set(cls.__dataclass_fields__)
-    unknown = sorted(set(d) - fields)
-    if unknown:
-        raise ValueError(f"{where}[{i}] has unknown keys {unknown}; allowed: {sorted(fields)}")
-    missing = [
-        k
-        for k, f in cls.__dataclass_fields__.items()
-        if k not in d
-        and f.default is dataclasses.MISSING
-        and f.default_factory is dataclasses.MISSING
-    ]
-    if missing:
-        raise ValueError(f"{where}[{i}] is missing keys {missing}")
-    return cls(**d)
 
 
 def _plain(value: Any) -> Any:

@@ -7,12 +7,14 @@ An environment step is a decision. The plant answers two calls:
 - :meth:`Plant.execute`: carry out the chosen action at the current decision: take one of the
   detected ways on, or back out to the last junction; returns an :class:`Outcome`.
 
-Two fidelities implement it. :class:`KinematicPlant` (``fidelity="fast"``, this module) moves the
-robot along the centreline graph and senses by perturbing the true options with a detector's
-measured error model (:mod:`pipe_env.sensing_model`); whether a primitive survives its option's
-errors follows the tolerances measured by the primitives' tolerance study. It runs thousands of
-decisions per second for RL iterations. The full fidelity (MuJoCo robot, rotating LiDAR, the
-detector and the primitives' executor) lives in :mod:`pipe_env.plant_full`.
+Both fidelities implement the typed :class:`Plant` protocol (the environment holds a
+``Plant``; only its factory knows which). :class:`KinematicPlant` (``fidelity="fast"``, this
+module) moves the robot along the centreline graph and senses by perturbing the true options
+with a detector's measured error model (:mod:`pipe_env.sensing_model`); whether a primitive
+survives its option's errors follows the tolerances measured by the primitives' tolerance
+study. It runs thousands of decisions per second for RL iterations. The full fidelity (MuJoCo
+robot, rotating LiDAR, the detector and the primitives' executor) lives in
+:mod:`pipe_env.plant_full`.
 
 Edge positions: the robot is on a run's edge at ``s`` metres (centreline) from fitting
 ``run.a``, heading towards fitting ``towards``.
@@ -23,6 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,6 +51,9 @@ from pipe_env.routing import (
     turn_angle,
 )
 from pipe_env.sensing_model import DETECTORS, DetectionErrorModel, error_model_for
+
+if TYPE_CHECKING:
+    from pipe_env.world import PipeWorld
 
 BACK_OUT = "back_out"
 
@@ -133,6 +139,83 @@ class Outcome:
     #: consecutive waypoints of the motion (see ``positions``)
     path: list[EdgeState] = field(default_factory=list)
     note: str = ""
+
+
+@runtime_checkable
+class Plant(Protocol):
+    """What an environment drives: one decision at a time (both fidelities).
+
+    Attributes:
+        fidelity: ``"fast"`` or ``"full"``.
+        network: the network the plant simulates (a plant is built once per network and
+            :meth:`reset` between episodes on it).
+        decision: the pending decision (None after an executed action, before ``advance``).
+        detection_log: one record per detection (:func:`detection_record`).
+        travelled: distance driven since the reset, m.
+        sim_time: simulated time since the reset, s.
+        scan_image: low-resolution range image of the last sweep (full fidelity with
+            ``scan_image=True``), else None.
+        world: the MuJoCo world the robot moves in (full fidelity), else None.
+    """
+
+    fidelity: str
+    network: PipeNetwork
+    decision: Decision | None
+    detection_log: list[dict]
+    travelled: float
+    sim_time: float
+    scan_image: NDArray[np.float32] | None
+    world: PipeWorld | None
+
+    def reset(self, rng: np.random.Generator) -> None:
+        """Put the robot at the network's start pose with fresh logs, drawing from ``rng``."""
+        ...
+
+    def advance(self, goal: Any = None) -> tuple[Decision | None, Outcome]:
+        """Drive to the next decision (None and status ``goal`` if the goal comes first)."""
+        ...
+
+    def execute(self, choice: StructureOption | str, goal: Any = None) -> Outcome:
+        """Carry out ``choice`` (an option of the pending decision, or ``BACK_OUT``)."""
+        ...
+
+    def resense(self) -> tuple[Decision, Outcome]:
+        """Sense again where the robot stands (after a jam)."""
+        ...
+
+    def pose(self) -> Pose:
+        """The true sensor pose."""
+        ...
+
+    def odometry_pose(self) -> Pose:
+        """The sensor pose the robot believes (odometry drift included)."""
+        ...
+
+    @property
+    def clamped_diameter(self) -> float:
+        """The clamp encoders' reading at the last decision, m."""
+        ...
+
+    @property
+    def state(self) -> EdgeState:
+        """Edge state (run, position, heading) of the true pose."""
+        ...
+
+    def edge_position(self) -> EdgePosition:
+        """Edge position of the true pose."""
+        ...
+
+    def waypoint(self) -> Any:
+        """The robot's current place as a path waypoint (see :meth:`positions`)."""
+        ...
+
+    def positions(self, waypoints: list[Any]) -> NDArray[np.float64]:
+        """Waypoints as (N, 3) world positions, m."""
+        ...
+
+    def close(self) -> None:
+        """Release what the plant holds."""
+        ...
 
 
 #: Sensed values are noisy: a true 90 deg way may be sensed at 91 deg. The robot attempts ways
@@ -229,6 +312,9 @@ class KinematicPlant:
     """
 
     fidelity = "fast"
+    #: no sweeps and no MuJoCo world in the fast fidelity (the :class:`Plant` protocol's)
+    scan_image: NDArray[np.float32] | None = None
+    world: PipeWorld | None = None
 
     def __init__(
         self,
@@ -518,6 +604,9 @@ class KinematicPlant:
         self.state = target
         self.decision = None
         return out
+
+    def close(self) -> None:
+        """Nothing to release (the plant interface's close)."""
 
 
 def detection_record(

@@ -40,14 +40,15 @@ from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
 from pipe_env.network import PipeNetwork
 from pipe_env.plant import BACK_OUT, Decision, Outcome, detection_record, goal_edge_position
-from pipe_env.routing import EdgePosition, locate
+from pipe_env.routing import EdgePosition, edge_length, locate
 from pipe_env.sensing_model import DETECTORS
 
 #: Fewer valid returns than this in a sweep means the sensor cannot see the pipe ahead.
 BLIND_RETURNS = 60
 #: Consecutive blind sweeps before the robot stops (fail safe).
 BLIND_SWEEPS = 2
-#: Longest drive without a decision before the robot stops to let the agent decide, metres.
+#: ``advance`` drives in legs of at most this many metres (a long straight takes several; the
+#: robot stops only for a structure, a dead end or the goal), metres.
 MAX_DRIVE = 4.0
 #: The goal counts as reached within this distance along the network, metres.
 GOAL_TOLERANCE = 0.05
@@ -56,6 +57,14 @@ SCAN_IMAGE_SHAPE = (16, 32)
 CONFIRM_RESCANS = 3
 #: The robot steers at the pipe-axis point this far ahead of its sensor, m.
 AXIS_LOOKAHEAD = 0.15
+#: Sweep cadence: while the last sweep shows no structure (and no goal, no blind sweep) within
+#: ``SPARSE_REACH`` ahead, the robot drives ``sparse_interval`` between sweeps; once one is
+#: within reach, ``scan_interval`` (the trigger and confirmation rules use ``scan_interval``
+#: whatever the cadence). Structures are seen from 1.2-2 m ahead (the detector on the study
+#: layouts, 60-120 mm), so a sparse drive never carries the robot past the trigger distance
+#: of a structure it could have seen, m.
+SPARSE_REACH = 0.6
+SPARSE_INTERVAL = 0.15
 
 
 def scan_image(scan: Scan, shape: tuple[int, int] = SCAN_IMAGE_SHAPE) -> NDArray[np.float32]:
@@ -87,7 +96,15 @@ class PhysicalPlant:
         misalignment: true sensor pose relative to its nominal mount (None: perfect).
         scan_image: keep a low-resolution range image of the last sweep.
         lidar_backend: ``"analytic"`` (exact, fast; default) or ``"mujoco"`` ray casting.
-        scan_interval: metres driven between sweeps.
+        scan_interval: metres driven between sweeps once a structure is in reach (see
+            ``SPARSE_REACH``).
+        sparse_interval: metres driven between sweeps while none is (``scan_interval``: the
+            fixed cadence).
+        robot_config: the robot (None: the default :class:`~pipe_env.robot.RobotConfig`).
+        physics: ``"contact"`` (physics where contact decides: straight drives away from
+            fittings move the clamped robot kinematically, see
+            :meth:`primitives.executor.Executor.free_straight`) or ``"everywhere"`` (contact
+            physics for every motion: the reference).
     """
 
     fidelity = "full"
@@ -103,8 +120,13 @@ class PhysicalPlant:
         lidar_backend: str = "analytic",
         scan_interval: float = 0.05,
         robot_config: Any = None,
+        physics: str = "contact",
+        sparse_interval: float = SPARSE_INTERVAL,
     ) -> None:
-        from primitives.executor import Executor
+        from primitives.executor import PHYSICS_MODES, Executor
+
+        if physics not in PHYSICS_MODES:
+            raise ValueError(f"physics {physics!r} is unknown; allowed: {PHYSICS_MODES}")
 
         if network.start_pose is None:
             raise ValueError("the network has no start_pose; the robot needs one")
@@ -115,14 +137,24 @@ class PhysicalPlant:
         self.trigger_distance = float(trigger_distance)
         self.keep_image = bool(scan_image)
         self.scan_interval = float(scan_interval)
+        if not (math.isfinite(sparse_interval) and scan_interval <= sparse_interval <= 0.5):
+            raise ValueError(
+                f"sparse_interval = {sparse_interval!r} is invalid; allowed [scan_interval, 0.5] m"
+            )
+        self.sparse_interval = float(sparse_interval)
+        #: the longest drive ``advance`` makes without a decision: the network's centreline
+        #: length plus a metre (further, the robot drove through a structure it did not see)
+        self._limit = 1.0 + float(sum(edge_length(network, r.id) for r in network.runs))
         lidar_kwargs: dict[str, Any] = {"backend": lidar_backend}
         if misalignment is not None:
             lidar_kwargs["misalignment"] = misalignment
+        self.physics = physics
         self.executor = Executor.for_network(
-            network, robot_config=robot_config, lidar=lidar, **lidar_kwargs
+            network, robot_config=robot_config, lidar=lidar, physics=physics, **lidar_kwargs
         )
         self.world = self.executor.world
         self.robot = self.executor.robot
+        self._started = False
         self.reset(np.random.default_rng(0))
 
     # ------------------------------------------------------------------ state
@@ -130,7 +162,7 @@ class PhysicalPlant:
         """Put the robot back at the network's start pose, clamped, with fresh logs."""
         start = self.network.start_pose
         assert start is not None
-        if getattr(self, "_started", False):
+        if self._started:  # the executor placed the robot when it was built
             self.executor.place(start, float(self.network.inner_diameter_at(start.position)))
         self._started = True
         self.rng = rng
@@ -274,7 +306,7 @@ class PhysicalPlant:
     def _on_scan_factory(self, goal: Any):
         blind = [0]
         rescans = [0]
-        verdict: dict[str, Any] = {"why": None}
+        verdict: dict[str, Any] = {"why": None, "interval": self.scan_interval}
         t_start = self.executor.time  # the plant's clock catches up after the motion
 
         def on_scan(scan: Scan, state: Any) -> str:
@@ -287,9 +319,11 @@ class PhysicalPlant:
             if self._goal_reached(goal):
                 verdict["why"] = "goal"
                 return "stop"
+            verdict["interval"] = self.scan_interval
             if self.detector == "ground_truth":
                 self._follow_axis(scan, None, float(state.clamped_diameter))
                 ref = truth[0].distance if truth else math.inf
+                self._cadence(verdict, [ref], goal, blind=False)
                 kind = truth[0].kind if truth else "straight"
                 self.detection_log.append(detection_record(now, node, truth, truth, kind))
                 if ref <= self.trigger_distance + 0.5 * self.scan_interval:
@@ -305,6 +339,8 @@ class PhysicalPlant:
                 detection_record(now, node, truth, list(fused.options), fused.kind)
             )
             blind[0] = blind[0] + 1 if scan.n_valid < BLIND_RETURNS else 0
+            seen = [o.distance for o in det.options] + [o.distance for o in fused.options]
+            self._cadence(verdict, seen, goal, blind=blind[0] > 0)
             if blind[0] >= BLIND_SWEEPS:
                 verdict["why"] = "blind"
                 return "stop"
@@ -328,16 +364,43 @@ class PhysicalPlant:
 
         return on_scan, verdict
 
+    def _cadence(self, verdict: dict[str, Any], seen: list[float], goal: Any, blind: bool) -> None:
+        """Choose the next drive's length (``verdict["interval"]``): ``sparse_interval`` while
+        no structure seen (``seen``: distances ahead, m), no goal and no blind sweep lie within
+        ``SPARSE_REACH``; ``scan_interval`` otherwise."""
+        if blind or any(d <= SPARSE_REACH for d in seen):
+            return
+        ahead = self._goal_ahead(goal)
+        if ahead is not None and ahead >= -GOAL_TOLERANCE and ahead <= SPARSE_REACH:
+            return
+        verdict["interval"] = self.sparse_interval
+
     def advance(self, goal: Any = None) -> tuple[Decision | None, Outcome]:
         """Drive and scan until a structure is confirmed, the goal is reached, or blind."""
         out = Outcome()
-        on_scan, verdict = self._on_scan_factory(goal)
-        outcome = self.executor.drive_until(
-            on_scan, MAX_DRIVE, scan_interval=self.scan_interval, rng=self.rng
-        )
-        self._account(outcome, out)
-        self._odometer += abs(float(outcome.travelled))
-        why = verdict["why"]
+        # a long straight is normal pipe: the robot drives on in legs of MAX_DRIVE until a
+        # structure, a dead end (blind) or the goal stops it, or it jams; the whole network's
+        # pipe length bounds the drive (a robot cannot drive further without a structure)
+        limit = self._limit
+        driven = 0.0
+        while True:
+            on_scan, verdict = self._on_scan_factory(goal)
+            leg = min(MAX_DRIVE, max(limit - driven, 0.0))
+            outcome = self.executor.drive_until(
+                on_scan,
+                leg,
+                scan_interval=self.scan_interval,
+                rng=self.rng,
+                next_interval=lambda v=verdict: float(v["interval"]),
+            )
+            self._account(outcome, out)
+            self._odometer += abs(float(outcome.travelled))
+            driven += abs(float(outcome.travelled))
+            why = verdict["why"]
+            if why is not None or outcome.status != "done" or driven >= limit - 1e-6:
+                break
+            if abs(float(outcome.travelled)) < 1e-6:
+                break  # nothing driven (a zero-length leg): decide here
         ahead = self._goal_ahead(goal) if why in ("confirmed", "blind") else None
         if ahead is not None and 0.0 <= ahead <= self.trigger_distance + self.scan_interval:
             # the goal lies between the robot and the structure it stopped for (a goal near a

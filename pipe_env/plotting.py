@@ -158,6 +158,17 @@ def save_network_plot(network: PipeNetwork, filename: str | Path, **kwargs: obje
     fig = plot_network(network, **kwargs)  # type: ignore[arg-type]
     out = Path(filename)
     out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=120)
+    save_figure(fig, out, dpi=120)
     plt.close(fig)
+    return out
+
+
+def save_figure(fig: Any, filename: str | Path, **kwargs: Any) -> Path:
+    """``fig.savefig`` written atomically (format from the suffix: png, svg, pdf, ...)."""
+    from detector.atomic import atomic_open
+
+    out = Path(filename)
+    kwargs.setdefault("format", out.suffix.lstrip(".").lower() or "png")
+    with atomic_open(out, "wb") as handle:
+        fig.savefig(handle, **kwargs)
     return out

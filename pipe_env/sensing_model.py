@@ -174,14 +174,43 @@ THESIS_LITERATURE_MODEL = DetectionErrorModel(
 @lru_cache(maxsize=1)
 def calibrated_models() -> dict[str, DetectionErrorModel]:
     """The calibrated models by ``"detector/preset"`` (empty if the data file is missing)."""
+    source = resources.files("pipe_env").joinpath(SENSING_MODELS_FILE)
     try:
-        text = resources.files("pipe_env").joinpath("data/sensing_models.json").read_text()
+        text = source.read_text(encoding="utf-8")
     except FileNotFoundError:
         return {}
+    return parse_models(text, str(source))
+
+
+#: The packaged calibrated models, relative to the ``pipe_env`` package.
+SENSING_MODELS_FILE = "data/sensing_models.json"
+
+
+def parse_models(text: str, source: str) -> dict[str, DetectionErrorModel]:
+    """The models of a sensing-models JSON document; a corrupt one is a ``ValueError`` naming
+    ``source`` and saying how to regenerate it."""
+    fix = "regenerate it with benchmarks/calibrate_sensing.py --write or reinstall pipenav"
+    try:
+        doc = json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as exc:
+        where = f" at line {exc.lineno}" if isinstance(exc, json.JSONDecodeError) else ""
+        raise ValueError(
+            f"{source}: the sensing models file is corrupt (not JSON{where}); {fix}"
+        ) from None
+    models = doc.get("models") if isinstance(doc, dict) else None
+    if not isinstance(models, dict):
+        raise ValueError(f"{source}: the sensing models file has no 'models' mapping; {fix}")
     names = {f.name for f in fields(DetectionErrorModel)}
     out: dict[str, DetectionErrorModel] = {}
-    for key, entry in json.loads(text)["models"].items():
-        out[key] = DetectionErrorModel(**{k: v for k, v in entry.items() if k in names})
+    for key, entry in models.items():
+        try:
+            if not isinstance(entry, dict):
+                raise TypeError(type(entry).__name__)
+            out[key] = DetectionErrorModel(**{k: v for k, v in entry.items() if k in names})
+        except (TypeError, ValueError) as exc:
+            raise ValueError(
+                f"{source}: models.{key} is not a valid sensing model ({exc}); {fix}"
+            ) from None
     return out
 
 

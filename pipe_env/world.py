@@ -323,6 +323,14 @@ class NearContacts:
         self._pairs = None
         self.n_pairs = 0
 
+    def forget(self) -> None:
+        """Forget the geoms' motion history (the robot was placed anew): the next
+        :meth:`update` selects from scratch, as on a new instance."""
+        self._anchor = None
+        self._last = None
+        self._motion = 0.0
+        self._coarse = None
+
     def update(self, data: mujoco.MjData, force: bool = False) -> None:
         """Select the pairs again if the geoms may come within reach of unpaired pieces before
         the next call (``data.geom_xpos`` must be current); always with ``force``."""

@@ -101,6 +101,33 @@ RECENTRE_DROP = 0.004
 #: ``drive_until`` sweeps at most this many times in a row without driving (``"rescan"``).
 MAX_RESCANS = 4
 
+#: The robot's collision pairs are selected again once it can have moved this near an unpaired
+#: wall piece, m (:class:`pipe_env.world.NearContacts`'s ``reach``). Measured: 12 mm selects a
+#: third as often as 6 mm for the same contacts (a t-junction turn: 169 selections instead of
+#: 585, bit-identical poses) but overflows the 160-pair pool in a mitre turn (automatic
+#: collisions then, slower), and the physics step costs the same; 6 mm stays.
+NEAR_REACH = 0.006
+#: Physics modes. ``"contact"``: a clamped robot driving straight (forward or back) in a run,
+#: away from fittings (see :meth:`Executor.free_straight`), moves kinematically along the pipe
+#: axis with the shape, clamp, sag and roll physics gave it, then settles physically; contact
+#: physics runs for everything else. ``"everywhere"``: contact physics for every motion (the
+#: reference the ``"contact"`` mode is measured against).
+PHYSICS_MODES = ("contact", "everywhere")
+#: Kinematic motion keeps the robot's body this much further than the pipe's diameter from
+#: both port planes of its run, m (see ``free_straight``).
+KINEMATIC_MARGIN = 0.0
+#: Kinematic motion needs the sensor within this fraction of the pipe's diameter of the run's
+#: axis and its heading within ``KINEMATIC_TILT`` of it (a robot well placed in the pipe).
+KINEMATIC_OFFSET = 0.15
+KINEMATIC_TILT = math.radians(5.0)
+#: A clamped straight drive of 5 cm falls this much short of its command (measured: 0.12-0.14
+#: mm in 60-120 mm pipes), m; the executor measures it again on every such physical drive.
+DEFAULT_SHORTFALL = 0.00013
+#: Larger shortfalls (a drive pushing against something) are not taken as the straight's, m.
+MAX_SHORTFALL = 0.002
+#: Physics ticks after every drive (and kinematic motion) to let the robot settle.
+SETTLE_TICKS = 3
+
 STATUSES = ("done", "jammed", "blocked", "dead_end")
 #: What a scan callback may answer: ``"stop"`` ends the sequence or drive; ``"continue"`` goes
 #: on; ``"rescan"`` (``drive_until`` only; elsewhere it means continue) sweeps again in place
@@ -151,8 +178,15 @@ class Outcome:
 
     def save(self, path: str | Path) -> None:
         """Save status and telemetry as an ``.npz`` file."""
+        from detector.atomic import atomic_open
+
+        target = str(path) if str(path).endswith(".npz") else f"{path}.npz"
+        with atomic_open(target, "wb") as handle:
+            self._savez(handle)
+
+    def _savez(self, handle: Any) -> None:
         np.savez(
-            path,
+            handle,
             status=np.array(self.status),
             reason=np.array(self.reason),
             travelled=np.array(self.travelled),
@@ -181,7 +215,9 @@ class Outcome:
         ax[0].set_title(f"{self.sequence}: {self.status} {self.reason}")
         fig.tight_layout()
         if path is not None:
-            fig.savefig(path)
+            from pipe_env.plotting import save_figure
+
+            save_figure(fig, path)
         return fig
 
 
@@ -209,7 +245,15 @@ class Executor:
         lidar: the rotating LiDAR (its ``mount`` should be ``robot.lidar_mount``), or None.
     """
 
-    def __init__(self, world: PipeWorld, robot: Robot, lidar: RotatingLidar | None = None) -> None:
+    def __init__(
+        self,
+        world: PipeWorld,
+        robot: Robot,
+        lidar: RotatingLidar | None = None,
+        physics: str = "everywhere",
+    ) -> None:
+        if physics not in PHYSICS_MODES:
+            raise ValueError(f"physics = {physics!r} is invalid; allowed: {PHYSICS_MODES}")
         if not isinstance(world, PipeWorld):
             raise ValueError(f"world must be a PipeWorld, got {type(world).__name__}")
         if not isinstance(robot, Robot):
@@ -223,6 +267,12 @@ class Executor:
         self.data = world.data
         self.config = robot.config
         self.substeps = max(1, int(round(CONTROL_DT / self.model.opt.timestep)))
+        self.physics = physics
+        #: how far the last clamped straight physical drive fell short of its command, m
+        self._shortfall = DEFAULT_SHORTFALL
+        #: control ticks run with physics, and driven kinematically (``physics="contact"``)
+        self.physics_ticks = 0
+        self.kinematic_ticks = 0
         self.time = 0.0
         #: called with the simulated time (s) after every control period, or None (video frames)
         self.on_tick: Callable[[float], None] | None = None
@@ -247,7 +297,7 @@ class Executor:
         #: MuJoCo's automatic collisions; the same contacts, slower)
         self.near: NearContacts | None = None
         if world.contact_geom_count and world.model.npair >= CONTACT_PAIR_POOL:
-            self.near = NearContacts(world, robot.geom_ids)
+            self.near = NearContacts(world, robot.geom_ids, reach=NEAR_REACH)
         start = world.network.start_pose
         if start is not None:
             self.place(start, float(world.network.inner_diameter_at(start.position)))
@@ -258,10 +308,11 @@ class Executor:
         network: PipeNetwork,
         robot_config: RobotConfig | None = None,
         lidar: LidarSpec | str | None = "ideal",
+        physics: str = "everywhere",
         **lidar_kwargs: Any,
     ) -> Executor:
         """Build the world of ``network`` with the robot and the LiDAR, the robot clamped at
-        the network's start pose."""
+        the network's start pose; ``physics`` is one of :data:`PHYSICS_MODES`."""
         if network.start_pose is None:
             raise ValueError("network.start_pose is None; the robot needs a start pose")
         robot = Robot(robot_config)
@@ -271,7 +322,7 @@ class Executor:
         if lidar is not None:
             kwargs = {"mount": robot.lidar_mount, **lidar_kwargs}
             sensor = RotatingLidar(world, lidar, **kwargs)
-        return cls(world, robot, sensor)
+        return cls(world, robot, sensor, physics=physics)
 
     # ------------------------------------------------------------------ placing
     def place(self, pose: Pose, diameter: float) -> None:
@@ -313,8 +364,10 @@ class Executor:
             d.mocap_pos[mid] = d.mocap_pos[mid]
         if self.near is not None:
             mujoco.mj_kinematics(m, d)
+            self.near.forget()
             self.near.update(d, force=True)
         mujoco.mj_forward(m, d)
+        self._shortfall = DEFAULT_SHORTFALL
         self._tele = _Telemetry()
         try:
             self._clamp(float(diameter))
@@ -419,7 +472,7 @@ class Executor:
         if on and self.near is None:
             if not (self.world.contact_geom_count and self.model.npair >= CONTACT_PAIR_POOL):
                 raise ValueError("this world has no contact pair pool; near contacts need one")
-            self.near = NearContacts(self.world, self.robot.geom_ids)
+            self.near = NearContacts(self.world, self.robot.geom_ids, reach=NEAR_REACH)
             mujoco.mj_kinematics(self.model, self.data)
             self.near.update(self.data, force=True)
         elif not on and self.near is not None:
@@ -431,6 +484,7 @@ class Executor:
         if self.near is not None:
             self.near.update(self.data)
         mujoco.mj_step(self.model, self.data, nstep=self.substeps)
+        self.physics_ticks += 1
 
     def _tick(self, lag_axis: NDArray | None = None) -> float:
         """Advance one control period with the current targets; returns the front's lag, m."""
@@ -484,8 +538,14 @@ class Executor:
         if step.distance < 0:
             self._reverse(-step.distance, step.speed)
             return
+        axis = self.free_straight(step.distance)
+        if axis is not None:
+            self._glide(step.distance, step.speed, axis)
+            return
         self._truncate(self.odometer)
         p, r = self._front_pose()
+        start, heading = p.copy(), r[:, 0].copy()
+        straight = self._kappa == 0.0 and self._alpha > 0.0 and not self._hold_heading
         self._F_pos, self._F_rot = p.copy(), _orthonormal(self._F_rot)
         remaining = step.distance
         ds_tick = step.speed * CONTROL_DT
@@ -521,9 +581,19 @@ class Executor:
                 self._travelled -= max(lag, 0.0)
                 self._truncate(self.odometer)
                 raise
-        self._settle(3)
+        self._settle(SETTLE_TICKS)
+        if straight and step.distance >= 0.01:
+            # what a clamped straight drive falls short of its command (the drive's lag not
+            # recovered when the next drive starts from where the front is): kinematic
+            # drives reproduce the latest measurement
+            advance = float((self._front_pose()[0] - start) @ heading)
+            self._shortfall = min(max(step.distance - advance, 0.0), MAX_SHORTFALL)
 
     def _reverse(self, distance: float, speed: float) -> None:
+        axis = self.free_straight(-distance)
+        if axis is not None:
+            self._glide(-distance, speed, axis)
+            return
         remaining = distance
         ds_tick = speed * CONTROL_DT
         while remaining > 1e-9:
@@ -538,7 +608,100 @@ class Executor:
             self._set_targets()
             self._tick(None)
         self._H_rot = self._F_rot.copy()
-        self._settle(3)
+        self._settle(SETTLE_TICKS)
+
+    # ------------------------------------------------------------ kinematic motion
+    def free_straight(self, distance: float) -> NDArray[np.float64] | None:
+        """The rule of ``physics="contact"``: the run's unit axis (world, the way the robot
+        faces) if driving ``distance`` m (negative: backwards) is a straight drive of a
+        clamped robot in a run, away from fittings; None if contact physics must run.
+
+        Away from fittings: before and after the motion the whole robot (from its rear,
+        ``RobotConfig.length`` behind the sensor, to the sensor) lies more than the run's
+        inner diameter (+ ``KINEMATIC_MARGIN``) inside both port planes of its run: the
+        sensor is more than a diameter plus the robot's length from the fitting behind and
+        more than a diameter from the one ahead, so no module, wheel or V apex is within a
+        diameter of a fitting, a taper or a junction's opening. Straight drive of a clamped
+        robot: the V folded on its clamping side, no steering bend, no roll, no bent joint, no
+        held turn heading, and the sensor within ``KINEMATIC_OFFSET`` diameters of the axis,
+        its heading within ``KINEMATIC_TILT`` of it. Everything else (approaches, turns, junctions,
+        reducers, clamping, centring, back-outs near fittings, jams) runs contact physics."""
+        if self.physics != "contact" or not math.isfinite(distance):
+            return None
+        if (
+            self._alpha <= 0.0
+            or self._vside != CLAMP_SIDE
+            or self._kappa != 0.0
+            or self._rho != 0.0
+            or self._hold_heading
+            or any(v != 0.0 for v in self._bend_offsets.values())
+        ):
+            return None
+        from pipe_env.routing import edge_length, leg_length, locate
+
+        net = self.world.network
+        pose = self.robot.sensor_pose()
+        ep, towards = locate(net, pose)
+        run = net.run_by_id[ep.run_id]
+        axis = net.position(run.b) - net.position(run.a)
+        axis = axis / float(np.linalg.norm(axis))
+        sign = 1.0 if towards == run.b else -1.0
+        axis = sign * axis
+        diameter = float(run.diameter)
+        cp = net.centreline.nearest(pose.position)
+        if cp.distance > KINEMATIC_OFFSET * diameter:
+            return None
+        if float(pose.forward @ axis) < math.cos(KINEMATIC_TILT):
+            return None
+        # the robot's body, from its rear (``length`` behind the sensor) to the sensor, must
+        # stay more than a diameter (+ margin) inside both port planes of the run
+        clearance = diameter + KINEMATIC_MARGIN
+        lo = leg_length(net, run.a, run.id) + clearance
+        hi = edge_length(net, run.id) - leg_length(net, run.b, run.id) - clearance
+        length = self.config.length
+        for s_sensor in (ep.s, ep.s + sign * distance):
+            s_rear = s_sensor - sign * length
+            if not (lo <= min(s_sensor, s_rear) and max(s_sensor, s_rear) <= hi):
+                return None
+        return axis
+
+    def _glide(self, distance: float, speed: float, axis: NDArray[np.float64]) -> None:
+        """Move the clamped robot ``distance`` m (negative: backwards) along the unit world
+        ``axis`` kinematically: every body, drive target and the driven path translate
+        together (joint angles, clamp, sag and roll as physics left them), the clock advances
+        by the drive's duration, and the robot settles for ``SETTLE_TICKS`` physics ticks."""
+        m, d = self.model, self.data
+        step = abs(distance)
+        n_ticks = max(1, int(math.ceil(step / (speed * CONTROL_DT) - 1e-9)))
+        q = self.robot.free_qpos
+        if distance > 0:
+            # the robot advances what a physical drive of this length does (see ``_drive``)
+            move = (distance - min(self._shortfall, 0.5 * distance)) * axis
+            self._truncate(self.odometer)
+            self._F_rot = _orthonormal(self._F_rot)
+            s = self.odometer + distance * np.arange(1, n_ticks + 1) / n_ticks
+            p = self._F_pos[None, :] + ((s - self.odometer) / distance)[:, None] * move[None, :]
+            self._push_many(s, p, np.broadcast_to(self._F_rot, (n_ticks, 3, 3)))
+            self._F_pos = self._F_pos + move
+            self.odometer += distance
+        else:
+            self.odometer += distance
+            target, rot = self._path(self.odometer)
+            move = target - self._F_pos
+            self._F_pos, self._F_rot = target.copy(), rot.copy()
+            self._H_rot = self._F_rot.copy()
+        self._travelled += step
+        d.qpos[q : q + 3] += move
+        self._set_targets()
+        mujoco.mj_kinematics(m, d)
+        if self.near is not None:
+            self.near.update(d, force=True)
+        self.time += n_ticks * CONTROL_DT
+        self.kinematic_ticks += n_ticks
+        if self.on_tick is not None:  # (one frame of the glide for videos)
+            self.on_tick(self.time)
+        self._tele.record(self, 0.0)
+        self._settle(SETTLE_TICKS)
 
     def _settle(self, ticks: int) -> None:
         for _ in range(ticks):
@@ -818,9 +981,12 @@ class Executor:
         scan_interval: float = 0.05,
         rng: np.random.Generator | None = None,
         speed: float = 0.05,
+        next_interval: Callable[[], float] | None = None,
     ) -> Outcome:
         """Stop-and-scan forward: sweep, ask ``on_scan``, drive ``scan_interval`` m, repeat,
         until ``on_scan`` says ``"stop"``, ``max_distance`` m are driven, or a jam.
+        ``next_interval`` (called after every sweep's verdict) may choose each drive's length
+        instead of ``scan_interval`` (m, in [1 mm, 1 m]).
 
         ``"rescan"`` sweeps again where the robot stands (at most ``MAX_RESCANS`` times in a
         row). At every stop the clamp encoders are read: below the reading of the last
@@ -846,7 +1012,14 @@ class Executor:
                 left = max_distance - (self.odometer - odo0)
                 if left <= 1e-6:
                     return self._outcome("done", "max distance driven", t0, "drive_until")
-                self._drive(Drive(min(scan_interval, left), speed))
+                interval = scan_interval
+                if next_interval is not None:
+                    interval = float(next_interval())
+                    if not (math.isfinite(interval) and 0.001 <= interval <= 1.0):
+                        raise ValueError(
+                            f"next_interval() = {interval!r} is invalid; allowed [1 mm, 1 m]"
+                        )
+                self._drive(Drive(min(interval, left), speed))
         except _Jam as exc:
             self._stop_here()
             return self._outcome("jammed", str(exc), t0, "drive_until")

@@ -80,7 +80,15 @@ def test_scenarios_run_reports_agree_and_exit_code(tiny_suite: Path, tmp_path: P
     doc = json.loads(js.read_text())
     assert doc["schema_version"] == 1
     assert {"numpy", "mujoco", "gymnasium"} <= set(doc["packages"])
-    assert doc["summary"] == {"total": 3, "passed": 2, "failed": 1}
+    assert doc["summary"] == {
+        "total": 3,
+        "passed": 2,
+        "failed": 1,
+        "errors": 0,
+        "expected_failures": 0,
+        "unexpected_passes": 0,
+        "not_run": 0,
+    }
     by_name = {f"{r['scenario']}[seed={r['seed']}]": r for r in doc["results"]}
     for name, case in failures.items():
         assert by_name[name]["passed"] == (case is None)
@@ -105,12 +113,16 @@ def test_scenarios_run_passing_set_exits_zero_and_list(tiny_suite: Path) -> None
     assert listed.returncode == 0 and "reach_branch" in listed.stdout
 
 
-def test_bad_scenario_file_is_a_usage_error_naming_file_and_key(tmp_path: Path) -> None:
+def test_bad_scenario_file_is_an_error_testcase_naming_file_and_key(tmp_path: Path) -> None:
     write(tmp_path, "broken", {"network": TEE, "detectr": "improved"})
     proc = pipenav("scenarios", "run", "--dir", str(tmp_path))
-    assert proc.returncode == 2
+    assert proc.returncode == 1
+    assert "ERROR broken [seed=0]" in proc.stdout
     assert "broken.yaml: key 'detectr': unknown key; allowed:" in proc.stdout
     assert "Traceback" not in proc.stdout + proc.stderr
+    listed = pipenav("scenarios", "list", "--dir", str(tmp_path))
+    assert listed.returncode == 2
+    assert "broken.yaml: key 'detectr': unknown key; allowed:" in listed.stdout
 
 
 def test_packaged_scenarios_all_validate() -> None:
@@ -163,7 +175,9 @@ def test_eval_and_plot_commands(tmp_path: Path) -> None:
 def test_bad_layout_parameters_and_values_are_usage_errors(tmp_path: Path) -> None:
     write(tmp_path, "too_wide", {"network": {"layout": "t_junction", "params": {"diameter": 0.5}}})
     proc = pipenav("scenarios", "run", "--dir", str(tmp_path))
-    assert proc.returncode == 2 and "Traceback" not in proc.stdout + proc.stderr
+    # a broken selected file is an error testcase of the run, not an abort
+    assert proc.returncode == 1 and "Traceback" not in proc.stdout + proc.stderr
+    assert "ERROR too_wide [seed=0]" in proc.stdout
     assert "too_wide.yaml: key 'network': layout parameter diameter=0.5 is outside" in proc.stdout
     (tmp_path / "too_wide.yaml").unlink()
     write(tmp_path, "unhashable", {"network": {"layout": [1]}, "sensor": {"preset": ["ideal"]}})

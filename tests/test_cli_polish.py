@@ -216,8 +216,9 @@ def test_drive_does_not_ask_when_the_reset_already_ended_the_episode(tmp_path: P
         raise AssertionError(f"asked {prompt!r} after the episode ended")
 
     console = Console(record=True, width=120)
-    assert OperatorConsole(env, read=read, console=console, out=tmp_path).run() == 0
-    assert "goal reached" in console.export_text()
+    # a network whose goal the reset's drive reaches is refused (one clear error), not asked
+    assert OperatorConsole(env, read=read, console=console, out=tmp_path).run() == 2
+    assert "the goal is reached inside reset()" in console.export_text()
 
 
 def test_bench_is_a_checkout_command_and_finds_its_scripts_from_anywhere(

@@ -94,3 +94,29 @@ def test_a_goal_driven_over_by_a_turn_counts_as_reached() -> None:
     branch = [o for o in dec.options if o.angle > 1.0]
     res = plant.execute(branch[0], goal)
     assert res.status == "goal"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("detector", ["ground_truth", "improved"])
+def test_a_long_straight_is_driven_to_the_bend_at_its_end_and_the_goal_after_it(
+    detector: str,
+) -> None:
+    """8 m of straight pipe (twice the longest leg ``advance`` drives) with nothing in it: the
+    robot drives on to the bend at its end, not stopping halfway with only back-out left."""
+    from pipe_env.plant_full import MAX_DRIVE
+
+    net = layouts.mitre_bend(0.1, math.pi / 2, 0.0, distance=8.0, outlet_length=1.0)
+    assert edge_length(net, "r_in") > 2 * MAX_DRIVE
+    plant = PhysicalPlant(net, detector=detector)
+    goal = EdgePosition("r_out0", 0.5, edge_length(net, "r_out0"))
+    dec, out = plant.advance(goal)
+    assert dec is not None and out.status == "done"
+    assert out.distance > 2 * MAX_DRIVE * 0.95
+    assert dec.kind == "bend" and dec.node_id == "s"
+    ways = [o for o in dec.options if o.angle > 1.0]
+    assert ways
+    res = plant.execute(ways[0], goal)
+    if res.status != "goal":
+        _, res = plant.advance(goal)
+    assert res.status == "goal"
+    assert plant.edge_position().run_id == "r_out0"

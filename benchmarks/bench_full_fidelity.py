@@ -1,0 +1,250 @@
+"""Full fidelity at speed: physics where contact decides against the all-physics reference.
+
+Runs RoutePlanner on the same held-out networks (``--networks``, default 48; 6-fitting 3D
+networks with loops, ``pool_network(config, EVAL_POOL_SEED, i)``) in full fidelity twice in one
+run, episode by episode alternating: ``physics="contact"`` (straight drives away from fittings
+kinematic, see :meth:`primitives.executor.Executor.free_straight`) and
+``physics="everywhere"`` (contact physics for every motion: the reference). Both use the same
+seeds, the same detector (``improved``), the same sweep cadence. Prints:
+
+- decisions/s of each (one core; resets, model builds included, and the steps alone) and their
+  ratio; control ticks run with physics and driven kinematically;
+- RoutePlanner success and jams per episode of each;
+- the detection error at each decision (distance mm, angle deg, direction deg against ground
+  truth, as the environment records them) of each;
+- the sensor pose at each episode's first decision: the difference between the two modes
+  (position mm, heading deg);
+- tests of equivalence: success by McNemar's exact test on the paired episodes; jams per
+  episode by the Wilcoxon signed-rank test on the paired counts; each detection error by the
+  two-sample Kolmogorov-Smirnov test on the per-decision errors. A p-value above 0.05 means no
+  difference detectable at this sample size (not proof of equality: the sample size bounds the
+  difference that could be detected, reported as the 95 % interval of the success difference).
+
+Usage: python benchmarks/bench_full_fidelity.py [--networks 48] [--write-docs] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from scipy import stats
+
+import pipe_env  # noqa: F401  (registers the environment ids)
+from agents.evaluate import EVAL_POOL_SEED, held_out_networks
+from agents.scripted import make_agent
+from detector.atomic import atomic_write_text
+from pipe_env.generator import NetworkConfig
+
+MODES = ("contact", "everywhere")
+NETWORK_CONFIG = {"n_fittings": 6, "planar": False, "allow_loops": True}
+
+
+def run_episode(env: gym.Env, network: Any, seed: int) -> dict[str, Any]:
+    """One RoutePlanner episode on ``network``: outcome, timing and the decisions' errors."""
+    base = env.unwrapped
+    agent = make_agent("route_planner", env)
+    t0 = time.perf_counter()
+    obs, info = env.reset(seed=seed, options={"network": network})
+    t_reset = time.perf_counter() - t0
+    agent.reset()
+    first = base.decision.pose if base.decision is not None else None
+    done = bool(base.terminated or base.truncated)
+    t1 = time.perf_counter()
+    while not done:
+        obs, _, term, trunc, info = env.step(agent.act(obs, info))
+        done = term or trunc
+    t_steps = time.perf_counter() - t1
+    ex = base.plant.executor
+    return {
+        "success": bool(info["is_success"]),
+        "jams": int(info["jams"]),
+        "decisions": int(info["decisions"]),
+        "reset_s": t_reset,
+        "steps_s": t_steps,
+        "errors": list(base.detection_errors),
+        "first_pose": None
+        if first is None
+        else {"position": first.position.tolist(), "forward": first.rotation[:, 0].tolist()},
+        "physics_ticks": int(ex.physics_ticks),
+        "kinematic_ticks": int(ex.kinematic_ticks),
+    }
+
+
+def _errors(rows: list[dict[str, Any]], key: str) -> np.ndarray:
+    vals = [e[key] for r in rows for e in r["errors"] if key in e and math.isfinite(e[key])]
+    return np.asarray(vals, dtype=float)
+
+
+def mcnemar_exact(a: list[bool], b: list[bool]) -> float:
+    """Two-sided exact McNemar p-value of paired successes ``a`` against ``b``."""
+    only_a = sum(1 for x, y in zip(a, b) if x and not y)
+    only_b = sum(1 for x, y in zip(a, b) if y and not x)
+    n = only_a + only_b
+    if n == 0:
+        return 1.0
+    return float(stats.binomtest(only_a, n, 0.5).pvalue)
+
+
+def summarise(results: dict[str, list[dict[str, Any]]]) -> tuple[dict[str, Any], str]:
+    """Figures and the markdown report of both modes' episodes."""
+    out: dict[str, Any] = {}
+    lines = []
+    n = len(results[MODES[0]])
+    lines.append(
+        f"RoutePlanner, improved detector, {n} held-out networks "
+        f"({NETWORK_CONFIG['n_fittings']}-fitting 3D with loops), both modes in one run.\n"
+    )
+    lines.append(
+        "| physics | decisions | decisions/s (all) | decisions/s (steps) | success | "
+        "jams/episode | physics ticks | kinematic ticks |"
+    )
+    lines.append("|---|---|---|---|---|---|---|---|")
+    for mode in MODES:
+        rows = results[mode]
+        dec = sum(r["decisions"] for r in rows)
+        wall = sum(r["reset_s"] + r["steps_s"] for r in rows)
+        steps = sum(r["steps_s"] for r in rows)
+        step_dec = sum(r["decisions"] for r in rows)
+        m = {
+            "decisions": dec,
+            "decisions_per_s": dec / wall if wall > 0 else math.nan,
+            "step_decisions_per_s": step_dec / steps if steps > 0 else math.nan,
+            "success_rate": float(np.mean([r["success"] for r in rows])),
+            "jams_per_episode": float(np.mean([r["jams"] for r in rows])),
+            "physics_ticks": sum(r["physics_ticks"] for r in rows),
+            "kinematic_ticks": sum(r["kinematic_ticks"] for r in rows),
+        }
+        out[mode] = m
+        lines.append(
+            f"| {mode} | {dec} | {m['decisions_per_s']:.3f} | {m['step_decisions_per_s']:.3f} | "
+            f"{m['success_rate']:.3f} | {m['jams_per_episode']:.2f} | {m['physics_ticks']} | "
+            f"{m['kinematic_ticks']} |"
+        )
+    c, e = out["contact"], out["everywhere"]
+    ratio = c["decisions_per_s"] / e["decisions_per_s"]
+    out["speed_ratio"] = ratio
+    lines.append(f"\ncontact / everywhere decisions/s (all): {ratio:.2f}")
+    lines.append(
+        f"full-fidelity decisions/s (contact, all): {c['decisions_per_s']:.3f} "
+        f"(target >= 10: {'met' if c['decisions_per_s'] >= 10 else 'NOT met'})\n"
+    )
+    # detection errors at each decision
+    lines.append("| detection error at the decisions | physics | n | median | p90 | KS p |")
+    lines.append("|---|---|---|---|---|---|")
+    out["errors"] = {}
+    for key, unit, scale in (
+        ("distance", "mm", 1000.0),
+        ("angle", "deg", 180 / math.pi),
+        ("direction", "deg", 180 / math.pi),
+    ):
+        a = np.abs(_errors(results["contact"], key)) * scale
+        b = np.abs(_errors(results["everywhere"], key)) * scale
+        p = float(stats.ks_2samp(a, b).pvalue) if len(a) and len(b) else math.nan
+        out["errors"][key] = {"ks_p": p}
+        for mode, v in (("contact", a), ("everywhere", b)):
+            med = float(np.median(v)) if len(v) else math.nan
+            p90 = float(np.percentile(v, 90)) if len(v) else math.nan
+            out["errors"][key][mode] = {"n": len(v), "median": med, "p90": p90}
+            lines.append(
+                f"| {key} ({unit}) | {mode} | {len(v)} | {med:.2f} | {p90:.2f} | {p:.3f} |"
+            )
+    # the sensor pose at the first decision
+    dpos, dang = [], []
+    for rc, re_ in zip(results["contact"], results["everywhere"]):
+        if rc["first_pose"] is None or re_["first_pose"] is None:
+            continue
+        pc, pe = np.array(rc["first_pose"]["position"]), np.array(re_["first_pose"]["position"])
+        fc, fe = np.array(rc["first_pose"]["forward"]), np.array(re_["first_pose"]["forward"])
+        dpos.append(1000 * float(np.linalg.norm(pc - pe)))
+        dang.append(math.degrees(math.acos(max(-1.0, min(1.0, float(fc @ fe))))))
+    if dpos:
+        out["first_pose"] = {
+            "median_mm": float(np.median(dpos)),
+            "max_mm": float(np.max(dpos)),
+            "median_deg": float(np.median(dang)),
+            "max_deg": float(np.max(dang)),
+        }
+        fp = out["first_pose"]
+        lines.append(
+            f"\nsensor pose at the first decision, contact vs everywhere ({len(dpos)} episodes): "
+            f"position median {fp['median_mm']:.2f} mm, max {fp['max_mm']:.2f} mm; heading "
+            f"median {fp['median_deg']:.3f} deg, max {fp['max_deg']:.3f} deg"
+        )
+    # equivalence tests
+    sc = [r["success"] for r in results["contact"]]
+    se = [r["success"] for r in results["everywhere"]]
+    p_success = mcnemar_exact(sc, se)
+    diff = np.array(sc, dtype=float) - np.array(se, dtype=float)
+    half = 1.96 * float(diff.std(ddof=1)) / math.sqrt(len(diff)) if len(diff) > 1 else math.nan
+    jc = np.array([r["jams"] for r in results["contact"]])
+    je = np.array([r["jams"] for r in results["everywhere"]])
+    p_jams = float(stats.wilcoxon(jc, je).pvalue) if np.any(jc != je) else 1.0
+    out["tests"] = {
+        "success_mcnemar_p": p_success,
+        "success_diff": float(diff.mean()),
+        "success_diff_ci95": [float(diff.mean() - half), float(diff.mean() + half)],
+        "jams_wilcoxon_p": p_jams,
+    }
+    lines.append(
+        f"\nsuccess: McNemar exact p = {p_success:.3f} (difference {diff.mean():+.3f}, 95 % "
+        f"interval [{diff.mean() - half:+.3f}, {diff.mean() + half:+.3f}]); jams/episode: "
+        f"Wilcoxon signed-rank p = {p_jams:.3f}; detection errors: two-sample KS p above. "
+        "p > 0.05: no difference detectable at this sample size."
+    )
+    return out, "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--networks", type=int, default=48)
+    parser.add_argument("--first", type=int, default=0, help="first held-out network index")
+    parser.add_argument("--json", default=None)
+    parser.add_argument("--write-docs", action="store_true")
+    args = parser.parse_args()
+    if args.networks < 1:
+        parser.error(f"--networks = {args.networks}; allowed: >= 1")
+    cfg = NetworkConfig.from_dict(NETWORK_CONFIG)
+    networks = held_out_networks(cfg, args.first + args.networks)[args.first :]
+    envs = {
+        mode: gym.make(
+            "pipenav/PipeNav-v0",
+            fidelity="full",
+            detector="improved",
+            network_config=cfg,
+            physics=mode,
+        )
+        for mode in MODES
+    }
+    results: dict[str, list[dict[str, Any]]] = {m: [] for m in MODES}
+    for i, net in enumerate(networks):
+        seed = EVAL_POOL_SEED + args.first + i
+        order = MODES if i % 2 == 0 else MODES[::-1]  # alternate: load drifts hit both
+        for mode in order:
+            results[mode].append(run_episode(envs[mode], net, seed))
+        rc, re_ = results["contact"][-1], results["everywhere"][-1]
+        print(
+            f"network {args.first + i}: contact {rc['success']} {rc['decisions']} dec "
+            f"{rc['reset_s'] + rc['steps_s']:.1f} s | everywhere {re_['success']} "
+            f"{re_['decisions']} dec {re_['reset_s'] + re_['steps_s']:.1f} s",
+            flush=True,
+        )
+    for env in envs.values():
+        env.close()
+    figures, markdown = summarise(results)
+    print("\n" + markdown)
+    if args.json:
+        atomic_write_text(args.json, json.dumps({"figures": figures, "episodes": results}))
+    if args.write_docs:
+        from benchmarks.report import write_section
+
+        write_section("full fidelity", markdown)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,157 @@
+"""Soak: many full-fidelity episodes and many fast decisions in one process, RSS printed as it goes.
+
+Part 1 runs ``--episodes`` full-fidelity episodes (MuJoCo robot, rotating LiDAR, the improved
+detector; a fresh 6-fitting network each episode, random valid actions) and prints the
+process's resident set size (RSS, MB) every ``--every`` episodes. Part 2 runs ``--decisions``
+fast-fidelity decisions (a pool of 50 networks, random valid actions, resets included) and
+prints RSS every tenth of the way. Each report gives the RSS and the RSS after glibc's
+``malloc_trim`` (memory freed but kept by the allocator given back): the second is what is
+judged. Memory is flat when it changes little between the warm-up and the end: the script
+prints both and exits 1 if the growth over the second half of a part exceeds
+``--max-growth-mb``.
+
+Measured (full fidelity, small generated networks): the plain RSS climbs from about 100 MB to
+200-270 MB over the first episodes and then wanders with the allocator's retained pages; after
+``malloc_trim`` it stays at 140-165 MB (MuJoCo, the meshes and the compiled kernels loaded
+once), and the live Python objects stay at one world, one plant and at most one renderer.
+
+Usage: python benchmarks/soak.py [--episodes 100] [--decisions 1000000] [--every 10]
+       [--max-growth-mb 30] [--write-docs]
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import sys
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import pipe_env  # noqa: F401
+from agents.evaluate import random_valid_episode
+
+
+def rss_mb() -> float:
+    """The current process's resident set size, MB (from /proc; 0 where it is unavailable)."""
+    try:
+        with open("/proc/self/statm", encoding="ascii") as fh:
+            pages = int(fh.read().split()[1])
+        return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+def trimmed_rss_mb() -> float:
+    """RSS after glibc's ``malloc_trim(0)`` returns freed heap pages to the OS, MB: what the
+    process really holds (without it, RSS also counts memory freed but kept by the allocator).
+    The plain RSS where glibc is not available."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+    return rss_mb()
+
+
+def soak_full(episodes: int, every: int, seed: int = 0) -> list[tuple[int, float]]:
+    """Run ``episodes`` full-fidelity episodes; (episodes done, RSS MB) every ``every``."""
+    env = gym.make(
+        "pipenav/PipeNav-v0",
+        fidelity="full",
+        detector="improved",
+        network_config={"n_fittings": 6, "planar": False, "allow_loops": True},
+        max_episode_steps=12,
+    )
+    rng = np.random.default_rng(seed)
+    marks = [(0, rss_mb())]
+    print(f"full  episode     0/{episodes}: RSS {marks[0][1]:7.1f} MB (start)", flush=True)
+    t0 = time.perf_counter()
+    for ep in range(1, episodes + 1):
+        random_valid_episode(env, rng, seed + ep)
+        if ep % every == 0 or ep in (1, episodes):
+            gc.collect()
+            raw = rss_mb()
+            marks.append((ep, trimmed_rss_mb()))
+            print(
+                f"full  episode {ep:5d}/{episodes}: RSS {raw:7.1f} MB, after malloc_trim "
+                f"{marks[-1][1]:7.1f} MB ({time.perf_counter() - t0:6.0f} s)",
+                flush=True,
+            )
+    env.close()
+    return marks
+
+
+def soak_fast(decisions: int, seed: int = 0) -> list[tuple[int, float]]:
+    """Run at least ``decisions`` fast-fidelity decisions; (decisions, RSS MB) ten times."""
+    env = gym.make("pipenav/PipeNav-v0", fidelity="fast", network_pool=50, max_episode_steps=64)
+    rng = np.random.default_rng(seed)
+    step = max(1, decisions // 10)
+    marks = [(0, rss_mb())]
+    done, ep, next_mark = 0, 0, step
+    t0 = time.perf_counter()
+    while done < decisions:
+        n, _ = random_valid_episode(env, rng, seed + ep)
+        done += n
+        ep += 1
+        if done >= next_mark:
+            gc.collect()
+            raw = rss_mb()
+            marks.append((done, trimmed_rss_mb()))
+            print(
+                f"fast  decisions {done:9d}/{decisions}: RSS {raw:7.1f} MB, after malloc_trim "
+                f"{marks[-1][1]:7.1f} MB "
+                f"({time.perf_counter() - t0:6.0f} s)",
+                flush=True,
+            )
+            next_mark += step
+    env.close()
+    return marks
+
+
+def growth(marks: list[tuple[int, float]]) -> tuple[float, float, float]:
+    """(RSS after warm-up, RSS at the end, growth over the second half), MB."""
+    warm = marks[2][1] if len(marks) > 2 else marks[-1][1]
+    half = marks[len(marks) // 2][1]
+    return warm, marks[-1][1], marks[-1][1] - half
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--episodes", type=int, default=100, help="full-fidelity episodes")
+    parser.add_argument("--decisions", type=int, default=1_000_000, help="fast decisions")
+    parser.add_argument("--every", type=int, default=10, help="print RSS every this many episodes")
+    parser.add_argument("--max-growth-mb", type=float, default=30.0)
+    parser.add_argument("--write-docs", action="store_true")
+    args = parser.parse_args(argv)
+    if args.episodes < 0 or args.decisions < 0 or args.every < 1:
+        parser.error("--episodes and --decisions must be >= 0 and --every >= 1")
+    rows: list[tuple[str, Any, float, float, float]] = []
+    if args.episodes:
+        marks = soak_full(args.episodes, args.every)
+        rows.append(("full episodes", args.episodes, *growth(marks)))
+    if args.decisions:
+        marks = soak_fast(args.decisions)
+        rows.append(("fast decisions", marks[-1][0], *growth(marks)))
+    lines = [
+        "| part | count | RSS after warm-up MB | RSS at end MB | growth over 2nd half MB |",
+        # (RSS after malloc_trim: memory the process holds, not pages the allocator keeps)
+        "|---|---|---|---|---|",
+    ]
+    lines += [f"| {p} | {n} | {w:.1f} | {e:.1f} | {g:+.1f} |" for p, n, w, e, g in rows]
+    table = "\n".join(lines)
+    print("\n" + table)
+    if args.write_docs:
+        from benchmarks.report import write_section
+
+        write_section("soak", table)
+    worst = max((g for *_, g in rows), default=0.0)
+    return 0 if worst <= args.max_growth_mb else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

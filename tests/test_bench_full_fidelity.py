@@ -1,0 +1,50 @@
+"""The equivalence benchmark's statistics (the figures, not the simulation)."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_full_fidelity.py"
+_spec = importlib.util.spec_from_file_location("bench_full_fidelity", _PATH)
+bench = importlib.util.module_from_spec(_spec)
+sys.modules["bench_full_fidelity"] = bench
+_spec.loader.exec_module(bench)
+
+
+def _episode(success: bool, jams: int, dist: float, x: float) -> dict:
+    return {
+        "success": success,
+        "jams": jams,
+        "decisions": 2,
+        "reset_s": 1.0,
+        "steps_s": 1.0,
+        "errors": [{"distance": dist, "angle": 0.01, "direction": 0.02}],
+        "first_pose": {"position": [x, 0.0, 0.0], "forward": [1.0, 0.0, 0.0]},
+        "physics_ticks": 100,
+        "kinematic_ticks": 10,
+    }
+
+
+def test_mcnemar_counts_only_discordant_pairs() -> None:
+    assert bench.mcnemar_exact([True] * 10, [True] * 10) == 1.0
+    # 8 episodes only one mode succeeded in, all the same way: a real difference
+    assert bench.mcnemar_exact([True] * 8 + [False] * 2, [False] * 8 + [False] * 2) < 0.01
+    # balanced discordance: none
+    assert bench.mcnemar_exact([True, False] * 5, [False, True] * 5) == pytest.approx(1.0)
+
+
+def test_summary_reports_both_modes_the_ratio_and_the_pose_difference() -> None:
+    results = {
+        "contact": [_episode(True, 0, 0.001, 0.0) for _ in range(6)],
+        "everywhere": [_episode(True, 0, 0.001, 0.002) for _ in range(6)],
+    }
+    results["everywhere"][0]["steps_s"] = 3.0  # the reference is slower
+    figures, text = bench.summarise(results)
+    assert figures["speed_ratio"] > 1.0
+    assert figures["first_pose"]["median_mm"] == pytest.approx(2.0)
+    assert figures["tests"]["success_mcnemar_p"] == 1.0
+    assert "| contact |" in text and "| everywhere |" in text and "McNemar" in text
