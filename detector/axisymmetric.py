@@ -32,29 +32,6 @@ from detector.pipe_cloud import (
 )
 from detector.robust import mad_sigma, robust_fit, tukey_cost
 
-#: Returns of a widening this much (m; or three times their noise) short of the wider pipe's
-#: radius lie on its cone, not on the wider pipe.
-CONE_PLATEAU_MARGIN = 0.0015
-#: A line along a widening's cone needs returns rising this much (m; or six times their noise)
-#: from the wall to the wider pipe: two rings of beams, not the spread of one.
-CONE_MIN_RISE = 0.002
-#: The returns of a cone seen by several rings lie on its line to within this much (m, robust
-#: standard deviation across it; or three times their noise).
-CONE_LINE_SCATTER = 0.00015
-#: Returns of a cone are binned this long (m along the axis) to find its first ring of beams
-#: (or the first few, close together near the sensor).
-CONE_FIRST_RING = 0.01
-#: Fewer returns than this off the wall are stray, not a ring of beams on a cone, whose
-#: returns cover this fraction of the azimuth at least.
-CONE_MIN_RETURNS = 6
-CONE_RING_COVERAGE = 0.75
-#: The rings' hinge (:func:`_ring_hinge_start`) looks this far (m) before the first returns off
-#: the wall; a ring rises when its median lies ``HINGE_MIN_SNR`` times its noise and at least
-#: ``HINGE_MIN_RISE`` (m) off the wall.
-HINGE_REACH = 0.15
-HINGE_MIN_SNR = 4.0
-HINGE_MIN_RISE = 0.0005
-
 
 def _closure(
     cloud: PipeCloud,
@@ -311,7 +288,7 @@ def detect_axisymmetric(
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     big_l, t_len, r2 = (float(v) for v in x)
     if not contraction:
-        big_l, along = _widening_start(cloud, big_r, r2, u_first, big_l)
+        big_l, along = _widening_start(cloud, big_r, r2, u_first, big_l, cfg)
         diag["widening_start_from_cone"] = bool(along)
     diag.update(reducer_r2=r2, reducer_taper=t_len, reducer_rms=rms, axisymmetric_support=support)
     cov = azimuth_coverage(p)
@@ -332,7 +309,7 @@ def detect_axisymmetric(
 
 
 def _widening_start(
-    cloud: PipeCloud, big_r: float, r2: float, u_first: float, default: float
+    cloud: PipeCloud, big_r: float, r2: float, u_first: float, default: float, cfg: ImprovedConfig
 ) -> tuple[float, bool]:
     """Start of a widening (m along the axis) to radius ``r2`` and whether its cone was seen
     by two or more rings of beams.
@@ -355,18 +332,18 @@ def _widening_start(
     e = cloud.r_v - big_r
     noise = float(partial_percentile(sig, 50.0))
     rise = r2 - big_r
-    margin = max(3.0 * noise, CONE_PLATEAU_MARGIN)
+    margin = max(3.0 * noise, cfg.cone_plateau_margin)
     plateau = e >= rise - margin
     u_f = float(partial_percentile(u[plateau], 1.0)) if np.any(plateau) else u_first * r2 / big_r
     off_wall = np.maximum(0.00035, 4.0 * sig)
     on = (np.abs(e) <= off_wall) & (u < u_f)
     cone = (e > off_wall) & ~plateau & (u > min(u_first, u_f) - 0.1) & (u < u_f)
     # (rings all round: part rings off the wall on one side are a slightly tilted axis)
-    cone[cone] = _full_rings(xyz[:, cone])
+    cone[cone] = _full_rings(xyz[:, cone], cfg)
     n_cone = int(np.count_nonzero(cone))
     uc, ec = u[cone], e[cone]
     if n_cone >= 20 and float(partial_percentile(ec, 95) - partial_percentile(ec, 5)) > max(
-        6.0 * noise, CONE_MIN_RISE
+        6.0 * noise, cfg.cone_min_rise
     ):
         # (near its start the cone lies within the noise of the wall: the line alone places
         # the start, bounded by the beams' crossings)
@@ -374,16 +351,16 @@ def _widening_start(
         # (a cone: returns on one line to within their noise)
         if math.isfinite(a_u) and b_u > 0.0:
             scatter = mad_sigma(ec - (uc - a_u) / b_u)
-            if scatter <= max(3.0 * noise, CONE_LINE_SCATTER):
+            if scatter <= max(3.0 * noise, cfg.cone_line_scatter):
                 return min(u_first, max(u_first - 0.1, a_u)), True
     # (under range noise the first centimetres of the cone, per return, are the wall's: the
     # rings' medians are not)
-    hinge = _ring_hinge_start(xyz, e, noise, u_first, u_f, rise - margin)
+    hinge = _ring_hinge_start(xyz, e, noise, u_first, u_f, rise - margin, cfg)
     if hinge is not None:
         return hinge, True
     hi = min(u_first, u_f)
     if n_cone:
-        first = uc <= uc.min() + CONE_FIRST_RING
+        first = uc <= uc.min() + cfg.cone_first_ring
         hi = min(hi, float(uc.min()))
     before = on & (u < hi)
     if not np.any(before):
@@ -404,6 +381,7 @@ def _ring_hinge_start(
     u_first: float,
     u_f: float,
     e_max: float,
+    cfg: ImprovedConfig,
 ) -> float | None:
     """Start of a widening (m along the axis) from the rings of beams before the wider pipe,
     each ring's median offset from the wall radius (``e``, m) against its position: flat on
@@ -416,11 +394,11 @@ def _ring_hinge_start(
     before it); ``u_f``: where the wider pipe's returns begin; ``e_max``: offsets beyond this
     are on the wider pipe, not the cone; ``noise``: the returns' median radial noise, m."""
     u = xyz[0]
-    win = (u > u_first - HINGE_REACH) & (u < u_f) & (e < e_max) & (e > -4.0 * noise - 0.00035)
-    if np.count_nonzero(win) < 4 * CONE_MIN_RETURNS:
+    win = (u > u_first - cfg.hinge_reach) & (u < u_f) & (e < e_max) & (e > -4.0 * noise - 0.00035)
+    if np.count_nonzero(win) < 4 * cfg.cone_min_returns:
         return None
     p, ew = xyz[:, win], e[win]
-    rings = _rings(p)
+    rings = _rings(p, cfg)
     if len(rings) < 4:
         return None
     ua = np.array([float(np.median(p[0, sel])) for sel in rings])
@@ -443,35 +421,37 @@ def _ring_hinge_start(
     if not math.isfinite(float(chi2[j])):
         return None
     big_l, b = float(grid[j]), float(b[j])
-    rising = (ua > big_l) & (b * (ua - big_l) > np.maximum(HINGE_MIN_SNR * sig_b, HINGE_MIN_RISE))
+    rising = (ua > big_l) & (
+        b * (ua - big_l) > np.maximum(cfg.hinge_min_snr * sig_b, cfg.hinge_min_rise)
+    )
     # (two rings at least, a ring on the wall before: one ring split between two bins makes
     # no slope)
-    if not rising.any() or np.ptp(ua[rising]) < CONE_FIRST_RING or not np.any(ua < big_l):
+    if not rising.any() or np.ptp(ua[rising]) < cfg.cone_first_ring or not np.any(ua < big_l):
         return None
     return big_l
 
 
-def _rings(p: NDArray[np.float64]) -> list[NDArray[np.bool_]]:
-    """The ``(3, n)`` returns in each ``CONE_FIRST_RING`` long stretch of the axis that holds at
-    least ``CONE_MIN_RETURNS`` of them covering at least ``CONE_RING_COVERAGE`` of the azimuth
-    (a ring of beams all round, not a stray return or part of a ring), nearest first: one mask
-    per ring."""
-    if p.shape[1] < CONE_MIN_RETURNS:
+def _rings(p: NDArray[np.float64], cfg: ImprovedConfig) -> list[NDArray[np.bool_]]:
+    """The ``(3, n)`` returns in each ``cfg.cone_first_ring`` long stretch of the axis that
+    holds at least ``cfg.cone_min_returns`` of them covering at least
+    ``cfg.cone_ring_coverage`` of the azimuth (a ring of beams all round, not a stray return or
+    part of a ring), nearest first: one mask per ring."""
+    if p.shape[1] < cfg.cone_min_returns:
         return []
     span = np.clip(p[0] - p[0].min(), 0.0, 1e12)
-    bins = np.floor(span / CONE_FIRST_RING).astype(np.int64)
+    bins = np.floor(span / cfg.cone_first_ring).astype(np.int64)
     vals, counts = np.unique(bins, return_counts=True)  # (occupied bins only: bounded work)
     out = []
-    for k in vals[counts >= CONE_MIN_RETURNS]:
+    for k in vals[counts >= cfg.cone_min_returns]:
         sel = bins == k
-        if azimuth_coverage(p[:, sel].T) >= CONE_RING_COVERAGE:
+        if azimuth_coverage(p[:, sel].T) >= cfg.cone_ring_coverage:
             out.append(sel)
     return out
 
 
-def _full_rings(p: NDArray[np.float64]) -> NDArray[np.bool_]:
+def _full_rings(p: NDArray[np.float64], cfg: ImprovedConfig) -> NDArray[np.bool_]:
     """Which of the ``(3, n)`` returns lie in a ring of beams all round (:func:`_rings`)."""
     keep = np.zeros(p.shape[1], dtype=bool)
-    for sel in _rings(p):
+    for sel in _rings(p, cfg):
         keep |= sel
     return keep

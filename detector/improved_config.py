@@ -52,6 +52,20 @@ class ImprovedConfig:
         torus_polish_max_noise: a long bend's angle is polished on returns spread along its arc
             only when their range noise (median, plus 0.3 mm) is below this (a noiseless
             sensor's range resolution).
+        cone_plateau_margin: returns of a widening this much (or three times their noise)
+            short of the wider pipe's radius lie on its cone, not on the wider pipe.
+        cone_min_rise: a line along a widening's cone needs returns rising this much (or six
+            times their noise) from the wall to the wider pipe: two rings of beams, not the
+            spread of one.
+        cone_line_scatter: the returns of a cone seen by several rings lie on its line to
+            within this much (robust standard deviation across it; or three times their noise).
+        cone_first_ring: returns of a cone are binned this long along the axis to find its
+            first ring of beams (or the first few, close together near the sensor).
+        cone_min_returns: fewer returns than this off the wall are stray, not a ring of beams
+            on a cone, whose returns cover ``cone_ring_coverage`` of the azimuth at least.
+        hinge_reach: the rings' hinge looks this far before the first returns off the wall; a
+            ring rises when its median lies ``hinge_min_snr`` times its noise and at least
+            ``hinge_min_rise`` off the wall.
     """
 
     tol_floor: float = 0.002
@@ -78,6 +92,15 @@ class ImprovedConfig:
     deflection_max: float = math.radians(150.0)
     torus_try_support: float = 0.95
     torus_polish_max_noise: float = 0.001
+    cone_plateau_margin: float = 0.0015
+    cone_min_rise: float = 0.002
+    cone_line_scatter: float = 0.00015
+    cone_first_ring: float = 0.01
+    cone_min_returns: int = 6
+    cone_ring_coverage: float = 0.75
+    hinge_reach: float = 0.15
+    hinge_min_snr: float = 4.0
+    hinge_min_rise: float = 0.0005
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -120,6 +143,15 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "deflection_max": (float, math.pi / 2, True, math.pi, "a number in [pi/2, pi] rad"),
     "torus_try_support": (float, 0.0, True, 1.0, "a number in [0, 1]"),
     "torus_polish_max_noise": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "cone_plateau_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "cone_min_rise": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "cone_line_scatter": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "cone_first_ring": (float, 0.0, False, 1.0, "a number in (0, 1] m"),
+    "cone_min_returns": (int, 1, True, math.inf, "an integer >= 1"),
+    "cone_ring_coverage": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "hinge_reach": (float, 0.0, True, 10.0, "a number in [0, 10] m"),
+    "hinge_min_snr": (float, 0.0, True, math.inf, "a finite number >= 0"),
+    "hinge_min_rise": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
 }
 
 
