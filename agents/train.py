@@ -64,8 +64,18 @@ class TrainConfig:
             raise ValueError(f"n_envs={self.n_envs!r} is not allowed; use an int in [1, 64]")
         if not (isinstance(self.total_timesteps, int) and self.total_timesteps > 0):
             raise ValueError(f"total_timesteps={self.total_timesteps!r}: use a positive int")
-        if not self.max_minutes > 0:
-            raise ValueError(f"max_minutes={self.max_minutes!r}: use a positive number")
+        if not (
+            isinstance(self.max_minutes, (int, float))
+            and not isinstance(self.max_minutes, bool)
+            and 0 < self.max_minutes < float("inf")
+        ):
+            raise ValueError(f"max_minutes={self.max_minutes!r}: use a positive finite number")
+        for name in ("seed", "checkpoint_every_timesteps", "torch_threads"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and not isinstance(value, bool) and value >= 0):
+                raise ValueError(f"{name}={value!r} is not allowed; use a non-negative int")
+        if not isinstance(self.env_id, str) or not self.env_id:
+            raise ValueError(f"env_id={self.env_id!r} is not allowed; use an environment id")
         for name in ("env_kwargs", "ppo", "eval"):
             if not isinstance(getattr(self, name), dict):
                 raise ValueError(f"{name}={getattr(self, name)!r}: use a mapping")
@@ -86,15 +96,26 @@ class TrainConfig:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> TrainConfig:
-        data = yaml.safe_load(Path(path).read_text()) or {}
+        """Read a YAML training config; every problem is a ``ValueError`` naming the file."""
+        try:
+            data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) or {}
+        except FileNotFoundError:
+            raise ValueError(f"{path}: no such training config file") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ValueError(f"{path}: cannot read the training config ({exc})") from None
+        except yaml.YAMLError as exc:
+            raise ValueError(f"{path}: not valid YAML ({exc})".replace("\n", " ")) from None
         if not isinstance(data, dict):
             raise ValueError(f"{path}: a training config must be a mapping")
-        unknown = sorted(set(data) - set(cls.__dataclass_fields__))
+        unknown = sorted(str(key) for key in set(data) - set(cls.__dataclass_fields__))
         if unknown:
             raise ValueError(
                 f"{path}: unknown keys {unknown}; allowed: {sorted(cls.__dataclass_fields__)}"
             )
-        return cls(**data)
+        try:
+            return cls(**data)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
 
 
 def make_env_fns(cfg: TrainConfig, pool_seed: int | None = None, n: int | None = None):

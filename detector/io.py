@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.atomic import atomic_open, atomic_write_text
-from detector.scan import Scan
+from detector.scan import Scan, ScanReadError
 
 __all__ = [
     "BagTopics",
@@ -97,11 +97,6 @@ _SCAN_ARRAYS = (
     "nominal_positions",
     "nominal_rotations",
 )
-
-
-class ScanReadError(ValueError):
-    """A recording that cannot be read as scans; the message names the file, the topic or
-    row, and what was expected."""
 
 
 @dataclass(frozen=True)

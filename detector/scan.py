@@ -25,6 +25,8 @@ from __future__ import annotations
 import json
 import math
 import numbers
+import zipfile
+import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +36,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.atomic import atomic_open
+
+
+class ScanReadError(ValueError):
+    """A recording that cannot be read as scans; the message names the file, the topic or
+    row, and what was expected."""
+
 
 SCAN_FORMAT_VERSION = 1
 
@@ -266,11 +274,32 @@ class Scan:
 
     @classmethod
     def load(cls, path: str | Path) -> Scan:
-        """Read a scan written by :meth:`save`."""
+        """Read a scan written by :meth:`save`.
+
+        Raises:
+            ScanReadError: (a ``ValueError``) naming the file, for a missing, corrupt or
+                foreign file; the scan's own checks name the field they reject.
+        """
+        try:
+            return cls._load(path)
+        except FileNotFoundError:
+            raise ScanReadError(f"{path}: no such scan file") from None
+        except ScanReadError:
+            raise
+        except ValueError as exc:  # the scan's own checks, or a malformed array
+            raise ScanReadError(f"{path}: {exc}") from None
+        except (OSError, EOFError, KeyError, TypeError, zipfile.BadZipFile, zlib.error) as exc:
+            raise ScanReadError(
+                f"{path}: not a readable pipenav scan file ({type(exc).__name__}: {exc}); "
+                "expected an .npz written by Scan.save"
+            ) from None
+
+    @classmethod
+    def _load(cls, path: str | Path) -> Scan:
         with np.load(Path(path), allow_pickle=False) as z:
             version = int(z["format_version"])
             if version != SCAN_FORMAT_VERSION:
-                raise ValueError(
+                raise ScanReadError(
                     f"scan file {path} has format_version {version}; this reads "
                     f"{SCAN_FORMAT_VERSION}"
                 )

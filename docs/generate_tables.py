@@ -79,6 +79,8 @@ OPTION_DOCS: dict[str, str] = {
     "pool_seed": "seed of that pool (use another one for held-out evaluation)",
     "coverage_done": "PipeExplore: covered fraction of the reachable pipe that ends the episode",
     "branch_view": "PipeExplore: how far the scans see into each pipe leaving a fitting, m",
+    "physics": "full fidelity: `contact` (physics where contact decides; straight drives far "
+    "from fittings glide) or `everywhere` (the all-physics reference)",
 }
 
 #: Reward terms (keys of ``info["reward_terms"]``) and the option that sets each.
@@ -179,6 +181,8 @@ def options_table() -> str:
     for name, default, _ in _constructor_options():
         names.add(name)
         if name not in rewards:
+            if name not in OPTION_DOCS:
+                raise KeyError(f"OPTION_DOCS has no description of the env option {name!r}")
             lines.append(_row(f"`{name}`", _fmt(default), OPTION_DOCS[name]))
     unknown = set(OPTION_DOCS) - names
     if unknown:

@@ -93,6 +93,10 @@ def test_commands_exist() -> None:
                 raise AssertionError(f"README command does not parse: {command}") from exc
         elif words[0] == "make":
             assert set(words[1:]) <= targets, command
+        elif words[0] == "python" and words[1] == "-m":
+            # a module run: ours must exist; the zoo and MuJoCo's viewer come from packages
+            top = words[2].split(".")[0]
+            assert top in {"rl_zoo3", "mujoco"} or (ROOT / top).is_dir(), command
         elif words[0] == "python":
             assert (ROOT / words[1]).is_file(), command
 
