@@ -24,10 +24,10 @@ from detector.pipe_cloud import (
     COST_TOL,
     STEP_TOL,
     PipeCloud,
-    _covers,
-    _pct,
-    _subsample,
-    _tolerance_v,
+    covers_azimuth,
+    even_subsample,
+    partial_percentile,
+    wall_tolerance,
 )
 from detector.robust import mad_sigma, median, robust_fit
 from detector.transforms import SensorInPipe
@@ -63,7 +63,7 @@ def _axis_pose(params: NDArray[np.float64], sensor_origin: NDArray[np.float64]) 
     return SensorInPipe.trusted(pos, rot)
 
 
-def _refine_axis(
+def refine_wall_axis(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float | None = None
 ) -> tuple[SensorInPipe, dict[str, Any]]:
     """Refine the pipe axis from the wall returns. Without ``u_max`` the nearest 60 % of the
@@ -77,10 +77,10 @@ def _refine_axis(
     sub = _axis_returns(xyz, cloud.r_v, big_r, gate, math.nan if u_max is None else u_max)
     if sub.shape[1] == 0:
         return cloud.pose, info
-    sub = np.ascontiguousarray(sub[:, _subsample(np.arange(sub.shape[1]), cfg.axis_points)])
+    sub = np.ascontiguousarray(sub[:, even_subsample(np.arange(sub.shape[1]), cfg.axis_points)])
     # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
     # gentle taper would pass for a tilted wall), so it is held at the prior
-    span = float(_pct(sub[0], 95) - _pct(sub[0], 5))
+    span = float(partial_percentile(sub[0], 95) - partial_percentile(sub[0], 5))
     tilt_sigma = cfg.prior_tilt if span >= 0.05 else math.radians(0.05)
     prior = np.array([cfg.prior_offset, cfg.prior_offset, tilt_sigma, tilt_sigma])
     info["axis_span"] = span
@@ -149,7 +149,7 @@ def _axis_returns(xyz, r, big_r, gate, u_max):  # type: ignore[no-untyped-def]
     return out
 
 
-def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
+def pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
     """Do two poses differ by more than 2 % of the radius across or 0.2 deg in tilt?"""
     lateral = float(np.abs(a.position[1:] - b.position[1:]).max())
     tilt = float(np.abs(a.rotation[0] - b.rotation[0]).max())
@@ -157,7 +157,7 @@ def _pose_moved(a: SensorInPipe, b: SensorInPipe, big_r: float) -> bool:
 
 
 # --------------------------------------------------------------------------- the wall
-def _wall_radius(
+def measure_wall_radius(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float, diag: dict[str, Any]
 ) -> float:
     """The pipe radius (m) the wall returns before ``u_max`` give under the current pose: their
@@ -169,17 +169,17 @@ def _wall_radius(
     ``RADIUS_DEAD_BAND`` are not made (the clamp reading is as good as the fit there)."""
     xyz = cloud.xyz_v
     idx, e_sel = _wall_returns(
-        xyz[0], cloud.r_v, _tolerance_v(cloud, cfg), big_r, u_max, cfg.max_radius_correction
+        xyz[0], cloud.r_v, wall_tolerance(cloud, cfg), big_r, u_max, cfg.max_radius_correction
     )
     if idx.size < 100:
         return big_r
     de = median(e_sel)
     if not RADIUS_DEAD_BAND <= abs(de) <= cfg.max_radius_correction:
         return big_r
-    if not _covers(xyz, idx, 0.75):
+    if not covers_azimuth(xyz, idx, 0.75):
         return big_r
     spread = float(mad_sigma(e_sel - de))
-    if spread > _straight_wall_rms(cloud):  # not a straight wall about this axis
+    if spread > straight_wall_rms(cloud):  # not a straight wall about this axis
         return big_r
     diag["wall_radius"] = big_r + de
     diag["wall_radius_rms"] = spread
@@ -204,13 +204,13 @@ def _wall_returns(u, r, tol, big_r, u_max, reach):  # type: ignore[no-untyped-de
     return idx[:m].copy(), e_sel[:m].copy()
 
 
-def _straight_wall_rms(cloud: PipeCloud) -> float:
+def straight_wall_rms(cloud: PipeCloud) -> float:
     """Largest scatter (m) of wall returns about a straight cylinder that the returns' own
     noise explains: 4 x their median radial noise, at least 0.6 mm."""
     return max(4.0 * cloud.sigma_percentile(50.0), 0.0006)
 
 
-def _wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float) -> bool:
+def wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: float) -> bool:
     """Do at least 200 returns lie before ``u_max`` (at least 15 cm) along the axis, all but
     1 % of them within the wall tolerance under the current pose?"""
     if u_max < 0.15:  # (a short stretch of wall: the first pass's wider view helps)
@@ -220,11 +220,11 @@ def _wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max:
     if n_near < 200:
         return False
     e = cloud.r_v - big_r
-    n_off = int(np.count_nonzero(near & (np.abs(e) > _tolerance_v(cloud, cfg))))
+    n_off = int(np.count_nonzero(near & (np.abs(e) > wall_tolerance(cloud, cfg))))
     return n_off <= 0.01 * n_near
 
 
-def _scatter_floor(cfg: ImprovedConfig, rms: float) -> float:
+def scatter_floor(cfg: ImprovedConfig, rms: float) -> float:
     """Tolerance floor (m) for a noiseless wall fitted to ``rms`` (m): six times that
     scatter, from 0.8 mm up to the configured floor."""
     return min(cfg.tol_floor, max(0.0008, 6.0 * float(rms)))
@@ -243,7 +243,7 @@ def _thinned(
     return cloud.thin
 
 
-def _wall_count(
+def count_wall_returns(
     cloud: PipeCloud,
     big_r: float,
     cfg: ImprovedConfig,
@@ -268,14 +268,14 @@ def _wall_count(
     return n_ok, n_near, cost, rms
 
 
-def _common_wall_fit(
+def common_wall_fit(
     cloud: PipeCloud,
     big_r: float,
     cfg: ImprovedConfig,
     poses: list[SensorInPipe],
     u_max: float,
 ) -> list[tuple[int, int, float, float]]:
-    """For each pose, what :func:`_wall_count` gives, over one set of returns for all: those
+    """For each pose, what :func:`count_wall_returns` gives, over one set of returns for all: those
     nearer than ``u_max`` along the axis under every pose (a tilted pose would otherwise count
     returns the others leave out). Empty when fewer than 40 returns are in that set."""
     sp, tol = _thinned(cloud, cfg)
@@ -291,7 +291,7 @@ def _common_wall_fit(
     return fits
 
 
-def _intact(
+def wall_intact(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, diag: dict[str, Any]
 ) -> Detection | None:
     """Straight pipe when fewer than ``min_anomaly_points`` returns leave the wall tolerance
@@ -299,7 +299,7 @@ def _intact(
     else); ``None`` otherwise."""
     if cloud.n < cfg.min_anomaly_points:
         return None
-    n_beyond, n_inside = _off_wall_counts(cloud.r_v, _tolerance_v(cloud, cfg), big_r)
+    n_beyond, n_inside = _off_wall_counts(cloud.r_v, wall_tolerance(cloud, cfg), big_r)
     if n_beyond + n_inside >= cfg.min_anomaly_points:
         return None
     n_wall = cloud.n - n_beyond - n_inside
@@ -325,7 +325,7 @@ def _off_wall_counts(r, tol, big_r):  # type: ignore[no-untyped-def]
     return n_beyond, n_inside
 
 
-def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:
+def structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> float:
     """Axial position where the wall stops being intact (first significant anomalies: regions
     of at least ``min_anomaly_points`` returns off the wall by more than twice their
     tolerance); the horizon when there are none."""
@@ -337,13 +337,13 @@ def _structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> flo
         cloud.wraps and g >= 3,
         cloud.xyz_v[0],
         cloud.r_v,
-        _tolerance_v(cloud, cfg),
+        wall_tolerance(cloud, cfg),
         big_r,
         cfg.min_anomaly_points,
     )
     if n_off < cfg.min_anomaly_points or not entry.size:
         return cfg.horizon
-    return float(_pct(entry, 1)) - 0.005
+    return float(partial_percentile(entry, 1)) - 0.005
 
 
 @njit(cache=True)

@@ -8,6 +8,7 @@ Lengths in metres, angles in radians.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -22,40 +23,166 @@ from detector.pipe_cloud import (
     COST_TOL,
     STEP_TOL,
     PipeCloud,
-    _azimuth_coverage,
-    _confidence,
-    _pct,
-    _radius_mode,
-    _robust_line,
-    _subsample,
+    azimuth_coverage,
+    even_subsample,
+    fit_confidence,
+    partial_percentile,
+    radius_mode,
+    robust_line,
 )
 from detector.robust import mad_sigma, robust_fit, tukey_cost
 
-#: Returns of a widening this much (m; or three times their noise) short of the wider pipe's
-#: radius lie on its cone, not on the wider pipe.
-CONE_PLATEAU_MARGIN = 0.0015
-#: A line along a widening's cone needs returns rising this much (m; or six times their noise)
-#: from the wall to the wider pipe: two rings of beams, not the spread of one.
-CONE_MIN_RISE = 0.002
-#: The returns of a cone seen by several rings lie on its line to within this much (m, robust
-#: standard deviation across it; or three times their noise).
-CONE_LINE_SCATTER = 0.00015
-#: Returns of a cone are binned this long (m along the axis) to find its first ring of beams
-#: (or the first few, close together near the sensor).
-CONE_FIRST_RING = 0.01
-#: Fewer returns than this off the wall are stray, not a ring of beams on a cone, whose
-#: returns cover this fraction of the azimuth at least.
-CONE_MIN_RETURNS = 6
-CONE_RING_COVERAGE = 0.75
-#: The rings' hinge (:func:`_ring_hinge_start`) looks this far (m) before the first returns off
-#: the wall; a ring rises when its median lies ``HINGE_MIN_SNR`` times its noise and at least
-#: ``HINGE_MIN_RISE`` (m) off the wall.
-HINGE_REACH = 0.15
-HINGE_MIN_SNR = 4.0
-HINGE_MIN_RISE = 0.0005
+
+def _closure(
+    cloud: PipeCloud,
+    big_r: float,
+    anomaly: NDArray[np.bool_],
+    p: NDArray[np.float64],
+    u: NDArray[np.float64],
+    r: NDArray[np.float64],
+    tol_med: float,
+    cfg: ImprovedConfig,
+    diag: dict[str, Any],
+) -> Detection | None:
+    """A closure: the returns inside the wall ``p`` (``anomaly``; ``u`` along the axis and
+    ``r`` from it, m) on a plane perpendicular to the axis, seen down to the centre, flat to
+    within the range noise (tolerance ``tol_med``, m); None when they are no end wall."""
+    u_med = float(partial_percentile(u, 50.0))
+    tol_u = 0.003 + 2.0 * tol_med
+    on_plane = np.abs(u - u_med) <= tol_u
+    frac_plane = float(on_plane.mean())
+    diag["closure_plane_fraction"] = frac_plane
+    if np.count_nonzero(on_plane) >= cfg.min_anomaly_points:
+        up = u[on_plane]
+        dist = float(np.mean(up))
+        spread = float(np.std(up))
+        cov = azimuth_coverage(p[on_plane])
+        # a cap is flat: a plane (tilted by any residual axis error) must explain it to
+        # within the range noise, where the far wall of a pipe seen head-on is curved
+        # (an even sample of the wall: a few hundred returns pin a plane and a quadric)
+        on_idx = np.flatnonzero(on_plane)
+        pick = on_idx[even_subsample(np.arange(on_idx.size), 2 * cfg.fit_points)]
+        pp = p[pick]
+        uq = pp[:, 0]
+        design = np.stack([np.ones(uq.size), pp[:, 1], pp[:, 2]], axis=1)
+        coef = np.linalg.lstsq(design, uq, rcond=None)[0]
+        plane_rms = float(np.sqrt(np.mean((uq - design @ coef) ** 2)))
+        noise_u = float(partial_percentile(cloud.values(anomaly, cloud.sigma_range_v)[pick], 50.0))
+        # under range noise a curved wall can pass for a plane: a quadratic surface must
+        # not explain it significantly better with a sag of millimetres (a cap's sag is
+        # the quantisation, a pipe's far wall sags by a good part of its radius)
+        quad = np.concatenate([design, (pp[:, 1:, None] * pp[:, None, 1:]).reshape(-1, 4)], 1)
+        coef_q = np.linalg.lstsq(quad, uq, rcond=None)[0]
+        rss_q = float(np.sum((uq - quad @ coef_q) ** 2))
+        rss_p = plane_rms**2 * uq.size
+        lr_curv = uq.size * math.log(max(rss_p, 1e-30) / max(rss_q, 1e-30))
+        sag = float(np.abs(quad[:, 3:] @ coef_q[3:]).max())
+        curved = lr_curv > 25.0 and sag > 0.003
+        flat_plane = plane_rms <= max(3.0 * noise_u, 0.001)
+        flat = flat_plane and not curved
+        diag["closure_curved"] = not flat
+        diag.update(
+            closure_rms=spread,
+            closure_plane_rms=plane_rms,
+            closure_sag=sag,
+            closure_curvature_lr=lr_curv,
+            closure_coverage=cov,
+            axisymmetric_support=1.0 if flat else 0.0,
+        )
+        plane_seen = frac_plane >= 0.8 and float(partial_percentile(r[on_plane], 5)) < 0.5 * big_r
+        if not plane_seen:  # (not a cap seen head-on: only a clear curvature counts)
+            diag["closure_curved"] = curved
+        if plane_seen and spread <= 0.5 * tol_u and flat_plane:
+            conf = fit_confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
+            opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
+            # (curved only by the quadratic test: an end wall unless the returns show a
+            # turn; the caller decides)
+            diag["closure_tentative"] = not flat
+            return Detection("closure", [opt], conf, diag)
+    return None
 
 
-def _axisymmetric(
+def _refit_without_end_wall(
+    cloud: PipeCloud,
+    big_r: float,
+    anomaly: NDArray[np.bool_],
+    u: NDArray[np.float64],
+    r: NDArray[np.float64],
+    sub: NDArray[np.intp],
+    n_lead: int,
+    us: NDArray[np.float64],
+    rs: NDArray[np.float64],
+    x: NDArray[np.float64],
+    u_first: float,
+    tol_med: float,
+    c_fin: float,
+    cfg: ImprovedConfig,
+    diag: dict[str, Any],
+    fit: Callable[..., tuple[NDArray, NDArray, NDArray]],
+) -> tuple[NDArray, NDArray, NDArray] | None:
+    """A narrowing's taper refitted without the end wall far down the narrower pipe (its
+    returns ``u``, ``r`` (m), the fitted ones ``us``, ``rs``: the subsample ``sub`` and
+    ``n_lead`` wall returns before it; ``x`` the first fit, ``fit`` the taper fit): the refit
+    ``(x, residuals, weights)``, or None when no end wall is seen through the taper."""
+    u_far = partial_percentile(u, 97.0)
+    # (under range noise the end wall's returns spread along the axis by their range
+    # noise: a metre away, a centimetre and more either side)
+    sig_range = cloud.values(anomaly, cloud.sigma_range_v)
+    near_far = np.abs(u - u_far) <= 0.003 + 2.0 * tol_med
+    spread_u = 3.0 * float(partial_percentile(sig_range[near_far], 50.0)) if near_far.any() else 0.0
+    window = 0.003 + 2.0 * tol_med + spread_u
+    far = np.abs(u - u_far) <= window
+    n_far = int(np.count_nonzero(far))
+    far_s = np.concatenate([far[sub], np.zeros(n_lead, dtype=bool)])
+    if (
+        30 <= n_far <= 0.9 * u.size
+        and float(partial_percentile(r[far], 5)) < 0.3 * big_r
+        and np.count_nonzero(~far_s) >= 50
+        # (returns spread along a taper, not mostly on one wall: the far wall of a turn)
+        and diag.get("closure_plane_fraction", 0.0) < 0.8
+    ):
+        # (the end wall lies inside the incoming pipe; the outermost of its returns,
+        # beams along the narrower pipe's wall, bound that pipe's radius from below)
+        r_end = float(partial_percentile(r[far], 98.0))
+        if float(partial_percentile(r[far], 90.0)) < big_r - tol_med:
+            us, rs = us[~far_s], rs[~far_s]
+            # (from two starts, the lower robust cost kept, both with the plateau from the
+            # farthest returns left, on the narrower pipe (the first fit, pulled onto the
+            # end wall, can hold the plateau at the end wall's bound): the first fit's
+            # start and length; and the first returns off the wall with a length from the
+            # returns left, since the first fit's long shallow taper reaching for the end
+            # wall can leave a minimum that the taper's own returns cannot pull the refit
+            # out of: a 9 cm taper 30 cm ahead came out starting 40 cm late)
+            u_rest, r_rest = u[~far], r[~far]
+            r2_far = min(
+                max(
+                    float(
+                        partial_percentile(r_rest[u_rest >= partial_percentile(u_rest, 90.0)], 50.0)
+                    ),
+                    r_end,
+                ),
+                big_r,
+            )
+            t_fresh = max(0.01, float(partial_percentile(u_rest, 30)) - u_first)
+            best = None
+            for k, start in enumerate(((x[0], x[1], r2_far), (u_first, t_fresh, r2_far))):
+                refit = fit(
+                    us,
+                    rs,
+                    np.array(start),
+                    np.array([-0.2, 0.002, r_end]),
+                    np.array([cfg.horizon, 1.0, big_r]),
+                )
+                cost = tukey_cost(refit[1], c_fin)
+                if best is None or cost < best[0]:
+                    best = (cost, refit)
+                    diag["reducer_refit_start"] = ("first fit", "returns left")[k]
+            diag["reducer_end_wall_radius"] = r_end
+            return best[1]
+    return None
+
+
+def detect_axisymmetric(
     cloud: PipeCloud,
     big_r: float,
     inside: NDArray[np.bool_],
@@ -73,70 +200,21 @@ def _axisymmetric(
     p = cloud.points(anomaly)
     u = p[:, 0]
     r = np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2]))
-    tol_med = float(_pct(tol[anomaly], 50.0))
+    tol_med = float(partial_percentile(tol[anomaly], 50.0))
     # --- closure: a plane perpendicular to the axis, seen down to the centre
     if contraction:
-        u_med = float(_pct(u, 50.0))
-        tol_u = 0.003 + 2.0 * tol_med
-        on_plane = np.abs(u - u_med) <= tol_u
-        frac_plane = float(on_plane.mean())
-        diag["closure_plane_fraction"] = frac_plane
-        if np.count_nonzero(on_plane) >= cfg.min_anomaly_points:
-            up = u[on_plane]
-            dist = float(np.mean(up))
-            spread = float(np.std(up))
-            cov = _azimuth_coverage(p[on_plane])
-            # a cap is flat: a plane (tilted by any residual axis error) must explain it to
-            # within the range noise, where the far wall of a pipe seen head-on is curved
-            # (an even sample of the wall: a few hundred returns pin a plane and a quadric)
-            on_idx = np.flatnonzero(on_plane)
-            pick = on_idx[_subsample(np.arange(on_idx.size), 2 * cfg.fit_points)]
-            pp = p[pick]
-            uq = pp[:, 0]
-            design = np.stack([np.ones(uq.size), pp[:, 1], pp[:, 2]], axis=1)
-            coef = np.linalg.lstsq(design, uq, rcond=None)[0]
-            plane_rms = float(np.sqrt(np.mean((uq - design @ coef) ** 2)))
-            noise_u = float(_pct(cloud.values(anomaly, cloud.sigma_range_v)[pick], 50.0))
-            # under range noise a curved wall can pass for a plane: a quadratic surface must
-            # not explain it significantly better with a sag of millimetres (a cap's sag is
-            # the quantisation, a pipe's far wall sags by a good part of its radius)
-            quad = np.concatenate([design, (pp[:, 1:, None] * pp[:, None, 1:]).reshape(-1, 4)], 1)
-            coef_q = np.linalg.lstsq(quad, uq, rcond=None)[0]
-            rss_q = float(np.sum((uq - quad @ coef_q) ** 2))
-            rss_p = plane_rms**2 * uq.size
-            lr_curv = uq.size * math.log(max(rss_p, 1e-30) / max(rss_q, 1e-30))
-            sag = float(np.abs(quad[:, 3:] @ coef_q[3:]).max())
-            curved = lr_curv > 25.0 and sag > 0.003
-            flat_plane = plane_rms <= max(3.0 * noise_u, 0.001)
-            flat = flat_plane and not curved
-            diag["closure_curved"] = not flat
-            diag.update(
-                closure_rms=spread,
-                closure_plane_rms=plane_rms,
-                closure_sag=sag,
-                closure_curvature_lr=lr_curv,
-                closure_coverage=cov,
-                axisymmetric_support=1.0 if flat else 0.0,
-            )
-            plane_seen = frac_plane >= 0.8 and float(_pct(r[on_plane], 5)) < 0.5 * big_r
-            if not plane_seen:  # (not a cap seen head-on: only a clear curvature counts)
-                diag["closure_curved"] = curved
-            if plane_seen and spread <= 0.5 * tol_u and flat_plane:
-                conf = _confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
-                opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
-                # (curved only by the quadratic test: an end wall unless the returns show a
-                # turn; the caller decides)
-                diag["closure_tentative"] = not flat
-                return Detection("closure", [opt], conf, diag)
+        closure = _closure(cloud, big_r, anomaly, p, u, r, tol_med, cfg, diag)
+        if closure is not None:
+            return closure
     # --- reducer: r(u) = R + (R2 - R) clip((u - L) / T, 0, 1)
     if contraction:
         u_cross = u
     else:
         u_cross = u * big_r / np.maximum(r, 1e-9)  # where the beams crossed the wall radius
-    u_first = float(_pct(u_cross, 1))
-    r2 = _radius_mode(r)
+    u_first = float(partial_percentile(u_cross, 1))
+    r2 = radius_mode(r)
     # the start of a taper is one kink in r(u): it needs a denser sample than the other fits
-    sub = _subsample(np.arange(u.size), 2 * cfg.fit_points)
+    sub = even_subsample(np.arange(u.size), 2 * cfg.fit_points)
     us, rs = u[sub], r[sub]
     n_lead = 0
     if contraction:
@@ -144,11 +222,11 @@ def _axisymmetric(
         # tolerance only some way past its start, and the kink needs both sides
         pw = cloud.points(wall)
         lead = np.flatnonzero((pw[:, 0] > u_first - 0.15) & (pw[:, 0] < u_first))
-        lead = lead[_subsample(np.arange(lead.size), cfg.fit_points // 2)]
+        lead = lead[even_subsample(np.arange(lead.size), cfg.fit_points // 2)]
         n_lead = int(lead.size)
         us = np.concatenate([us, pw[lead, 0]])
         rs = np.concatenate([rs, np.hypot(pw[lead, 1], pw[lead, 2])])
-    t0 = max(0.01, float(_pct(u, 30)) - u_first)
+    t0 = max(0.01, float(partial_percentile(u, 30)) - u_first)
 
     def fit(
         us: NDArray, rs: NDArray, start: NDArray, lower: NDArray, upper: NDArray
@@ -186,63 +264,34 @@ def _axisymmetric(
         # the way onto the end wall when grazing beams lose the narrower pipe's own wall.
         # Without them, the taper ends where its returns end; the end wall, filling the
         # narrower pipe's cross-section, still bounds its radius from below.
-        u_far = _pct(u, 97.0)
-        # (under range noise the end wall's returns spread along the axis by their range
-        # noise: a metre away, a centimetre and more either side)
-        sig_range = cloud.values(anomaly, cloud.sigma_range_v)
-        near_far = np.abs(u - u_far) <= 0.003 + 2.0 * tol_med
-        spread_u = 3.0 * float(_pct(sig_range[near_far], 50.0)) if near_far.any() else 0.0
-        window = 0.003 + 2.0 * tol_med + spread_u
-        far = np.abs(u - u_far) <= window
-        n_far = int(np.count_nonzero(far))
-        far_s = np.concatenate([far[sub], np.zeros(n_lead, dtype=bool)])
-        if (
-            30 <= n_far <= 0.9 * u.size
-            and float(_pct(r[far], 5)) < 0.3 * big_r
-            and np.count_nonzero(~far_s) >= 50
-            # (returns spread along a taper, not mostly on one wall: the far wall of a turn)
-            and diag.get("closure_plane_fraction", 0.0) < 0.8
-        ):
-            # (the end wall lies inside the incoming pipe; the outermost of its returns,
-            # beams along the narrower pipe's wall, bound that pipe's radius from below)
-            r_end = float(_pct(r[far], 98.0))
-            if float(_pct(r[far], 90.0)) < big_r - tol_med:
-                us, rs = us[~far_s], rs[~far_s]
-                # (from two starts, the lower robust cost kept, both with the plateau from the
-                # farthest returns left, on the narrower pipe (the first fit, pulled onto the
-                # end wall, can hold the plateau at the end wall's bound): the first fit's
-                # start and length; and the first returns off the wall with a length from the
-                # returns left, since the first fit's long shallow taper reaching for the end
-                # wall can leave a minimum that the taper's own returns cannot pull the refit
-                # out of: a 9 cm taper 30 cm ahead came out starting 40 cm late)
-                u_rest, r_rest = u[~far], r[~far]
-                r2_far = min(
-                    max(float(_pct(r_rest[u_rest >= _pct(u_rest, 90.0)], 50.0)), r_end), big_r
-                )
-                t_fresh = max(0.01, float(_pct(u_rest, 30)) - u_first)
-                best = None
-                for k, start in enumerate(((x[0], x[1], r2_far), (u_first, t_fresh, r2_far))):
-                    refit = fit(
-                        us,
-                        rs,
-                        np.array(start),
-                        np.array([-0.2, 0.002, r_end]),
-                        np.array([cfg.horizon, 1.0, big_r]),
-                    )
-                    cost = tukey_cost(refit[1], c_fin)
-                    if best is None or cost < best[0]:
-                        best = (cost, refit)
-                        diag["reducer_refit_start"] = ("first fit", "returns left")[k]
-                x, res, w = best[1]
-                diag["reducer_end_wall_radius"] = r_end
+        refit = _refit_without_end_wall(
+            cloud,
+            big_r,
+            anomaly,
+            u,
+            r,
+            sub,
+            n_lead,
+            us,
+            rs,
+            x,
+            u_first,
+            tol_med,
+            c_fin,
+            cfg,
+            diag,
+            fit,
+        )
+        if refit is not None:
+            x, res, w = refit
     support = float((w > 0.1).mean())
     rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
     big_l, t_len, r2 = (float(v) for v in x)
     if not contraction:
-        big_l, along = _widening_start(cloud, big_r, r2, u_first, big_l)
+        big_l, along = _widening_start(cloud, big_r, r2, u_first, big_l, cfg)
         diag["widening_start_from_cone"] = bool(along)
     diag.update(reducer_r2=r2, reducer_taper=t_len, reducer_rms=rms, axisymmetric_support=support)
-    cov = _azimuth_coverage(p)
+    cov = azimuth_coverage(p)
     if not (math.isfinite(big_l) and math.isfinite(r2)):
         return Detection.straight(confidence=0.0, **diag)
     if r2 < 0.25 * big_r:
@@ -251,16 +300,16 @@ def _axisymmetric(
         if diag.get("closure_curved", False):
             diag["axisymmetric_support"] = 0.0
             return Detection.straight(confidence=0.0, **diag)
-        conf = 0.5 * _confidence(int(w.sum()), rms, c_fin) * cov
+        conf = 0.5 * fit_confidence(int(w.sum()), rms, c_fin) * cov
         opt = StructureOption("closure", max(big_l, 0.0), 0.0, 0.0, 0.0, conf)
         return Detection("closure", [opt], conf, diag)
-    conf = _confidence(int((w > 0.1).sum()), rms, c_fin) * cov * min(1.0, support / 0.6)
+    conf = fit_confidence(int((w > 0.1).sum()), rms, c_fin) * cov * min(1.0, support / 0.6)
     opt = StructureOption("reducer", max(big_l, 0.0), 2.0 * r2, 0.0, 0.0, conf)
     return Detection("reducer", [opt], conf, diag)
 
 
 def _widening_start(
-    cloud: PipeCloud, big_r: float, r2: float, u_first: float, default: float
+    cloud: PipeCloud, big_r: float, r2: float, u_first: float, default: float, cfg: ImprovedConfig
 ) -> tuple[float, bool]:
     """Start of a widening (m along the axis) to radius ``r2`` and whether its cone was seen
     by two or more rings of beams.
@@ -281,35 +330,37 @@ def _widening_start(
     xyz, sig = cloud.xyz_v, cloud.sigma_v
     u = xyz[0]
     e = cloud.r_v - big_r
-    noise = float(_pct(sig, 50.0))
+    noise = float(partial_percentile(sig, 50.0))
     rise = r2 - big_r
-    margin = max(3.0 * noise, CONE_PLATEAU_MARGIN)
+    margin = max(3.0 * noise, cfg.cone_plateau_margin)
     plateau = e >= rise - margin
-    u_f = float(_pct(u[plateau], 1.0)) if np.any(plateau) else u_first * r2 / big_r
+    u_f = float(partial_percentile(u[plateau], 1.0)) if np.any(plateau) else u_first * r2 / big_r
     off_wall = np.maximum(0.00035, 4.0 * sig)
     on = (np.abs(e) <= off_wall) & (u < u_f)
     cone = (e > off_wall) & ~plateau & (u > min(u_first, u_f) - 0.1) & (u < u_f)
     # (rings all round: part rings off the wall on one side are a slightly tilted axis)
-    cone[cone] = _full_rings(xyz[:, cone])
+    cone[cone] = _full_rings(xyz[:, cone], cfg)
     n_cone = int(np.count_nonzero(cone))
     uc, ec = u[cone], e[cone]
-    if n_cone >= 20 and float(_pct(ec, 95) - _pct(ec, 5)) > max(6.0 * noise, CONE_MIN_RISE):
+    if n_cone >= 20 and float(partial_percentile(ec, 95) - partial_percentile(ec, 5)) > max(
+        6.0 * noise, cfg.cone_min_rise
+    ):
         # (near its start the cone lies within the noise of the wall: the line alone places
         # the start, bounded by the beams' crossings)
-        a_u, b_u = _robust_line(ec, uc, 1e-18, 1e-4)  # u = a + b e: the start at e = 0
+        a_u, b_u = robust_line(ec, uc, 1e-18, 1e-4)  # u = a + b e: the start at e = 0
         # (a cone: returns on one line to within their noise)
         if math.isfinite(a_u) and b_u > 0.0:
             scatter = mad_sigma(ec - (uc - a_u) / b_u)
-            if scatter <= max(3.0 * noise, CONE_LINE_SCATTER):
+            if scatter <= max(3.0 * noise, cfg.cone_line_scatter):
                 return min(u_first, max(u_first - 0.1, a_u)), True
     # (under range noise the first centimetres of the cone, per return, are the wall's: the
     # rings' medians are not)
-    hinge = _ring_hinge_start(xyz, e, noise, u_first, u_f, rise - margin)
+    hinge = _ring_hinge_start(xyz, e, noise, u_first, u_f, rise - margin, cfg)
     if hinge is not None:
         return hinge, True
     hi = min(u_first, u_f)
     if n_cone:
-        first = uc <= uc.min() + CONE_FIRST_RING
+        first = uc <= uc.min() + cfg.cone_first_ring
         hi = min(hi, float(uc.min()))
     before = on & (u < hi)
     if not np.any(before):
@@ -330,6 +381,7 @@ def _ring_hinge_start(
     u_first: float,
     u_f: float,
     e_max: float,
+    cfg: ImprovedConfig,
 ) -> float | None:
     """Start of a widening (m along the axis) from the rings of beams before the wider pipe,
     each ring's median offset from the wall radius (``e``, m) against its position: flat on
@@ -342,11 +394,11 @@ def _ring_hinge_start(
     before it); ``u_f``: where the wider pipe's returns begin; ``e_max``: offsets beyond this
     are on the wider pipe, not the cone; ``noise``: the returns' median radial noise, m."""
     u = xyz[0]
-    win = (u > u_first - HINGE_REACH) & (u < u_f) & (e < e_max) & (e > -4.0 * noise - 0.00035)
-    if np.count_nonzero(win) < 4 * CONE_MIN_RETURNS:
+    win = (u > u_first - cfg.hinge_reach) & (u < u_f) & (e < e_max) & (e > -4.0 * noise - 0.00035)
+    if np.count_nonzero(win) < 4 * cfg.cone_min_returns:
         return None
     p, ew = xyz[:, win], e[win]
-    rings = _rings(p)
+    rings = _rings(p, cfg)
     if len(rings) < 4:
         return None
     ua = np.array([float(np.median(p[0, sel])) for sel in rings])
@@ -369,35 +421,37 @@ def _ring_hinge_start(
     if not math.isfinite(float(chi2[j])):
         return None
     big_l, b = float(grid[j]), float(b[j])
-    rising = (ua > big_l) & (b * (ua - big_l) > np.maximum(HINGE_MIN_SNR * sig_b, HINGE_MIN_RISE))
+    rising = (ua > big_l) & (
+        b * (ua - big_l) > np.maximum(cfg.hinge_min_snr * sig_b, cfg.hinge_min_rise)
+    )
     # (two rings at least, a ring on the wall before: one ring split between two bins makes
     # no slope)
-    if not rising.any() or np.ptp(ua[rising]) < CONE_FIRST_RING or not np.any(ua < big_l):
+    if not rising.any() or np.ptp(ua[rising]) < cfg.cone_first_ring or not np.any(ua < big_l):
         return None
     return big_l
 
 
-def _rings(p: NDArray[np.float64]) -> list[NDArray[np.bool_]]:
-    """The ``(3, n)`` returns in each ``CONE_FIRST_RING`` long stretch of the axis that holds at
-    least ``CONE_MIN_RETURNS`` of them covering at least ``CONE_RING_COVERAGE`` of the azimuth
-    (a ring of beams all round, not a stray return or part of a ring), nearest first: one mask
-    per ring."""
-    if p.shape[1] < CONE_MIN_RETURNS:
+def _rings(p: NDArray[np.float64], cfg: ImprovedConfig) -> list[NDArray[np.bool_]]:
+    """The ``(3, n)`` returns in each ``cfg.cone_first_ring`` long stretch of the axis that
+    holds at least ``cfg.cone_min_returns`` of them covering at least
+    ``cfg.cone_ring_coverage`` of the azimuth (a ring of beams all round, not a stray return or
+    part of a ring), nearest first: one mask per ring."""
+    if p.shape[1] < cfg.cone_min_returns:
         return []
     span = np.clip(p[0] - p[0].min(), 0.0, 1e12)
-    bins = np.floor(span / CONE_FIRST_RING).astype(np.int64)
+    bins = np.floor(span / cfg.cone_first_ring).astype(np.int64)
     vals, counts = np.unique(bins, return_counts=True)  # (occupied bins only: bounded work)
     out = []
-    for k in vals[counts >= CONE_MIN_RETURNS]:
+    for k in vals[counts >= cfg.cone_min_returns]:
         sel = bins == k
-        if _azimuth_coverage(p[:, sel].T) >= CONE_RING_COVERAGE:
+        if azimuth_coverage(p[:, sel].T) >= cfg.cone_ring_coverage:
             out.append(sel)
     return out
 
 
-def _full_rings(p: NDArray[np.float64]) -> NDArray[np.bool_]:
+def _full_rings(p: NDArray[np.float64], cfg: ImprovedConfig) -> NDArray[np.bool_]:
     """Which of the ``(3, n)`` returns lie in a ring of beams all round (:func:`_rings`)."""
     keep = np.zeros(p.shape[1], dtype=bool)
-    for sel in _rings(p):
+    for sel in _rings(p, cfg):
         keep |= sel
     return keep

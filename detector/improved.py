@@ -132,19 +132,19 @@ from numpy.typing import NDArray
 
 from detector.axis_fit import (
     RADIUS_DEAD_BAND,
-    _common_wall_fit,
-    _intact,
-    _pose_moved,
-    _refine_axis,
-    _scatter_floor,
-    _straight_wall_rms,
-    _structure_start,
-    _wall_consistent,
-    _wall_count,
-    _wall_radius,
+    common_wall_fit,
+    count_wall_returns,
+    measure_wall_radius,
+    pose_moved,
+    refine_wall_axis,
+    scatter_floor,
+    straight_wall_rms,
+    structure_start,
+    wall_consistent,
+    wall_intact,
 )
-from detector.axisymmetric import _axisymmetric
-from detector.branches import Lobe, _branches, _find_lobes
+from detector.axisymmetric import detect_axisymmetric
+from detector.branches import Lobe, detect_branches, find_lobes
 from detector.detection import Detection
 from detector.grazing import find_ring_holes
 from detector.grid import label_regions
@@ -152,14 +152,14 @@ from detector.improved_config import DEFAULT_CONFIG, ImprovedConfig
 from detector.options import StructureOption, option_order
 from detector.pipe_cloud import (
     PipeCloud,
-    _azimuth_coverage,
-    _azimuth_uniformity,
-    _classify,
-    _confidence,
-    _dir,
-    _pct,
-    _prepare,
-    _region_stats,
+    axis_direction,
+    azimuth_coverage,
+    azimuth_uniformity,
+    classify_returns,
+    fit_confidence,
+    partial_percentile,
+    prepare_cloud,
+    region_sizes,
 )
 from detector.robust import mad_sigma
 from detector.scan import Scan
@@ -241,7 +241,7 @@ def detect_improved(
         bias = 0.0
     diag: dict[str, Any] = {"method": "improved", "n_points": int(scan.n_valid)}
     try:
-        cloud = _prepare(scan, pose0, bias, config)
+        cloud = prepare_cloud(scan, pose0, bias, config)
         reach = _blocked_within_min_range(scan, cloud, big_r)
         if reach is not None:
             diag["blocked_within_min_range"] = reach
@@ -251,15 +251,15 @@ def detect_improved(
         # nothing to measure or refine (the common case, kept cheap)
         if refine_axis:
             diag["axis_pass"] = 0
-            straight = _intact(cloud, big_r, config, diag)
+            straight = wall_intact(cloud, big_r, config, diag)
             if straight is not None:
                 return _with_ring_holes(cloud, big_r, straight)
         # the clamp's encoders read the diameter to a millimetre or two: the wall right around
         # the sensor (nearer than any structure in view) measures it first, the wall before
         # the structure again once the axis is refined
-        u_nearest = _pct(cloud.xyz_v[0], 1.0)
+        u_nearest = partial_percentile(cloud.xyz_v[0], 1.0)
         r_clamped = big_r
-        big_r = _wall_radius(cloud, big_r, config, u_nearest + NEAR_WALL, diag)
+        big_r = measure_wall_radius(cloud, big_r, config, u_nearest + NEAR_WALL, diag)
         given: GivenPose | None = None
         if refine_axis:
             chosen = _choose_pose(cloud, pose0, big_r, r_clamped, u_nearest, config, diag)
@@ -295,45 +295,45 @@ def _choose_pose(
     pose to check the choice against)``, or a straight pipe's detection when every return lies
     on the wall."""
     if big_r != r_clamped:  # (straight pipe after all, at its measured radius?)
-        straight = _intact(cloud, big_r, config, diag)
+        straight = wall_intact(cloud, big_r, config, diag)
         if straight is not None:
             return _with_ring_holes(cloud, big_r, straight)
     diag.pop("axis_pass")
     candidates = [(pose0, {})]
     passes = [0]  # the pass each candidate pose comes from
     xyz_of = [cloud.xyz_v]
-    u_start0 = _structure_start(cloud, big_r, config)
+    u_start0 = structure_start(cloud, big_r, config)
     moved = False
-    first_pass = not _wall_consistent(cloud, big_r, config, u_start0)
+    first_pass = not wall_consistent(cloud, big_r, config, u_start0)
     diag["axis_first_pass"] = first_pass
     if not first_pass:
         # the given pose explains the wall before the structure: only the second
         # pass (from that pose) refines it
         u_start = u_start0
     else:
-        pose1, info1 = _refine_axis(cloud, big_r, config)
+        pose1, info1 = refine_wall_axis(cloud, big_r, config)
         candidates.append((pose1, info1))
         passes.append(1)
         cloud.set_pose(pose1)
         xyz_of.append(cloud.xyz_v)
         diag.update(info1)
         diag["axis_pass"] = 1
-        straight = _intact(cloud, big_r, config, diag)
+        straight = wall_intact(cloud, big_r, config, diag)
         if straight is not None:  # no return off the wall under the refined axis
             return _with_ring_holes(cloud, big_r, straight)
         for key in info1:
             diag.pop(key)
         diag.pop("axis_pass")
-        u_start = _structure_start(cloud, big_r, config)
-        moved = _pose_moved(pose0, pose1, big_r)
+        u_start = structure_start(cloud, big_r, config)
+        moved = pose_moved(pose0, pose1, big_r)
     # does the given pose explain the wall before the structure (seen under it, within
     # the tolerance that found the structure's start)?
-    n_ok, n_seen, _, _ = _wall_count(cloud, big_r, config, pose0, u_start0, tol_scale=2.0)
+    n_ok, n_seen, _, _ = count_wall_returns(cloud, big_r, config, pose0, u_start0, tol_scale=2.0)
     given_fits = n_seen >= 40 and n_ok >= 0.9 * n_seen
     # second pass: all of the intact wall before the structure (not a thin ring of it
     # right before the structure when the given pose explains the wall: where a wide
     # arc starts, already curving, the ring pulls the axis off)
-    pose2, info2 = _refine_axis(cloud, big_r, config, u_max=u_start)
+    pose2, info2 = refine_wall_axis(cloud, big_r, config, u_max=u_start)
     thin_ring = info2.get("axis_span", 1.0) < 0.02
     if info2.get("axis_points", 0) >= 40 and not (thin_ring and given_fits):
         info2["axis_wall_until"] = u_start
@@ -344,12 +344,12 @@ def _choose_pose(
     # explains fewer of them)
     cloud.restore(pose0, xyz_of[0])
     u_near = min(u_start, u_start0) if moved else u_start
-    counts = [_wall_count(cloud, big_r, config, p, u_near) for p, _ in candidates]
+    counts = [count_wall_returns(cloud, big_r, config, p, u_near) for p, _ in candidates]
     scores = [c[0] for c in counts]
     # a refinement whose cylinder misses its own wall returns by several times their
     # noise fitted a curved wall (the arc of a wide bend filling the whole view): the
     # given pose stands when it explains the wall
-    rms_cap = _straight_wall_rms(cloud)
+    rms_cap = straight_wall_rms(cloud)
     for k, (_, inf) in enumerate(candidates):
         if k and given_fits and inf.get("axis_rms", 0.0) > rms_cap:
             scores[k] = -1
@@ -391,12 +391,12 @@ def _choose_pose(
     else:
         cloud.set_pose(pose)
     given = GivenPose(pose0, xyz_of[0], big_r, u_near, r_clamped)
-    big_r = _wall_radius(cloud, big_r, config, u_near, diag)
+    big_r = measure_wall_radius(cloud, big_r, config, u_near, diag)
     # a noiseless wall fitted closely: the tolerance floor shrinks towards its scatter
     # (under the given pose, the wall returns' own scatter about it)
     rms = diag.get("wall_radius_rms", info.get("axis_rms", counts[best][3]))
     if rms is not None and cloud.sigma_percentile(90.0) < 0.0005:
-        cloud.floor = _scatter_floor(config, rms)
+        cloud.floor = scatter_floor(config, rms)
         diag["tolerance_floor"] = cloud.floor
     return big_r, given
 
@@ -466,7 +466,7 @@ def _with_ring_holes(
         beyond &= cloud.xyz_v[0] < before
         if np.count_nonzero(beyond) < 6:
             return det
-        before = min(before, _structure_start(cloud, big_r, cfg) - 2.0 * big_r)
+        before = min(before, structure_start(cloud, big_r, cfg) - 2.0 * big_r)
         beyond &= cloud.xyz_v[0] < before
         if np.count_nonzero(beyond) < 6:
             return det
@@ -476,7 +476,9 @@ def _with_ring_holes(
     # them that closely (a sensor millimetres off the axis, not refined away, bends every ring)
     near = cloud.xyz_v[0] < before
     e_near = (cloud.r_v - big_r)[near]
-    if e_near.size < 50 or mad_sigma(e_near) > max(0.0003, 3.0 * _pct(cloud.sigma_v[near], 50.0)):
+    if e_near.size < 50 or mad_sigma(e_near) > max(
+        0.0003, 3.0 * partial_percentile(cloud.sigma_v[near], 50.0)
+    ):
         return det
     # only the rings that hold such returns, and their neighbours
     cols = cloud.cell[beyond] % cloud.shape[1]
@@ -498,10 +500,10 @@ def _with_ring_holes(
         # the branches of one junction leave the run at one place, and the openings the fit
         # explained poorly are still the openings of that junction
         return det
-    conf = min(_confidence(h.n, h.rms, 0.001) for h in holes)
+    conf = min(fit_confidence(h.n, h.rms, 0.001) for h in holes)
     options = [StructureOption("junction", position, 2.0 * big_r, 0.0, 0.0, conf)]
     for h in holes:
-        angle, direction = option_direction(_dir(h.angle, h.roll), cloud.pose)
+        angle, direction = option_direction(axis_direction(h.angle, h.roll), cloud.pose)
         options.append(
             StructureOption("junction", h.position, 2.0 * h.radius, direction, angle, conf)
         )
@@ -576,10 +578,10 @@ def _detect_again(
     ``floor`` was set) the floor from the wall's scatter (``wall_rms(radius)``, m, when the
     radius fit measured none). Returns ``(radius, detection)``."""
     sub = _pose_diagnostics(diag_pose, axis_info)
-    radius = _wall_radius(cloud, big_r, cfg, wall_until, sub)
+    radius = measure_wall_radius(cloud, big_r, cfg, wall_until, sub)
     if floor is not None:
         rms = sub.get("wall_radius_rms")
-        cloud.floor = _scatter_floor(cfg, wall_rms(radius) if rms is None else rms)
+        cloud.floor = scatter_floor(cfg, wall_rms(radius) if rms is None else rms)
         sub["tolerance_floor"] = cloud.floor
     return radius, _detect_in_pipe_frame(cloud, radius, cfg, sub)
 
@@ -610,13 +612,13 @@ def _start_recheck(
         return None
     chosen, xyz_chosen = cloud.pose, cloud.xyz_v
     floor = cloud.floor
-    refined, info = _refine_axis(cloud, big_r, cfg, u_max=u_cap)
+    refined, info = refine_wall_axis(cloud, big_r, cfg, u_max=u_cap)
     poses = [chosen, pose0] + ([refined] if info.get("axis_points", 0) >= 40 else [])
-    fits = _common_wall_fit(cloud, big_r, cfg, poses, u_cap)
+    fits = common_wall_fit(cloud, big_r, cfg, poses, u_cap)
     if not fits:  # (too little wall before the arc to choose on)
         return None
     best = max(range(len(poses)), key=lambda k: (fits[k][0], -fits[k][2]))
-    if best == 0 or not _pose_moved(chosen, poses[best], big_r):
+    if best == 0 or not pose_moved(chosen, poses[best], big_r):
         return None
     if best == 1:
         cloud.restore(pose0, xyz0)
@@ -683,7 +685,7 @@ def _given_pose_again(
     ``None`` with the cloud back under the chosen pose."""
     pose0, xyz0, big_r, wall_until = given.pose, given.xyz, given.radius, given.wall_until
     chosen, xyz_chosen, floor = cloud.pose, cloud.xyz_v, cloud.floor
-    if not _pose_moved(chosen, pose0, big_r):
+    if not pose_moved(chosen, pose0, big_r):
         return None
     cloud.restore(pose0, xyz0)
     radius, redone = _detect_again(
@@ -694,7 +696,7 @@ def _given_pose_again(
         big_r,
         wall_until,
         floor,
-        lambda r: _wall_count(cloud, r, cfg, pose0, wall_until)[3],
+        lambda r: count_wall_returns(cloud, r, cfg, pose0, wall_until)[3],
     )
     given_rms = stands(redone)
     if given_rms is not None:
@@ -823,7 +825,7 @@ def _taper_radius_check(
     sub = _pose_diagnostics(
         diag_pose, {k: v for k, v in det.diagnostics.items() if k.startswith(records)}
     )
-    radius = _wall_radius(cloud, given.clamped_radius, cfg, u_cap, sub)
+    radius = measure_wall_radius(cloud, given.clamped_radius, cfg, u_cap, sub)
     if abs(radius - big_r) < RADIUS_DEAD_BAND:
         return None
     redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
@@ -875,7 +877,7 @@ def _detect_in_pipe_frame(
     diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
     diag["sensor_offset_pipe"] = [float(v) for v in cloud.pose.position[1:]]
     # (the tolerance: the residual axis error grows with the distance along the axis)
-    tol, wall, beyond, inside = _classify(cloud, big_r, cfg)
+    tol, wall, beyond, inside = classify_returns(cloud, big_r, cfg)
     n_valid = cloud.n
     n_wall = int(np.count_nonzero(wall))
     diag.update(
@@ -891,7 +893,7 @@ def _detect_in_pipe_frame(
     labels, n_lab = label_regions(anomaly, cloud.wraps)
     keep = np.zeros_like(anomaly)
     if n_lab:
-        counts, row_span = _region_stats(labels, n_lab)
+        counts, row_span = region_sizes(labels, n_lab)
         good = (counts >= cfg.min_anomaly_points) & (row_span >= cfg.min_region_rows)
         good[0] = False
         keep = good[labels] & anomaly
@@ -910,29 +912,29 @@ def _detect_in_pipe_frame(
         mixed[labels[inside_k]] = True
         if not mixed[labels[beyond_k]].any():
             pre = (np.where(beyond_k, labels, 0), n_lab)
-    lobes = _find_lobes(cloud, beyond_k, big_r, cfg, pre)
+    lobes = find_lobes(cloud, beyond_k, big_r, cfg, pre)
     diag["n_lobes"] = len(lobes)
     if lobes:
         # an expansion: returns beyond the wall all around and hardly any inside
         p_beyond = cloud.points(beyond_k)
-        cov = _azimuth_coverage(p_beyond)
-        uniform = _azimuth_uniformity(p_beyond)
+        cov = azimuth_coverage(p_beyond)
+        uniform = azimuth_uniformity(p_beyond)
         diag.update(beyond_coverage=cov, beyond_uniformity=uniform)
         # (inside returns count only near the start of the widening: an end wall far down
         # the wider pipe is not part of the structure)
         u_grid = cloud.xyz[0]
-        u_start = _pct(u_grid[beyond_k], 5.0)
+        u_start = partial_percentile(u_grid[beyond_k], 5.0)
         inside_near = inside_k & (u_grid <= u_start + 4.0 * big_r)
         if uniform >= 0.3 and inside_near.sum() < 0.3 * beyond_k.sum():
-            return _axisymmetric(cloud, big_r, inside_near, beyond_k, wall, tol, cfg, diag)
-        return _branches(cloud, big_r, lobes, keep, wall, tol, cfg, diag)
-    det = _axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
+            return detect_axisymmetric(cloud, big_r, inside_near, beyond_k, wall, tol, cfg, diag)
+        return detect_branches(cloud, big_r, lobes, keep, wall, tol, cfg, diag)
+    det = detect_axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
     if det.diagnostics.get("axisymmetric_support", 1.0) >= 0.6:
         return det
     # neither an end wall nor a reducer: the far wall of a turn seen head-on (small pipes, far
     # away): fit an outgoing pipe to the inner returns with unknown roll
     pseudo = Lobe(inside_k, 0.0, int(inside_k.sum()))
-    alt = _branches(cloud, big_r, [pseudo], keep, wall, tol, cfg, dict(diag), any_roll=True)
+    alt = detect_branches(cloud, big_r, [pseudo], keep, wall, tol, cfg, dict(diag), any_roll=True)
     if det.diagnostics.get("closure_tentative", False):
         # a wall that looks flat within the range noise but curves: the far wall of a turn
         # when the fit finds one way on; a pipe across (or a 90 deg turn: the same far wall)

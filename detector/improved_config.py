@@ -35,6 +35,37 @@ class ImprovedConfig:
         far_wall_min_lean: a far wall seen head-on gives the way on only when its returns lie
             on average at least this many radii (of the clamped pipe) along the fitted axis
             from the axis' foot; nearer, the direction is undetermined and no turn is reported.
+        all_round: a region of returns beyond the wall covering this fraction of the azimuth
+            goes all round the axis (and is split into its deep parts).
+        snap_within: a junction's branch fitted within this angle of a standard fitting angle
+            (tees and crosses 90 deg, laterals 45 or 135 deg) is tried held at it.
+        snap_lr: ... and held when the returns allow it: likelihood ratio at most this per
+            branch held (under range noise the few dozen returns through a far opening reject
+            a standard angle held where the branch's hole is at ratios of 7-9 now and then).
+        snap_max_turn: ... and when it turns the branch by at most this about the run.
+        snap_radius: a radius held with a standard angle may move by this fraction of itself.
+        deflection_min, deflection_max: the deflections an outgoing pipe's fit may take (a
+            bend's: at most 100 deg).
+        torus_try_support: a single way on whose straight-axes fit leaves out more than this
+            fraction of its returns is also tried as a long-radius bend (as one that fits them
+            loosely is).
+        torus_polish_max_noise: a long bend's angle is polished on returns spread along its arc
+            only when their range noise (median, plus 0.3 mm) is below this (a noiseless
+            sensor's range resolution).
+        cone_plateau_margin: returns of a widening this much (or three times their noise)
+            short of the wider pipe's radius lie on its cone, not on the wider pipe.
+        cone_min_rise: a line along a widening's cone needs returns rising this much (or six
+            times their noise) from the wall to the wider pipe: two rings of beams, not the
+            spread of one.
+        cone_line_scatter: the returns of a cone seen by several rings lie on its line to
+            within this much (robust standard deviation across it; or three times their noise).
+        cone_first_ring: returns of a cone are binned this long along the axis to find its
+            first ring of beams (or the first few, close together near the sensor).
+        cone_min_returns: fewer returns than this off the wall are stray, not a ring of beams
+            on a cone, whose returns cover ``cone_ring_coverage`` of the azimuth at least.
+        hinge_reach: the rings' hinge looks this far before the first returns off the wall; a
+            ring rises when its median lies ``hinge_min_snr`` times its noise and at least
+            ``hinge_min_rise`` off the wall.
     """
 
     tol_floor: float = 0.002
@@ -52,6 +83,24 @@ class ImprovedConfig:
     radius_lr_per_branch: float = 12.0
     max_radius_correction: float = 0.003
     far_wall_min_lean: float = 0.15
+    all_round: float = 0.75
+    snap_within: float = math.radians(25.0)
+    snap_lr: float = 10.0
+    snap_max_turn: float = math.radians(3.0)
+    snap_radius: float = 0.03
+    deflection_min: float = math.radians(25.0)
+    deflection_max: float = math.radians(150.0)
+    torus_try_support: float = 0.95
+    torus_polish_max_noise: float = 0.001
+    cone_plateau_margin: float = 0.0015
+    cone_min_rise: float = 0.002
+    cone_line_scatter: float = 0.00015
+    cone_first_ring: float = 0.01
+    cone_min_returns: int = 6
+    cone_ring_coverage: float = 0.75
+    hinge_reach: float = 0.15
+    hinge_min_snr: float = 4.0
+    hinge_min_rise: float = 0.0005
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -85,6 +134,24 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "radius_lr_per_branch": (float, 0.0, True, math.inf, "a finite number >= 0"),
     "max_radius_correction": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
     "far_wall_min_lean": (float, 0.0, True, 100.0, "a number in [0, 100] (radii)"),
+    "all_round": (float, 0.0, False, 1.0, "a number in (0, 1]"),
+    "snap_within": (float, 0.0, True, math.pi / 2, "a number in [0, pi/2] rad"),
+    "snap_lr": (float, 0.0, True, math.inf, "a finite number >= 0"),
+    "snap_max_turn": (float, 0.0, True, math.pi, "a number in [0, pi] rad"),
+    "snap_radius": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "deflection_min": (float, 0.0, True, math.pi / 2, "a number in [0, pi/2] rad"),
+    "deflection_max": (float, math.pi / 2, True, math.pi, "a number in [pi/2, pi] rad"),
+    "torus_try_support": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "torus_polish_max_noise": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "cone_plateau_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "cone_min_rise": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "cone_line_scatter": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "cone_first_ring": (float, 0.0, False, 1.0, "a number in (0, 1] m"),
+    "cone_min_returns": (int, 1, True, math.inf, "an integer >= 1"),
+    "cone_ring_coverage": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "hinge_reach": (float, 0.0, True, 10.0, "a number in [0, 10] m"),
+    "hinge_min_snr": (float, 0.0, True, math.inf, "a finite number >= 0"),
+    "hinge_min_rise": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
 }
 
 

@@ -9,17 +9,14 @@ Lengths in metres, angles in radians.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from detector.fit_kernels import MODEL_TORUS, torus_distance
-from detector.pipe_cloud import ANNEAL, COST_TOL, STEP_TOL, _pct, _subsample
+from detector.outgoing import BranchFit
+from detector.pipe_cloud import ANNEAL, COST_TOL, STEP_TOL, even_subsample, partial_percentile
 from detector.robust import robust_fit, tukey_cost
-
-if TYPE_CHECKING:
-    from detector.branches import BranchFit
 
 
 def _torus_dist(p: NDArray, big_l: float, theta: float, phi: float, rb: float) -> NDArray:
@@ -43,7 +40,7 @@ def _arc_angle(p: NDArray, big_l: float, theta: float, phi: float, rb: float) ->
     return np.arctan2(qa, qw)
 
 
-def _fit_torus(
+def fit_torus(
     p: NDArray,
     big_r: float,
     big_l: float,
@@ -58,7 +55,7 @@ def _fit_torus(
     polished on the returns ``p_fit`` when given. Returns (x, rms, support, largest arc angle
     seen): ``x`` polished, the rms (m) and support of the fit before the polish, the arc angle
     (rad) of the polished bend; the last three over ``p``."""
-    sub = p[_subsample(np.arange(p.shape[0]), 300)]
+    sub = p[even_subsample(np.arange(p.shape[0]), 300)]
     data = np.ascontiguousarray(sub.T)
 
     lower = np.array([-0.5, math.radians(5.0), -10.0, 0.5 * big_r, 0.2 * big_r])
@@ -67,7 +64,7 @@ def _fit_torus(
     # starts: the straight-axes fit with a 1.75 D arc; and a 3 D arc of 60 deg starting where
     # the returns leave the incoming pipe (near the start of a wide arc the straight-axes fit
     # settles on a shallow deflection far too near)
-    u_arc = float(_pct(sub[:, 0], 2.0))
+    u_arc = float(partial_percentile(sub[:, 0], 2.0))
     rb_wide = 3.0 * 2.0 * big_r
     starts = [
         np.array([big_l, f.theta, f.phi, big_r, 1.75 * 2.0 * big_r]),
@@ -117,7 +114,7 @@ def _fit_torus(
         # only: under range noise those few far returns scatter by millimetres, and weighing
         # them as much as the wall near the sensor adds more scatter to the angle than it
         # takes bias out of it.
-        spread = p_fit[_subsample(np.arange(p_fit.shape[0]), 300)]
+        spread = p_fit[even_subsample(np.arange(p_fit.shape[0]), 300)]
 
         def spread_cost(xx: NDArray) -> float:
             return tukey_cost(_torus_dist(spread, xx[0], xx[1], xx[2], xx[4]) - xx[3], c_fin)
@@ -143,7 +140,7 @@ def _fit_torus(
     return x, rms_full, n_ok, vis
 
 
-def _spread_along_axis(
+def spread_along_axis(
     idx: NDArray[np.intp], u: NDArray[np.float64], n: int, bins: int = 20
 ) -> NDArray[np.intp]:
     """``n`` of the returns ``idx`` (all of them when there are fewer), spread evenly along the
@@ -165,6 +162,6 @@ def _spread_along_axis(
             sharing -= 1
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     picked = [
-        order[s0 + _subsample(np.arange(c), k)] for s0, c, k in zip(starts, counts, take) if k
+        order[s0 + even_subsample(np.arange(c), k)] for s0, c, k in zip(starts, counts, take) if k
     ]
     return idx[np.sort(np.concatenate(picked))]

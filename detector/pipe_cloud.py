@@ -105,7 +105,7 @@ class PipeCloud:
         """The ``q``-th percentile of the returns' radial noise (m; computed once)."""
         v = self._sigma_pct.get(q)
         if v is None:
-            v = self._sigma_pct[q] = _pct(self.sigma_v, q)
+            v = self._sigma_pct[q] = partial_percentile(self.sigma_v, q)
         return v
 
     def values(self, mask: NDArray[np.bool_], per_return: NDArray) -> NDArray:
@@ -195,7 +195,9 @@ def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray,
     return hit
 
 
-def _prepare(scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig) -> PipeCloud:
+def prepare_cloud(
+    scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig
+) -> PipeCloud:
     wraps, k_cols, src, dirs, trig, src_missing, beam_step = _pattern(scan)
     # (missing cells point at a copy of a real one and are dropped)
     cell, pb, ranges, local = _gather_returns(
@@ -299,12 +301,12 @@ def _moves(scan: Scan) -> bool:
     return float(np.ptp(scan.nominal_rotations, axis=0).max()) > 1e-9
 
 
-def _classify(
+def classify_returns(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]:
     """The returns on the grid, by their distance ``e`` from the wall of radius ``big_r`` (m)
     under the current pose: ``(tol, wall, beyond, inside)``, the (G, K) radial tolerance of
-    each return (floor, sensor noise and residual axis error: as :func:`_tolerance_v`; the
+    each return (floor, sensor noise and residual axis error: as :func:`wall_tolerance`; the
     floor where there is no return) and the masks of ``-tol_in <= e <= tol``, ``e > tol`` and
     ``e < -tol_in``, where ``tol_in`` is ``tol`` less any lowering of the floor (a lowered
     floor serves the openings only: returns beyond the wall)."""
@@ -339,7 +341,7 @@ def _classify_kernel(cell, g, k, r_v, sigma_v, u_v, big_r, floor, noise_k, slope
     return tol, wall, beyond, inside
 
 
-def _tolerance_v(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
+def wall_tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
     """(N,) radial tolerance of each return (compact order) under the current pose."""
     if cloud.tol0 is None:
         cloud.tol0 = cfg.tol_floor + cfg.noise_k * cloud.sigma_v
@@ -348,14 +350,14 @@ def _tolerance_v(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
     return cloud._tol_v
 
 
-def _subsample(idx: NDArray[np.intp], n: int) -> NDArray[np.intp]:
+def even_subsample(idx: NDArray[np.intp], n: int) -> NDArray[np.intp]:
     if idx.size <= n:
         return idx
     step = idx.size / n
     return idx[(np.arange(n) * step).astype(np.intp)]
 
 
-def _pct(x: NDArray[np.float64], q: float) -> float:
+def partial_percentile(x: NDArray[np.float64], q: float) -> float:
     """``np.percentile(x, q)`` (linear interpolation) by partial sorting; 0 for empty input."""
     n = x.size
     if n == 0:
@@ -368,20 +370,20 @@ def _pct(x: NDArray[np.float64], q: float) -> float:
     return float(part[lo] + (h - lo) * (part[lo + 1] - part[lo]))
 
 
-def _dir(theta: float, phi: float) -> NDArray[np.float64]:
+def axis_direction(theta: float, phi: float) -> NDArray[np.float64]:
     st = math.sin(theta)
     return np.array([math.cos(theta), st * math.cos(phi), st * math.sin(phi)])
 
 
-def _region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
+def region_sizes(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
     """(cells, grid rows spanned) of each label 0..n_lab of a labelled grid
     (:func:`detector.grid.region_stats`)."""
     return region_stats(labels, n_lab)
 
 
-def _covers(xyz: NDArray, idx: NDArray[np.intp], fraction: float, bins: int = 36) -> bool:
+def covers_azimuth(xyz: NDArray, idx: NDArray[np.intp], fraction: float, bins: int = 36) -> bool:
     """Do the ``(3, n)`` points ``idx`` cover at least ``fraction`` of the azimuth (as
-    :func:`_azimuth_coverage`)? Every 16th of them is tried first: when those cover enough, so
+    :func:`azimuth_coverage`)? Every 16th of them is tried first: when those cover enough, so
     do all of them."""
     if idx.size >= 512:
         few = idx[::16]
@@ -397,23 +399,23 @@ def _yz_coverage(y: NDArray, z: NDArray, bins: int) -> float:
     return float(np.count_nonzero(np.bincount(k, minlength=bins))) / bins
 
 
-def _azimuth_coverage(p: NDArray, bins: int = 36) -> float:
+def azimuth_coverage(p: NDArray, bins: int = 36) -> float:
     """Fraction of ``bins`` azimuth sectors that the ``(n, 3)`` points occupy."""
     return _yz_coverage(p[:, 1], p[:, 2], bins)
 
 
-def _azimuth_uniformity(p: NDArray, bins: int = 12) -> float:
+def azimuth_uniformity(p: NDArray, bins: int = 12) -> float:
     """Smallest azimuth-bin count relative to the median bin count (1: even all around)."""
     if p.shape[0] == 0:
         return 0.0
     phi = np.arctan2(p[:, 2], p[:, 1])
     k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
     cnt = np.bincount(k, minlength=bins)
-    med = float(_pct(cnt, 50.0))
+    med = float(partial_percentile(cnt, 50.0))
     return float(cnt.min()) / med if med > 0 else 0.0
 
 
-def _confidence(n_support: int, rms: float, tol: float, n_scale: float = 30.0) -> float:
+def fit_confidence(n_support: int, rms: float, tol: float, n_scale: float = 30.0) -> float:
     """Confidence in [0, 1] of a fit to ``n_support`` returns with residual ``rms`` against
     the tolerance ``tol`` (m): it saturates with the support (``1 - exp(-n / n_scale)``) and
     falls as the rms approaches the tolerance."""
@@ -421,7 +423,7 @@ def _confidence(n_support: int, rms: float, tol: float, n_scale: float = 30.0) -
     return float(min(1.0, max(0.0, c)))
 
 
-def _radius_mode(r: NDArray[np.float64]) -> float:
+def radius_mode(r: NDArray[np.float64]) -> float:
     """Most frequent radius (m): 1 mm histogram peak refined by the median of its
     neighbourhood (2 mm either side).
 
@@ -441,10 +443,10 @@ def _radius_mode(r: NDArray[np.float64]) -> float:
     )
     peak = (int(cand[int(np.argmax(smooth))]) + 0.5) * 0.001
     near = np.abs(r - peak) <= 0.002
-    return float(_pct(r[near], 50.0)) if near.any() else float(peak)
+    return float(partial_percentile(r[near], 50.0)) if near.any() else float(peak)
 
 
-def _robust_line(
+def robust_line(
     x: NDArray[np.float64], y: NDArray[np.float64], sxx_floor: float, sigma_floor: float
 ) -> tuple[float, float]:
     """Robust fit ``y = a + b x`` (Tukey IRLS, 6 iterations): ``(a, b)``.
@@ -457,7 +459,7 @@ def _robust_line(
             units of ``y``.
     """
     w = np.ones_like(x)
-    a, b = float(_pct(y, 50.0)), 0.0
+    a, b = float(partial_percentile(y, 50.0)), 0.0
     for _ in range(6):
         sw = w.sum()
         if sw <= 0:

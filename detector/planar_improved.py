@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from detector.detection import Detection
 from detector.options import StructureOption
-from detector.pipe_cloud import _confidence, _radius_mode, _robust_line
+from detector.pipe_cloud import fit_confidence, radius_mode, robust_line
 from detector.robust import mad_sigma, robust_gauss_newton, tukey_cost, tukey_weights
 from detector.scan import Scan, corrected_ranges, radial_noise, spec_value
 from detector.transforms import SensorInPipe, option_direction
@@ -166,7 +166,7 @@ def _detect(
                 um, vm = u[m][order], v[m][order]
                 um, vm = um[: max(6, int(0.6 * um.size))], vm[: max(6, int(0.6 * vm.size))]
                 if float(um[-1] - um[0]) > 0.02:
-                    fits.append((sgn, *_robust_line(um, vm, 1e-12, 2e-4)))
+                    fits.append((sgn, *robust_line(um, vm, 1e-12, 2e-4)))
         if len(fits) == 2:
             off = 0.5 * (fits[0][1] + fits[1][1])
             slope = 0.5 * (fits[0][2] + fits[1][2])
@@ -195,7 +195,7 @@ def _detect(
         len(sides) == 2 and inside.sum() < 0.3 * beyond.sum() and _parallel(u, v, sides)
     ):
         return _openings(u, v, a, big_r, sides, inside, wall, e_lat, pose, tol_med, diag)
-    return _axisymmetric(u, a, big_r, inside, beyond, tol_med, diag)
+    return detect_axisymmetric(u, a, big_r, inside, beyond, tol_med, diag)
 
 
 def _parallel(u: NDArray, v: NDArray, sides: list) -> bool:
@@ -238,7 +238,7 @@ def _openings(
         big_l, theta, rho, rms, n_sup = fit
         if not (math.isfinite(big_l) and -0.5 <= big_l <= 3.0):
             continue
-        conf = _confidence(n_sup, rms, max(tol, 1e-3), n_scale=10.0)
+        conf = fit_confidence(n_sup, rms, max(tol, 1e-3), n_scale=10.0)
         # roll of the outgoing axis (in the plane, towards this side), in the sensor frame
         _, direction = option_direction(
             np.array([math.cos(theta), *(sgn * math.sin(theta) * e_lat[1:])]), pose
@@ -322,7 +322,7 @@ def _fit_outgoing(
     return float(x[0]), float(x[1]), float(x[2]), rms, int((w > 0.1).sum())
 
 
-def _axisymmetric(
+def detect_axisymmetric(
     u: NDArray,
     a: NDArray,
     big_r: float,
@@ -341,10 +341,10 @@ def _axisymmetric(
         on = np.abs(um - u_med) <= 0.003 + 2.0 * tol
         if on.mean() >= 0.8 and float(np.min(am[on])) < 0.5 * big_r:
             up = um[on]
-            conf = _confidence(int(on.sum()), float(np.std(up)), 0.003 + 2.0 * tol, n_scale=10.0)
+            conf = fit_confidence(int(on.sum()), float(np.std(up)), 0.003 + 2.0 * tol, n_scale=10.0)
             opt = StructureOption("closure", float(np.mean(up)), 0.0, 0.0, 0.0, conf)
             return Detection("closure", [opt], conf, diag)
-    r2 = _radius_mode(am)
+    r2 = radius_mode(am)
     if r2 < 0.25 * big_r:
         conf = 0.3
         opt = StructureOption("closure", max(0.0, float(np.min(um))), 0.0, 0.0, 0.0, conf)
@@ -354,12 +354,12 @@ def _axisymmetric(
     taper = (am > lo) & (am < hi)
     big_l = float(np.min(um))
     if taper.sum() >= 3:
-        a0, b0 = _robust_line(um[taper], am[taper], 1e-12, 2e-4)
+        a0, b0 = robust_line(um[taper], am[taper], 1e-12, 2e-4)
         if abs(b0) > 1e-3:
             cand = (big_r - a0) / b0
             if math.isfinite(cand) and abs(cand - big_l) < 0.2:
                 big_l = float(cand)
     diag.update(reducer_r2=r2, taper_points=int(taper.sum()))
-    conf = _confidence(int(m.sum()), 0.0, tol, n_scale=10.0)
+    conf = fit_confidence(int(m.sum()), 0.0, tol, n_scale=10.0)
     opt = StructureOption("reducer", max(0.0, big_l), 2.0 * r2, 0.0, 0.0, conf)
     return Detection("reducer", [opt], conf, diag)

@@ -49,6 +49,62 @@ def mad_sigma(x: NDArray[np.float64]) -> float:
     return float(1.4826 * median(np.abs(x - median(x))))
 
 
+def _residuals_and_jacobian(
+    residual: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    jacobian: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
+    eps: NDArray[np.float64],
+    n_p: int,
+) -> Callable[[NDArray[np.float64]], tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """``x -> (residuals, Jacobian)`` of :func:`robust_gauss_newton` from ``residual`` and the
+    analytic ``jacobian``, or forward differences over the ``n_p`` parameters with the steps
+    ``eps`` when it is None."""
+    if residual is None:
+        raise ValueError("robust_gauss_newton needs residual or resjac")
+    res_fn = residual
+
+    def resjac(xv: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        rv = res_fn(xv)
+        if jacobian is not None:
+            return rv, jacobian(xv)
+        jv = np.empty((rv.size, n_p))
+        for k in range(n_p):
+            xk = xv.copy()
+            xk[k] += eps[k]
+            jv[:, k] = (res_fn(xk) - rv) / eps[k]
+        return rv, jv
+
+    return resjac
+
+
+def _prior_precision(
+    x0: NDArray[np.float64],
+    prior_sigma: NDArray[np.float64] | None,
+    prior_mean: NDArray[np.float64] | None,
+    data_sigma: float,
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """The gaussian prior of :func:`robust_gauss_newton` as (precision relative to one
+    residual's, mean), or ``(None, None)`` without one."""
+    if prior_sigma is None:
+        return None, None
+    pm = x0 if prior_mean is None else prior_mean
+    inv = np.where(np.isfinite(prior_sigma), np.square(data_sigma / np.asarray(prior_sigma)), 0.0)
+    return inv, pm
+
+
+def _bounds(
+    lower: NDArray[np.float64] | None, upper: NDArray[np.float64] | None
+) -> tuple[NDArray[np.intp] | None, NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """(indices of the parameters pinned by their bounds or None, lower, upper as floats)."""
+    fixed = None
+    if lower is not None and upper is not None:
+        pinned = np.asarray(lower, dtype=float) >= np.asarray(upper, dtype=float)
+        if pinned.any():
+            fixed = np.flatnonzero(pinned)
+    lo = None if lower is None else np.asarray(lower, dtype=float)
+    up = None if upper is None else np.asarray(upper, dtype=float)
+    return fixed, lo, up
+
+
 def robust_gauss_newton(
     residual: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None,
     x0: NDArray[np.float64],
@@ -100,35 +156,10 @@ def robust_gauss_newton(
     cf = c if c_final is None else c_final
     lam = 1e-3
     if resjac is None:
-        if residual is None:
-            raise ValueError("robust_gauss_newton needs residual or resjac")
-        res_fn = residual
-
-        def resjac(xv: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-            rv = res_fn(xv)
-            if jacobian is not None:
-                return rv, jacobian(xv)
-            jv = np.empty((rv.size, n_p))
-            for k in range(n_p):
-                xk = xv.copy()
-                xk[k] += eps[k]
-                jv[:, k] = (res_fn(xk) - rv) / eps[k]
-            return rv, jv
-
-    inv = None
-    if prior_sigma is not None:
-        pm = x0 if prior_mean is None else prior_mean
-        inv = np.where(
-            np.isfinite(prior_sigma), np.square(data_sigma / np.asarray(prior_sigma)), 0.0
-        )
+        resjac = _residuals_and_jacobian(residual, jacobian, eps, n_p)
+    inv, pm = _prior_precision(x0, prior_sigma, prior_mean, data_sigma)
     # parameters pinned by their bounds take no part in the steps
-    fixed = None
-    if lower is not None and upper is not None:
-        pinned = np.asarray(lower, dtype=float) >= np.asarray(upper, dtype=float)
-        if pinned.any():
-            fixed = np.flatnonzero(pinned)
-    lo = None if lower is None else np.asarray(lower, dtype=float)
-    up = None if upper is None else np.asarray(upper, dtype=float)
+    fixed, lo, up = _bounds(lower, upper)
     r, jac = resjac(x)
     jt = jac.T  # (n_p, N): component-first (the analytic Jacobians are built that way)
     n_anneal = max(1, iterations - 1 if anneal is None else anneal)

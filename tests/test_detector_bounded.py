@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from detector import detect
-from detector.pipe_cloud import _pct, _radius_mode
+from detector.pipe_cloud import partial_percentile, radius_mode
 from detector.scan import MAX_RANGE_LIMIT, Scan
 
 #: A detector step may use this much memory per scan (tracemalloc peak), bytes.
@@ -124,7 +124,7 @@ def _dense_mode(r: np.ndarray) -> float:
     smooth = np.convolve(np.bincount(bins - lo), np.ones(3), mode="same")
     peak = (int(np.argmax(smooth)) + lo + 0.5) * 0.001
     near = np.abs(r - peak) <= 0.002
-    return float(_pct(r[near], 50.0)) if near.any() else float(peak)
+    return float(partial_percentile(r[near], 50.0)) if near.any() else float(peak)
 
 
 @settings(max_examples=200, deadline=None)
@@ -136,7 +136,7 @@ def test_radius_mode_is_the_dense_histograms(radii, decimals):
     r = np.array(radii)
     if decimals is not None:
         r = np.round(r, decimals)  # (ties between bins)
-    assert _radius_mode(r) == _dense_mode(r)
+    assert radius_mode(r) == _dense_mode(r)
 
 
 def test_radius_mode_memory_does_not_grow_with_the_span():
@@ -145,7 +145,7 @@ def test_radius_mode_memory_does_not_grow_with_the_span():
     r = np.r_[np.full(200, 0.05), 1e4]
     tracemalloc.start()
     try:
-        mode = _radius_mode(r)
+        mode = radius_mode(r)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()

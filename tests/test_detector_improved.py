@@ -232,13 +232,13 @@ def test_bad_arguments_are_rejected():
 def test_spread_along_axis_keeps_sparse_stretches(n_returns, n, seed, far_share):
     # a dense near wall and a sparse far stretch: the subsample takes n returns (all when
     # there are fewer), none twice, and every far return when they are within a fair share
-    from detector.long_bend import _spread_along_axis
+    from detector.long_bend import spread_along_axis
 
     rng = np.random.default_rng(seed)
     n_far = int(far_share * 0.05 * n_returns)
     u = np.concatenate([rng.uniform(0.0, 0.1, n_returns - n_far), rng.uniform(0.3, 0.4, n_far)])
     idx = np.arange(1000, 1000 + u.size)
-    out = _spread_along_axis(idx, u, n, bins=20)
+    out = spread_along_axis(idx, u, n, bins=20)
     assert np.all(np.diff(out) > 0) and np.isin(out, idx).all()
     assert out.size == min(n, idx.size)
     if n_far <= n // 20:  # (within a stretch's fair share: the far returns are all kept)
