@@ -15,7 +15,7 @@ $(BIN)/python:
 # torch first, pinned: a bare "torch" requirement would pull a multi-GB CUDA build.
 $(STAMP): $(BIN)/python pyproject.toml
 	$(BIN)/python -m pip install -q torch==2.13.0
-	$(BIN)/python -m pip install -q -e ".[test]"
+	$(BIN)/python -m pip install -q -e ".[test,zoo,bench]"
 	touch $(STAMP)
 
 install: $(STAMP)
