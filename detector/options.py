@@ -25,7 +25,10 @@ import numbers
 from dataclasses import dataclass
 from typing import Any
 
-KINDS: tuple[str, ...] = ("straight", "reducer", "closure", "bend", "junction")
+from detector.vocab import Kind
+
+#: The structure kinds as plain strings, in :class:`~detector.vocab.Kind` order.
+KINDS: tuple[str, ...] = tuple(k.value for k in Kind)
 
 
 def wrap_angle(a: float) -> float:
@@ -93,11 +96,11 @@ class StructureOption:
     def describe(self) -> str:
         """Human-readable summary in operator units, e.g. 'bend 45 deg up in 18.0 cm, 100 mm'."""
         where = f"in {self.distance * 100:.1f} cm"
-        if self.kind == "closure":
+        if self.kind == Kind.CLOSURE:
             return f"closure {where}"
-        if self.kind == "straight":
+        if self.kind == Kind.STRAIGHT:
             return f"straight pipe, {self.diameter * 1000:.0f} mm"
-        if self.kind == "reducer":
+        if self.kind == Kind.REDUCER:
             return f"reducer to {self.diameter * 1000:.0f} mm {where}"
         if self.is_straight_on:
             return f"{self.kind}: straight on {where}, {self.diameter * 1000:.0f} mm"
