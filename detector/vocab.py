@@ -39,3 +39,7 @@ class Method(StrEnum):
     IMPROVED = "improved"
     THESIS = "thesis"
     GROUND_TRUTH = "ground_truth"
+
+
+#: Every source of structure options, as plain strings, in :class:`Method` order.
+DETECTORS: tuple[str, ...] = tuple(m.value for m in Method)

@@ -35,6 +35,7 @@ import detector as detection
 from detector.fusion import StructureTracker, TrackState
 from detector.options import StructureOption, option_order
 from detector.scan import Scan
+from detector.vocab import Method
 from pipe_env.geometry import Pose
 from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
@@ -320,7 +321,7 @@ class PhysicalPlant:
                 verdict["why"] = "goal"
                 return "stop"
             verdict["interval"] = self.scan_interval
-            if self.detector == "ground_truth":
+            if self.detector == Method.GROUND_TRUTH:
                 self._follow_axis(scan, None, float(state.clamped_diameter))
                 ref = truth[0].distance if truth else math.inf
                 self._cadence(verdict, [ref], goal, blind=False)
@@ -428,7 +429,7 @@ class PhysicalPlant:
             dist = truth[0].distance if truth else 0.0
             options = [StructureOption("closure", max(dist, 0.0), 0.0, confidence=0.0)]
             return Decision(options, "closure", truth, node, entry, pose)
-        if self.detector == "ground_truth":
+        if self.detector == Method.GROUND_TRUTH:
             return Decision(
                 list(truth), truth[0].kind if truth else "straight", truth, node, entry, pose
             )

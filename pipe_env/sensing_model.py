@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from detector.options import KINDS, StructureOption, option_order
+from detector.vocab import DETECTORS, Method
 from pipe_env.geometry import clamp
 
 _SIGMAS = ("distance_sigma", "diameter_sigma", "angle_sigma", "direction_sigma")
@@ -150,9 +151,6 @@ def _confuse(kind: str, u: float) -> str:
     return others[int(u * len(others)) % len(others)]
 
 
-#: Detectors the environments accept.
-DETECTORS = ("improved", "thesis", "ground_truth")
-
 #: Used only when no calibrated entry exists for a sensor (a custom LidarSpec whose name is not
 #: a preset): the thesis's own 3D figures (its tables 5.2, 5.3 and 6.1, 40-10 cm window): max
 #: errors of 4 cm distance, 1 cm diameter, 2 deg angle and 11 deg direction, a std of about
@@ -223,13 +221,13 @@ def error_model_for(detector: str, lidar: Any = "ideal") -> DetectionErrorModel:
     """
     if detector not in DETECTORS:
         raise ValueError(f"detector={detector!r} is not allowed; use one of {DETECTORS}")
-    if detector == "ground_truth":
+    if detector == Method.GROUND_TRUTH:
         return DetectionErrorModel("ground_truth")
     preset = lidar if isinstance(lidar, str) else str(getattr(lidar, "name", "ideal"))
     models = calibrated_models()
     if f"{detector}/{preset}" in models:
         return models[f"{detector}/{preset}"]
-    if detector == "thesis":
+    if detector == Method.THESIS:
         return THESIS_LITERATURE_MODEL
     if f"{detector}/ideal" in models:
         return models[f"{detector}/ideal"]
