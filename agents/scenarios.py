@@ -58,6 +58,7 @@ import numpy as np
 import yaml
 
 from detector.vocab import DETECTORS, Method
+from pipe_env.fidelity import Fidelity
 
 SCENARIO_KEYS = {
     "name",
@@ -88,7 +89,8 @@ MAX_SEED = 2**63 - 1
 MAX_TIMEOUT_S = 86400.0
 MODES = ("navigate", "detect")
 ENVS = ("PipeNav-v0", "PipeExplore-v0")
-FIDELITIES = ("full", "fast")
+#: Scenario fidelities, its default (full) first: the order its errors list.
+FIDELITIES: tuple[str, ...] = (Fidelity.FULL.value, Fidelity.FAST.value)
 NETWORK_SOURCES = ("layout", "generator", "file", "inline")
 SENSOR_KEYS = {"preset", "overrides", "misalignment"}
 MISALIGNMENT_KEYS = {"offset", "tilt_deg"}

@@ -83,6 +83,7 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from detector.options import KINDS, StructureOption
+from pipe_env.fidelity import FIDELITIES, Fidelity
 from pipe_env.generator import NetworkConfig, generate_network
 from pipe_env.geometry import Pose, clamp, norm3
 from pipe_env.network import PipeNetwork
@@ -130,7 +131,6 @@ OPTION_FEATURES = (
     "goal_alignment",
 )
 SCAN_SHAPE = (16, 32)
-FIDELITIES = ("fast", "full")
 GOAL_CLIP = 20.0
 MAX_AUTO_STRUCTURES = 64
 
@@ -349,7 +349,7 @@ class _DecisionEnv(gym.Env):
 
     def _make_plant(self, network: PipeNetwork) -> Plant:
         """The plant factory: the only place that knows the fidelities' classes."""
-        if self.fidelity == "fast":
+        if self.fidelity == Fidelity.FAST:
             return KinematicPlant(
                 network,
                 self.detector,

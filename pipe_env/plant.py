@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.options import StructureOption
+from pipe_env.fidelity import Fidelity
 from pipe_env.geometry import (
     Pose,
     clamp,
@@ -311,7 +312,7 @@ class KinematicPlant:
         jam_time: simulated seconds a jam costs (stall, detection of it, reversing).
     """
 
-    fidelity = "fast"
+    fidelity = Fidelity.FAST.value
     #: no sweeps and no MuJoCo world in the fast fidelity (the :class:`Plant` protocol's)
     scan_image: NDArray[np.float32] | None = None
     world: PipeWorld | None = None

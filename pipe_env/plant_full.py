@@ -36,6 +36,7 @@ from detector.fusion import StructureTracker, TrackState
 from detector.options import StructureOption, option_order
 from detector.scan import Scan
 from detector.vocab import Method
+from pipe_env.fidelity import Fidelity
 from pipe_env.geometry import Pose
 from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
@@ -108,7 +109,7 @@ class PhysicalPlant:
             physics for every motion: the reference).
     """
 
-    fidelity = "full"
+    fidelity = Fidelity.FULL.value
 
     def __init__(
         self,
