@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.options import StructureOption
+from detector.vocab import StrEnum
 from pipe_env.fidelity import Fidelity
 from pipe_env.geometry import (
     Pose,
@@ -57,6 +58,17 @@ if TYPE_CHECKING:
     from pipe_env.world import PipeWorld
 
 BACK_OUT = "back_out"
+
+
+class PlantStatus(StrEnum):
+    """How a plant's action or drive ended (:attr:`Outcome.status`); not the executor's
+    :class:`primitives.steps.SequenceStatus`, which the full plant maps onto these."""
+
+    DONE = "done"
+    JAMMED = "jammed"
+    BLOCKED = "blocked"
+    GOAL = "goal"
+    BACK_OUT = "back_out"
 
 
 @dataclass(frozen=True)
@@ -134,7 +146,7 @@ class Decision:
 class Outcome:
     """What an action or a drive did. Distances in metres, times in seconds."""
 
-    status: str = "done"  # done | jammed | blocked | goal | back_out
+    status: str = "done"  # a PlantStatus value: done | jammed | blocked | goal | back_out
     distance: float = 0.0
     sim_time: float = 0.0
     #: consecutive waypoints of the motion (see ``positions``)
@@ -505,7 +517,7 @@ class KinematicPlant:
         before the structure (it stalled there and backed off) and costs ``jam_time``; a
         ``goal`` just past the fitting on the way taken ends the move there."""
         out = self._execute(choice, goal)
-        if out.status == "jammed":
+        if out.status == PlantStatus.JAMMED:
             out.sim_time += self.jam_time
             self.sim_time += self.jam_time
         return out
