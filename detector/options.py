@@ -25,18 +25,29 @@ import numbers
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from detector.vocab import Kind
 
 #: The structure kinds as plain strings, in :class:`~detector.vocab.Kind` order.
 KINDS: tuple[str, ...] = tuple(k.value for k in Kind)
 
 
-def wrap_angle(a: float) -> float:
-    """``a`` (radians) wrapped to (-pi, pi]."""
-    w = math.fmod(a + math.pi, 2.0 * math.pi)
-    if w <= 0.0:
-        w += 2.0 * math.pi
-    return w - math.pi
+def wrap_angle(a: Any) -> Any:
+    """``a`` (radians; a real number or an array of them) wrapped to (-pi, pi].
+
+    A real number gives a float (computed with :func:`math.fmod`, fast for the detector's
+    loops); an array gives an array and a 0-d array a float. Both paths give the same values.
+    """
+    if isinstance(a, numbers.Real):
+        w = math.fmod(a + math.pi, 2.0 * math.pi)
+        if w <= 0.0:
+            w += 2.0 * math.pi
+        w -= math.pi
+        return math.pi if w == -math.pi else w
+    arr = np.mod(np.asarray(a, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
+    arr = np.where(arr == -np.pi, np.pi, arr)
+    return float(arr) if np.ndim(arr) == 0 else arr
 
 
 @dataclass(frozen=True)

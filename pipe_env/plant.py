@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from detector.options import StructureOption
+from detector.options import StructureOption, wrap_angle
 from detector.vocab import StrEnum
 from pipe_env.fidelity import Fidelity
 from pipe_env.geometry import (
@@ -39,7 +39,6 @@ from pipe_env.geometry import (
     direction_from_angles,
     frame_from_forward,
     norm3,
-    wrap_angle,
 )
 from pipe_env.ground_truth import options_at
 from pipe_env.network import ROBOT_DIAMETER_RANGE, PipeNetwork
