@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from detector.options import KINDS, StructureOption, option_order
-from detector.vocab import DETECTORS, Method
+from detector.vocab import DETECTORS, Kind, Method
 from pipe_env.geometry import clamp
 
 _SIGMAS = ("distance_sigma", "diameter_sigma", "angle_sigma", "direction_sigma")
@@ -109,7 +109,7 @@ class DetectionErrorModel:
             if i > 0 and coin[i] < self.miss_rate:
                 continue
             out.append(self._perturb(o, kind, noise[i], bool(gross[i])))
-        if coin[n + 2] < self.phantom_rate and truth[0].kind not in ("closure", "reducer"):
+        if coin[n + 2] < self.phantom_rate and truth[0].kind not in (Kind.CLOSURE, Kind.REDUCER):
             ref = out[-1]
             phantom_dir = ref.direction + math.pi / 2 + rng.normal(0.0, 0.3)
             out.append(
@@ -138,7 +138,7 @@ class DetectionErrorModel:
             direction=o.direction + s_dir * z[3],
             angle=clamp(angle, 0.0, math.pi),
             confidence=self.confidence,
-            bend_radius=o.bend_radius if kind == "bend" else 0.0,
+            bend_radius=o.bend_radius if kind == Kind.BEND else 0.0,
         )
 
 
