@@ -80,6 +80,7 @@ SCENARIO_KEYS = {
     "tags",
     "known_failure",
     "timeout_s",
+    "auto_single",
 }
 #: Wall-clock limit of one scenario run when neither the file nor ``--timeout`` gives one, s.
 DEFAULT_TIMEOUT_S = 1800.0
@@ -139,6 +140,10 @@ class Scenario:
     known_failure: str | None = None
     #: wall-clock limit of one run, s (None: the runner's default)
     timeout_s: float | None = None
+    #: the environment takes a single way on by itself (``auto_single`` of ``gym.make``); a
+    #: single-structure layout whose goal lies past its only way sets it false, so that the
+    #: episode starts at the decision instead of being over inside ``reset()``
+    auto_single: bool = True
 
     @property
     def base_dir(self) -> Path:
@@ -313,6 +318,8 @@ def _parse_scenario(data: Any, source: str) -> Scenario:
                 source, "timeout_s", f"got {timeout!r}; allowed: seconds in (0, {MAX_TIMEOUT_S:g}]"
             )
         timeout = float(timeout)
+    auto_single = data.get("auto_single", True)
+    _expect(source, "auto_single", auto_single, bool, "true or false")
     return Scenario(
         name,
         source,
@@ -329,6 +336,7 @@ def _parse_scenario(data: Any, source: str) -> Scenario:
         tags,
         known,
         timeout,
+        auto_single,
     )
 
 
@@ -752,6 +760,7 @@ def _env_kwargs(sc: Scenario, net: Any) -> dict[str, Any]:
         "fidelity": sc.fidelity,
         "lidar": spec,
         "misalignment": mis,
+        "auto_single": sc.auto_single,
     }
 
 

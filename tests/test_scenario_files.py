@@ -130,3 +130,15 @@ def test_random_structures_raise_only_scenario_errors(raw: dict) -> None:
         parse_scenario(raw, "random.yaml")
     except ScenarioError as exc:
         assert str(exc).startswith("random.yaml")
+
+
+def test_auto_single_is_a_checked_scenario_key(tmp_path: Path) -> None:
+    """A single-way layout sets ``auto_single: false`` so its episode starts at the decision;
+    anything but a boolean is an error naming the key."""
+    packaged = packaged_scenario_dir() / "reducer_to_60mm.yaml"
+    assert load_scenario(packaged).auto_single is False
+    text = packaged.read_text().replace("auto_single: false", "auto_single: 'no'")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(text)
+    with pytest.raises(ScenarioError, match="auto_single"):
+        load_scenario(bad)
