@@ -57,6 +57,9 @@ from typing import Any
 import numpy as np
 import yaml
 
+from detector.vocab import DETECTORS, Method
+from pipe_env.fidelity import Fidelity
+
 SCENARIO_KEYS = {
     "name",
     "description",
@@ -87,8 +90,8 @@ MAX_SEED = 2**63 - 1
 MAX_TIMEOUT_S = 86400.0
 MODES = ("navigate", "detect")
 ENVS = ("PipeNav-v0", "PipeExplore-v0")
-DETECTORS = ("improved", "thesis", "ground_truth")
-FIDELITIES = ("full", "fast")
+#: Scenario fidelities, its default (full) first: the order its errors list.
+FIDELITIES: tuple[str, ...] = (Fidelity.FULL.value, Fidelity.FAST.value)
 NETWORK_SOURCES = ("layout", "generator", "file", "inline")
 SENSOR_KEYS = {"preset", "overrides", "misalignment"}
 MISALIGNMENT_KEYS = {"offset", "tilt_deg"}
@@ -844,7 +847,7 @@ def _run_detect(sc: Scenario, net: Any, seed: int) -> dict[str, Any]:
         pose = start.translated(base - d)
         truth = net.structures_ahead(pose, 10.0)
         diameter = net.inner_diameter_at(pose.position)
-        if sc.detector == "ground_truth":
+        if sc.detector == Method.GROUND_TRUTH:
             options, kind = truth, truth[0].kind
         elif planar:
             det = detector.detect_planar(

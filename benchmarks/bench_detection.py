@@ -54,7 +54,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from detector import detect, detect_planar  # noqa: E402
+from detector import METHODS, detect, detect_planar  # noqa: E402
 from detector.atomic import atomic_write_text  # noqa: E402
 from detector.detection import Detection  # noqa: E402
 from detector.options import StructureOption  # noqa: E402
@@ -65,7 +65,6 @@ from pipe_env.lidar import RotatingLidar  # noqa: E402
 from pipe_env.plotting import save_figure  # noqa: E402
 from pipe_env.world import build_world  # noqa: E402
 
-METHODS = ("thesis", "improved")
 DIAMETERS_FULL = (0.057, 0.075, 0.1, 0.125)
 DIAMETERS_QUICK = (0.057, 0.1)
 

@@ -48,7 +48,7 @@ from benchmarks.bench_detection import (  # noqa: E402
     match_options,
     rot_from_tilt,
 )
-from detector import detect, detect_planar  # noqa: E402
+from detector import METHODS, detect, detect_planar  # noqa: E402
 from detector.atomic import atomic_write_text  # noqa: E402
 from detector.detection import Detection  # noqa: E402
 from detector.options import StructureOption  # noqa: E402
@@ -58,7 +58,6 @@ from pipe_env.lidar import PRESETS, RotatingLidar  # noqa: E402
 from pipe_env.network import PipeNetwork  # noqa: E402
 from pipe_env.world import PipeWorld, build_world  # noqa: E402
 
-METHODS = ("thesis", "improved")
 DOC_PATH = Path(__file__).resolve().parents[1] / "docs" / "thesis-reproduction.md"
 #: The thesis's accuracy requirement on sizes (its 3.1.2: 2 cm for the size, as the distance).
 REQUIRED_SIZE = REQUIRED_DISTANCE

@@ -21,11 +21,12 @@ from detector.planar import detect_planar_thesis
 from detector.planar_improved import detect_planar_improved
 from detector.scan import Scan, spec_value
 from detector.spatial import detect_spatial_thesis
+from detector.vocab import Method
 
 #: Methods of :func:`detect`.
-METHODS: tuple[str, ...] = ("thesis", "improved")
+METHODS: tuple[str, ...] = (Method.THESIS.value, Method.IMPROVED.value)
 #: Methods of :func:`detect_planar`.
-PLANAR_METHODS: tuple[str, ...] = ("thesis", "improved")
+PLANAR_METHODS: tuple[str, ...] = (Method.THESIS.value, Method.IMPROVED.value)
 
 
 #: Narrowest clamped diameter the detector accepts, metres.
@@ -82,9 +83,9 @@ def detect(
             :func:`detector.spatial.detect_spatial_thesis`).
     """
     d = _check(scan, clamped_diameter)
-    if method == "improved":
+    if method == Method.IMPROVED:
         return detect_improved(scan, d, sensor_in_pipe=sensor_in_pipe, **options)
-    if method == "thesis":
+    if method == Method.THESIS:
         return detect_spatial_thesis(scan, d, sensor_in_pipe=sensor_in_pipe, **options)
     raise ValueError(f"method must be one of {METHODS}, got {method!r}")
 
@@ -125,9 +126,9 @@ def detect_planar(
             f"{scan.n_planes} planes, got {plane!r}"
         )
     plane = index
-    if method == "thesis":
+    if method == Method.THESIS:
         return detect_planar_thesis(scan, d, plane=plane, sensor_in_pipe=sensor_in_pipe, **options)
-    if method == "improved":
+    if method == Method.IMPROVED:
         return detect_planar_improved(
             scan, d, plane=plane, sensor_in_pipe=sensor_in_pipe, **options
         )

@@ -38,6 +38,7 @@ from detector.pipe_cloud import (
 )
 from detector.robust import robust_fit, tukey_cost, tukey_weights
 from detector.transforms import option_direction
+from detector.vocab import Kind
 
 #: Deflections of standard branch fittings (tees and crosses, laterals either way), rad; the
 #: tuning of holding a branch at one is :class:`~detector.improved_config.ImprovedConfig`'s
@@ -644,7 +645,7 @@ def _branch_detection(bp: BranchProblem, om: OutgoingModel) -> Detection:
             o.direction,
             o.angle,
             o.confidence,
-            bend_radius=o.bend_radius if kind == "bend" else 0.0,
+            bend_radius=o.bend_radius if kind == Kind.BEND else 0.0,
         )
         for o in options
     ]

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from detector.options import KINDS, StructureOption, option_order
+from detector.vocab import Kind
 
 
 def clean_diagnostics(value: Any) -> Any:
@@ -72,9 +73,9 @@ class Detection:
                     f"Detection.options must be StructureOption instances, got "
                     f"{type(o).__name__} at index {k}"
                 )
-        if self.kind == "straight" and opts:
+        if self.kind == Kind.STRAIGHT and opts:
             raise ValueError("a straight detection has no options")
-        if self.kind != "straight" and not opts:
+        if self.kind != Kind.STRAIGHT and not opts:
             raise ValueError(f"a {self.kind} detection needs at least one option")
         c = float(self.confidence)
         if not math.isfinite(c):

@@ -61,6 +61,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from detector.detection import Detection
 from detector.options import StructureOption, option_order
+from detector.vocab import Kind
 
 #: Ways on deflected less than this count as straight on (their direction is 0), radians.
 STRAIGHT_ON = math.radians(2.0)
@@ -269,7 +270,7 @@ class StructureTracker:
             self._track = tr = None
             self._challenger = None
         handed_over = False
-        if detection.kind == "straight" or not detection.options:
+        if detection.kind == Kind.STRAIGHT or not detection.options:
             if tr is not None:
                 if self._distance(tr, pos) <= self.handover_distance and tr.confirmed:
                     handed_over = True
@@ -427,7 +428,7 @@ class StructureTracker:
         if not ways:
             ways = [max(tr.ways, key=lambda w: w.weight)]
         kind = tr.kind
-        if kind in ("bend", "junction"):
+        if kind in (Kind.BEND, Kind.JUNCTION):
             kind = "junction" if len(ways) > 1 else "bend"
         opts = []
         conf = min(1.0, tr.evidence / self.confirm_evidence)
@@ -438,10 +439,10 @@ class StructureTracker:
             perp = v_s - (v_s @ axis_s) * axis_s
             # a way straight on has no direction (0 by convention)
             direction = math.atan2(float(perp[2]), float(perp[1])) if angle > STRAIGHT_ON else 0.0
-            if kind == "closure":
+            if kind == Kind.CLOSURE:
                 angle, direction = 0.0, 0.0
-            diameter = 0.0 if kind == "closure" else max(0.0, way.diameter)
-            radius = way.bend_radius if kind == "bend" else 0.0
+            diameter = 0.0 if kind == Kind.CLOSURE else max(0.0, way.diameter)
+            radius = way.bend_radius if kind == Kind.BEND else 0.0
             opts.append(
                 StructureOption(kind, dist, diameter, direction, angle, conf, bend_radius=radius)
             )

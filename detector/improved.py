@@ -164,6 +164,7 @@ from detector.pipe_cloud import (
 from detector.robust import mad_sigma
 from detector.scan import Scan
 from detector.transforms import SensorInPipe, option_direction
+from detector.vocab import Kind
 
 #: With the structure starting less than ``NO_WALL_VIEW`` (m) past the nearest returns, a
 #: refined pipe axis replaces the given pose only when it explains this fraction (and ten)
@@ -449,7 +450,7 @@ def _with_ring_holes(
         return det
     support = det.diagnostics.get("fit_support")
     weak = (
-        det.kind == "junction"
+        det.kind == Kind.JUNCTION
         and support is not None
         and support < max(30, 0.5 * det.diagnostics.get("fit_points", 0))
     )
@@ -545,9 +546,9 @@ def _gentle_start(det: Detection) -> float | None:
     """Where a structure that leaves the wall gradually starts, m along the axis: a long
     bend's arc (``bend_radius x tan(angle / 2)`` before its reference point), a reducer's
     taper; ``None`` for the others (their walls break off)."""
-    if det.kind == "reducer" and det.options:
+    if det.kind == Kind.REDUCER and det.options:
         return det.options[0].distance
-    if det.kind == "bend" and len(det.options) == 1 and det.options[0].bend_radius > 0.0:
+    if det.kind == Kind.BEND and len(det.options) == 1 and det.options[0].bend_radius > 0.0:
         opt = det.options[0]
         return opt.distance - opt.bend_radius * math.tan(0.5 * opt.angle)
     return None
@@ -603,7 +604,7 @@ def _start_recheck(
     and the structure kept its kind, else ``None`` (the cloud keeps its pose)."""
     pose0, xyz0, big_r, wall_until = given.pose, given.xyz, given.radius, given.wall_until
     start = _gentle_start(det)
-    if start is None or (det.kind == "reducer" and cloud.floor is None):
+    if start is None or (det.kind == Kind.REDUCER and cloud.floor is None):
         # (a reducer under range noise: its tolerance is the noise's, and a pose chosen again
         # on less wall sizes the wider pipe no better)
         return None
@@ -654,7 +655,7 @@ def _torus_pose_check(
     times as loosely (rms), the given pose and its detection stand. ``(radius, detection)``
     then, else ``None`` (the cloud keeps its pose)."""
     rms = det.diagnostics.get("torus_rms")
-    if det.kind != "bend" or det.diagnostics.get("model") != "torus" or rms is None:
+    if det.kind != Kind.BEND or det.diagnostics.get("model") != "torus" or rms is None:
         return None
 
     def stands(redone: Detection) -> float | None:
@@ -710,9 +711,9 @@ def _given_pose_again(
 def _fit_rms(det: Detection) -> float | None:
     """How closely the model of ``det`` fits its returns (rms, m): a reducer's taper, a turn's
     or junction's axes; ``None`` for the others."""
-    if det.kind not in ("reducer", "bend", "junction"):
+    if det.kind not in (Kind.REDUCER, Kind.BEND, Kind.JUNCTION):
         return None
-    key = "reducer_rms" if det.kind == "reducer" else "fit_rms"
+    key = "reducer_rms" if det.kind == Kind.REDUCER else "fit_rms"
     rms = det.diagnostics.get(key)
     return float(rms) if rms is not None else None
 
@@ -737,13 +738,13 @@ def _taper_pose_check(
     rms = _fit_rms(det)
     if rms is None or det.diagnostics.get("start_recheck"):
         return None
-    if det.kind != "reducer" and _fit_share(det) >= TAPER_POSE_POOR_SUPPORT:
+    if det.kind != Kind.REDUCER and _fit_share(det) >= TAPER_POSE_POOR_SUPPORT:
         return None
 
     def stands(redone: Detection) -> float | None:
         rms0 = _fit_rms(redone)
         ok = (
-            redone.kind == "reducer"
+            redone.kind == Kind.REDUCER
             and rms0 is not None
             and redone.diagnostics.get("axisymmetric_support", 0.0) >= TAPER_POSE_MIN_SUPPORT
             and rms0 * TAPER_POSE_RATIO <= rms
@@ -772,7 +773,7 @@ def _short_wall_pose_check(
     detection)`` then, else ``None`` (the cloud keeps its pose)."""
     rms = _fit_rms(det)
     span = det.diagnostics.get("axis_span")
-    if det.kind not in ("bend", "junction") or rms is None or span is None:
+    if det.kind not in (Kind.BEND, Kind.JUNCTION) or rms is None or span is None:
         return None
     if span >= SHORT_WALL_VIEW or det.diagnostics.get("axis_pass", 0) == 0:
         return None
@@ -782,7 +783,7 @@ def _short_wall_pose_check(
     def stands(redone: Detection) -> float | None:
         rms0 = _fit_rms(redone)
         ok = (
-            redone.kind in ("bend", "junction")
+            redone.kind in (Kind.BEND, Kind.JUNCTION)
             and rms0 is not None
             and len(redone.options) <= len(det.options)
             and rms0 <= rms
@@ -814,7 +815,7 @@ def _taper_radius_check(
     clamp's reading, m, when too little wall lies there) and detect again.
     ``(radius, detection)`` when the radius changed and the structure is still a reducer, else
     ``None`` (the detection under radius ``big_r`` stands)."""
-    if det.kind != "reducer" or not det.options or det.diagnostics.get("start_recheck"):
+    if det.kind != Kind.REDUCER or not det.options or det.diagnostics.get("start_recheck"):
         return None
     opt = det.options[0]
     if opt.diameter >= 2.0 * big_r:  # (a widening: its start is where the beams leave the wall)
@@ -829,7 +830,7 @@ def _taper_radius_check(
     if abs(radius - big_r) < RADIUS_DEAD_BAND:
         return None
     redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
-    if redone.kind != "reducer":
+    if redone.kind != Kind.REDUCER:
         return None
     redone.diagnostics["taper_radius_check"] = {"radius_before": big_r, "radius": radius}
     return radius, redone
@@ -940,9 +941,9 @@ def _detect_in_pipe_frame(
         # when the fit finds one way on; a pipe across (or a 90 deg turn: the same far wall)
         # is too ambiguous to overrule the end wall
         undetermined = alt.diagnostics.get("reason") == "far wall: way on undetermined"
-        if undetermined or alt.kind == "junction":
+        if undetermined or alt.kind == Kind.JUNCTION:
             det.diagnostics["far_wall_way_undetermined"] = True
-        return alt if alt.kind == "bend" else det
-    if alt.kind != "straight" and alt.confidence > det.confidence:
+        return alt if alt.kind == Kind.BEND else det
+    if alt.kind != Kind.STRAIGHT and alt.confidence > det.confidence:
         return alt
     return det

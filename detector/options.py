@@ -25,15 +25,29 @@ import numbers
 from dataclasses import dataclass
 from typing import Any
 
-KINDS: tuple[str, ...] = ("straight", "reducer", "closure", "bend", "junction")
+import numpy as np
+
+from detector.vocab import Kind
+
+#: The structure kinds as plain strings, in :class:`~detector.vocab.Kind` order.
+KINDS: tuple[str, ...] = tuple(k.value for k in Kind)
 
 
-def wrap_angle(a: float) -> float:
-    """``a`` (radians) wrapped to (-pi, pi]."""
-    w = math.fmod(a + math.pi, 2.0 * math.pi)
-    if w <= 0.0:
-        w += 2.0 * math.pi
-    return w - math.pi
+def wrap_angle(a: Any) -> Any:
+    """``a`` (radians; a real number or an array of them) wrapped to (-pi, pi].
+
+    A real number gives a float (computed with :func:`math.fmod`, fast for the detector's
+    loops); an array gives an array and a 0-d array a float. Both paths give the same values.
+    """
+    if isinstance(a, numbers.Real):
+        w = math.fmod(a + math.pi, 2.0 * math.pi)
+        if w <= 0.0:
+            w += 2.0 * math.pi
+        w -= math.pi
+        return math.pi if w == -math.pi else w
+    arr = np.mod(np.asarray(a, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
+    arr = np.where(arr == -np.pi, np.pi, arr)
+    return float(arr) if np.ndim(arr) == 0 else arr
 
 
 @dataclass(frozen=True)
@@ -93,11 +107,11 @@ class StructureOption:
     def describe(self) -> str:
         """Human-readable summary in operator units, e.g. 'bend 45 deg up in 18.0 cm, 100 mm'."""
         where = f"in {self.distance * 100:.1f} cm"
-        if self.kind == "closure":
+        if self.kind == Kind.CLOSURE:
             return f"closure {where}"
-        if self.kind == "straight":
+        if self.kind == Kind.STRAIGHT:
             return f"straight pipe, {self.diameter * 1000:.0f} mm"
-        if self.kind == "reducer":
+        if self.kind == Kind.REDUCER:
             return f"reducer to {self.diameter * 1000:.0f} mm {where}"
         if self.is_straight_on:
             return f"{self.kind}: straight on {where}, {self.diameter * 1000:.0f} mm"

@@ -40,6 +40,7 @@ from detector.pipe_cloud import fit_confidence, radius_mode, robust_line
 from detector.robust import mad_sigma, robust_gauss_newton, tukey_cost, tukey_weights
 from detector.scan import Scan, corrected_ranges, radial_noise, spec_value
 from detector.transforms import SensorInPipe, option_direction
+from detector.vocab import Kind
 
 #: Fewest beyond returns on a side for an opening.
 MIN_OPENING_POINTS = 3
@@ -262,7 +263,7 @@ def _openings(
         options.append(StructureOption("junction", big_l, 2.0 * big_r, 0.0, 0.0, min(confs)))
     kind = "bend" if len(options) == 1 else "junction"
     options = [
-        StructureOption(kind, big_l if kind == "junction" else o.distance, o.diameter,
+        StructureOption(kind, big_l if kind == Kind.JUNCTION else o.distance, o.diameter,
                         o.direction, o.angle, o.confidence)
         for o in options
     ]  # fmt: skip

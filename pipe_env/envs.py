@@ -83,6 +83,8 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from detector.options import KINDS, StructureOption
+from detector.vocab import Kind
+from pipe_env.fidelity import FIDELITIES, Fidelity
 from pipe_env.generator import NetworkConfig, generate_network
 from pipe_env.geometry import Pose, clamp, norm3
 from pipe_env.network import PipeNetwork
@@ -93,6 +95,7 @@ from pipe_env.plant import (
     KinematicPlant,
     Outcome,
     Plant,
+    PlantStatus,
     drivable,
     goal_edge_position,
     option_errors,
@@ -130,7 +133,6 @@ OPTION_FEATURES = (
     "goal_alignment",
 )
 SCAN_SHAPE = (16, 32)
-FIDELITIES = ("fast", "full")
 GOAL_CLIP = 20.0
 MAX_AUTO_STRUCTURES = 64
 
@@ -349,7 +351,7 @@ class _DecisionEnv(gym.Env):
 
     def _make_plant(self, network: PipeNetwork) -> Plant:
         """The plant factory: the only place that knows the fidelities' classes."""
-        if self.fidelity == "fast":
+        if self.fidelity == Fidelity.FAST:
             return KinematicPlant(
                 network,
                 self.detector,
@@ -466,16 +468,16 @@ class _DecisionEnv(gym.Env):
         events["outcome"] = outcome.status
         if outcome.note:
             events["outcome_note"] = outcome.note
-        if outcome.status == "jammed":
+        if outcome.status == PlantStatus.JAMMED:
             self.jams += 1
             events["jammed"] = True
             if self.jams >= self.max_jams:
                 self.terminated = True
             else:
                 self.decision = self._sense_again_after_jam()
-        elif outcome.status == "blocked":
+        elif outcome.status == PlantStatus.BLOCKED:
             events["blocked"] = True
-        elif outcome.status == "goal":
+        elif outcome.status == PlantStatus.GOAL:
             self._reach_goal(events)
         else:
             self.decision, adv = self._advance()
@@ -519,11 +521,12 @@ class _DecisionEnv(gym.Env):
         for _ in range(MAX_AUTO_STRUCTURES):
             dec, out = self.plant.advance(self._goal_target())
             self._record(out)
-            if out.status == "goal":
+            if out.status == PlantStatus.GOAL:
                 self._reach_goal(events)
                 return None, events
             assert dec is not None
-            if out.status == "jammed":  # stalled while driving: the robot decides where it is
+            # stalled while driving: the robot decides where it is
+            if out.status == PlantStatus.JAMMED:
                 self._count_jam(events, "drive_jammed", out.note)
             self.structures += 1
             self._after_sensing(dec)
@@ -532,7 +535,7 @@ class _DecisionEnv(gym.Env):
                 self.auto_single
                 and len(ways) == 1
                 and len(dec.options) == 1
-                and dec.kind in ("bend", "reducer")
+                and dec.kind in (Kind.BEND, Kind.REDUCER)
             )
             if not single:
                 self.decision_points.append(dec.pose.position)
@@ -540,13 +543,13 @@ class _DecisionEnv(gym.Env):
             outcome = self.plant.execute(ways[0], self._goal_target())
             self._record(outcome)
             events["auto_structures"] += 1
-            if outcome.status == "goal":
+            if outcome.status == PlantStatus.GOAL:
                 self._reach_goal(events)
                 return None, events
-            if outcome.status != "done":
+            if outcome.status != PlantStatus.DONE:
                 events["auto_" + outcome.status] = True
                 self.plant.decision = dec
-                if outcome.status == "jammed":
+                if outcome.status == PlantStatus.JAMMED:
                     self._count_jam(events, "auto_jammed", outcome.note)
                     if not self.terminated:
                         dec = self._sense_again_after_jam()
@@ -934,7 +937,7 @@ class PipeExploreEnv(_DecisionEnv):
 
     def _record(self, outcome: Outcome) -> None:
         super()._record(outcome)
-        if outcome.status == "back_out":
+        if outcome.status == PlantStatus.BACK_OUT:
             return  # reversing over pipe already seen
         # (the kinematic plant's path holds edge states; the physical plant's, sensor
         # positions along the driven path, m)

@@ -14,6 +14,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+# re-exported for existing imports: the one wrap_angle lives in the lowest layer (detector)
+from detector.options import wrap_angle as wrap_angle
+
 WORLD_UP = np.array([0.0, 0.0, 1.0])
 #: Fallback "up" hint for frames whose forward axis is (nearly) vertical.
 FALLBACK_UP = np.array([1.0, 0.0, 0.0])
@@ -115,13 +118,6 @@ def angles_from_direction(vec_body: ArrayLike) -> tuple[float, float]:
     lateral = float(np.hypot(v[1], v[2]))
     direction = float(np.arctan2(v[2], v[1])) if lateral > 1e-9 else 0.0
     return angle, direction
-
-
-def wrap_angle(a: ArrayLike) -> Any:
-    """Wrap angles to (-pi, pi]."""
-    w = np.mod(np.asarray(a, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
-    w = np.where(w == -np.pi, np.pi, w)
-    return float(w) if np.ndim(w) == 0 else w
 
 
 def segment_distance(

@@ -30,14 +30,15 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from detector.options import StructureOption
+from detector.options import StructureOption, wrap_angle
+from detector.vocab import StrEnum
+from pipe_env.fidelity import Fidelity
 from pipe_env.geometry import (
     Pose,
     clamp,
     direction_from_angles,
     frame_from_forward,
     norm3,
-    wrap_angle,
 )
 from pipe_env.ground_truth import options_at
 from pipe_env.network import ROBOT_DIAMETER_RANGE, PipeNetwork
@@ -56,6 +57,17 @@ if TYPE_CHECKING:
     from pipe_env.world import PipeWorld
 
 BACK_OUT = "back_out"
+
+
+class PlantStatus(StrEnum):
+    """How a plant's action or drive ended (:attr:`Outcome.status`); not the executor's
+    :class:`primitives.steps.SequenceStatus`, which the full plant maps onto these."""
+
+    DONE = "done"
+    JAMMED = "jammed"
+    BLOCKED = "blocked"
+    GOAL = "goal"
+    BACK_OUT = "back_out"
 
 
 @dataclass(frozen=True)
@@ -133,7 +145,7 @@ class Decision:
 class Outcome:
     """What an action or a drive did. Distances in metres, times in seconds."""
 
-    status: str = "done"  # done | jammed | blocked | goal | back_out
+    status: str = "done"  # a PlantStatus value: done | jammed | blocked | goal | back_out
     distance: float = 0.0
     sim_time: float = 0.0
     #: consecutive waypoints of the motion (see ``positions``)
@@ -311,7 +323,7 @@ class KinematicPlant:
         jam_time: simulated seconds a jam costs (stall, detection of it, reversing).
     """
 
-    fidelity = "fast"
+    fidelity = Fidelity.FAST.value
     #: no sweeps and no MuJoCo world in the fast fidelity (the :class:`Plant` protocol's)
     scan_image: NDArray[np.float32] | None = None
     world: PipeWorld | None = None
@@ -504,7 +516,7 @@ class KinematicPlant:
         before the structure (it stalled there and backed off) and costs ``jam_time``; a
         ``goal`` just past the fitting on the way taken ends the move there."""
         out = self._execute(choice, goal)
-        if out.status == "jammed":
+        if out.status == PlantStatus.JAMMED:
             out.sim_time += self.jam_time
             self.sim_time += self.jam_time
         return out

@@ -35,6 +35,8 @@ import detector as detection
 from detector.fusion import StructureTracker, TrackState
 from detector.options import StructureOption, option_order
 from detector.scan import Scan
+from detector.vocab import Method
+from pipe_env.fidelity import Fidelity
 from pipe_env.geometry import Pose
 from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
@@ -42,6 +44,7 @@ from pipe_env.network import PipeNetwork
 from pipe_env.plant import BACK_OUT, Decision, Outcome, detection_record, goal_edge_position
 from pipe_env.routing import EdgePosition, edge_length, locate
 from pipe_env.sensing_model import DETECTORS
+from primitives.steps import SequenceStatus
 
 #: Fewer valid returns than this in a sweep means the sensor cannot see the pipe ahead.
 BLIND_RETURNS = 60
@@ -107,7 +110,7 @@ class PhysicalPlant:
             physics for every motion: the reference).
     """
 
-    fidelity = "full"
+    fidelity = Fidelity.FULL.value
 
     def __init__(
         self,
@@ -320,7 +323,7 @@ class PhysicalPlant:
                 verdict["why"] = "goal"
                 return "stop"
             verdict["interval"] = self.scan_interval
-            if self.detector == "ground_truth":
+            if self.detector == Method.GROUND_TRUTH:
                 self._follow_axis(scan, None, float(state.clamped_diameter))
                 ref = truth[0].distance if truth else math.inf
                 self._cadence(verdict, [ref], goal, blind=False)
@@ -397,7 +400,7 @@ class PhysicalPlant:
             self._odometer += abs(float(outcome.travelled))
             driven += abs(float(outcome.travelled))
             why = verdict["why"]
-            if why is not None or outcome.status != "done" or driven >= limit - 1e-6:
+            if why is not None or outcome.status != SequenceStatus.DONE or driven >= limit - 1e-6:
                 break
             if abs(float(outcome.travelled)) < 1e-6:
                 break  # nothing driven (a zero-length leg): decide here
@@ -410,11 +413,11 @@ class PhysicalPlant:
             last = self.executor.run(go_straight(max(ahead, 0.001)), rng=self.rng)
             self._account(last, out)
             self._odometer += abs(float(last.travelled))
-            why = "goal" if last.status == "done" else why
+            why = "goal" if last.status == SequenceStatus.DONE else why
         if why == "goal":
             out.status = "goal"
             return None, out
-        if outcome.status == "jammed":
+        if outcome.status == SequenceStatus.JAMMED:
             out.status = "jammed"
             out.note = f"jammed while driving: {outcome.reason}"
         self.decision = self._decision(why)
@@ -428,7 +431,7 @@ class PhysicalPlant:
             dist = truth[0].distance if truth else 0.0
             options = [StructureOption("closure", max(dist, 0.0), 0.0, confidence=0.0)]
             return Decision(options, "closure", truth, node, entry, pose)
-        if self.detector == "ground_truth":
+        if self.detector == Method.GROUND_TRUTH:
             return Decision(
                 list(truth), truth[0].kind if truth else "straight", truth, node, entry, pose
             )
@@ -483,7 +486,7 @@ class PhysicalPlant:
         self._account(outcome, out)
         self._odometer += abs(float(outcome.travelled))
         status = outcome.status
-        if status == "jammed":
+        if status == SequenceStatus.JAMMED:
             # back off to where the robot decided, as an operator would, then sense again
             back = self.executor.run(
                 back_out(
@@ -496,7 +499,7 @@ class PhysicalPlant:
             self._odometer -= abs(float(back.travelled))
             out.status, out.note = "jammed", outcome.reason
             return out
-        if status in ("blocked", "dead_end"):
+        if status in (SequenceStatus.BLOCKED, SequenceStatus.DEAD_END):
             out.status, out.note = "blocked", outcome.reason
             return out
         ways = [r for r in self.network.runs_at[dec.node_id] if r.id != dec.entry_run]
@@ -522,9 +525,9 @@ class PhysicalPlant:
             outcome = self.executor.run(back_out(distance, diameter=diameter), rng=self.rng)
             self._account(outcome, out)
             self._odometer -= abs(float(outcome.travelled))
-            if outcome.status != "done":
+            if outcome.status != SequenceStatus.DONE:
                 out.note = f"backing out ended {outcome.status}: {outcome.reason}"
-                if outcome.status == "jammed":
+                if outcome.status == SequenceStatus.JAMMED:
                     out.status = "jammed"
         self.tracker.reset()
         self._track_state = None

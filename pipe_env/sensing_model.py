@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from detector.options import KINDS, StructureOption, option_order
+from detector.vocab import DETECTORS, Kind, Method
 from pipe_env.geometry import clamp
 
 _SIGMAS = ("distance_sigma", "diameter_sigma", "angle_sigma", "direction_sigma")
@@ -108,7 +109,7 @@ class DetectionErrorModel:
             if i > 0 and coin[i] < self.miss_rate:
                 continue
             out.append(self._perturb(o, kind, noise[i], bool(gross[i])))
-        if coin[n + 2] < self.phantom_rate and truth[0].kind not in ("closure", "reducer"):
+        if coin[n + 2] < self.phantom_rate and truth[0].kind not in (Kind.CLOSURE, Kind.REDUCER):
             ref = out[-1]
             phantom_dir = ref.direction + math.pi / 2 + rng.normal(0.0, 0.3)
             out.append(
@@ -137,7 +138,7 @@ class DetectionErrorModel:
             direction=o.direction + s_dir * z[3],
             angle=clamp(angle, 0.0, math.pi),
             confidence=self.confidence,
-            bend_radius=o.bend_radius if kind == "bend" else 0.0,
+            bend_radius=o.bend_radius if kind == Kind.BEND else 0.0,
         )
 
 
@@ -149,9 +150,6 @@ def _confuse(kind: str, u: float) -> str:
     others = [k for k in KINDS if k not in (kind, "straight")]
     return others[int(u * len(others)) % len(others)]
 
-
-#: Detectors the environments accept.
-DETECTORS = ("improved", "thesis", "ground_truth")
 
 #: Used only when no calibrated entry exists for a sensor (a custom LidarSpec whose name is not
 #: a preset): the thesis's own 3D figures (its tables 5.2, 5.3 and 6.1, 40-10 cm window): max
@@ -223,13 +221,13 @@ def error_model_for(detector: str, lidar: Any = "ideal") -> DetectionErrorModel:
     """
     if detector not in DETECTORS:
         raise ValueError(f"detector={detector!r} is not allowed; use one of {DETECTORS}")
-    if detector == "ground_truth":
+    if detector == Method.GROUND_TRUTH:
         return DetectionErrorModel("ground_truth")
     preset = lidar if isinstance(lidar, str) else str(getattr(lidar, "name", "ideal"))
     models = calibrated_models()
     if f"{detector}/{preset}" in models:
         return models[f"{detector}/{preset}"]
-    if detector == "thesis":
+    if detector == Method.THESIS:
         return THESIS_LITERATURE_MODEL
     if f"{detector}/ideal" in models:
         return models[f"{detector}/ideal"]

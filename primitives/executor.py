@@ -60,6 +60,7 @@ from primitives.steps import (
     Halt,
     Roll,
     Scan,
+    SequenceStatus,
     Step,
     Stop,
     Unclamp,
@@ -128,7 +129,8 @@ MAX_SHORTFALL = 0.002
 #: Physics ticks after every drive (and kinematic motion) to let the robot settle.
 SETTLE_TICKS = 3
 
-STATUSES = ("done", "jammed", "blocked", "dead_end")
+#: The executor's outcome statuses as plain strings, in :class:`SequenceStatus` order.
+STATUSES: tuple[str, ...] = tuple(s.value for s in SequenceStatus)
 #: What a scan callback may answer: ``"stop"`` ends the sequence or drive; ``"continue"`` goes
 #: on; ``"rescan"`` (``drive_until`` only; elsewhere it means continue) sweeps again in place
 #: before driving, e.g. to confirm a structure seen close ahead.

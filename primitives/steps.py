@@ -27,6 +27,8 @@ import numbers
 from dataclasses import asdict, dataclass, fields
 from typing import Any, ClassVar
 
+from detector.vocab import StrEnum
+
 DEFAULT_SPEED = 0.05  # m/s
 
 
@@ -38,6 +40,19 @@ def _num(obj: Any, name: str, lo: float, hi: float, unit: str) -> None:
             f"{type(obj).__name__}.{name} = {v!r} is invalid; allowed: [{lo:g}, {hi:g}] {unit}"
         )
     object.__setattr__(obj, name, float(v))
+
+
+class SequenceStatus(StrEnum):
+    """How a primitive sequence (or a drive) ended: the executor's outcome status."""
+
+    DONE = "done"
+    JAMMED = "jammed"
+    BLOCKED = "blocked"
+    DEAD_END = "dead_end"
+
+
+#: The statuses a :class:`Halt` step may end a sequence with, as plain strings.
+HALT_STATUSES: tuple[str, ...] = (SequenceStatus.BLOCKED.value, SequenceStatus.DEAD_END.value)
 
 
 @dataclass(frozen=True)
@@ -177,7 +192,7 @@ class Halt(Step):
     reason: str = ""
 
     def __post_init__(self) -> None:
-        if self.status not in ("blocked", "dead_end"):
+        if self.status not in HALT_STATUSES:
             raise ValueError(
                 f"Halt.status = {self.status!r} is invalid; allowed: 'blocked', 'dead_end'"
             )
