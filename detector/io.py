@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.atomic import atomic_open, atomic_write_text
-from detector.scan import Scan, ScanReadError
+from detector.scan import SCAN_ARRAYS, Scan, ScanReadError
 
 __all__ = [
     "BagTopics",
@@ -86,17 +86,6 @@ CSV_COLUMNS = ("sweep", "plane_angle", "beam_angle", "range", "time")
 CSV_POSE_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 #: Format version of a multi-sweep npz written by :func:`write_npz`.
 NPZ_SWEEPS_VERSION = 1
-_SCAN_ARRAYS = (
-    "ranges",
-    "valid",
-    "beam_angles",
-    "plane_angles",
-    "timestamps",
-    "positions",
-    "rotations",
-    "nominal_positions",
-    "nominal_rotations",
-)
 
 
 @dataclass(frozen=True)
@@ -443,7 +432,7 @@ def _read_npz(p: Path) -> list[Scan]:
                 )
             out = []
             for i in range(int(z["n_sweeps"])):
-                arrays = {k: z[f"{i}/{k}"] for k in _SCAN_ARRAYS}
+                arrays = {k: z[f"{i}/{k}"] for k in SCAN_ARRAYS}
                 spec = json.loads(str(z[f"{i}/spec"]))
                 meta = json.loads(str(z[f"{i}/metadata"]))
                 out.append(Scan(**arrays, spec=spec, metadata=meta))
@@ -452,7 +441,7 @@ def _read_npz(p: Path) -> list[Scan]:
         raise
     except Exception as e:  # (zipfile, zlib, numpy, JSON: any broken file, named)
         raise ScanReadError(
-            f"{p}: not a scan npz (expected the arrays {', '.join(_SCAN_ARRAYS)}, the spec and "
+            f"{p}: not a scan npz (expected the arrays {', '.join(SCAN_ARRAYS)}, the spec and "
             f"the metadata): {type(e).__name__}: {e}"
         ) from e
 
@@ -975,7 +964,7 @@ def write_npz(scans: Sequence[Scan], path: str | os.PathLike[str]) -> Path:
         "n_sweeps": np.array(len(scans)),
     }
     for i, s in enumerate(scans):
-        for k in _SCAN_ARRAYS:
+        for k in SCAN_ARRAYS:
             arrays[f"{i}/{k}"] = getattr(s, k)
         arrays[f"{i}/spec"] = np.array(json.dumps(s.spec))
         arrays[f"{i}/metadata"] = np.array(json.dumps(s.metadata, default=_plain))

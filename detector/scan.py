@@ -37,6 +37,20 @@ from numpy.typing import NDArray
 
 from detector.atomic import atomic_open
 
+#: The arrays of a scan, as :meth:`Scan.save` stores them (the npz's keys besides the
+#: format version, the spec and the metadata).
+SCAN_ARRAYS = (
+    "ranges",
+    "valid",
+    "beam_angles",
+    "plane_angles",
+    "timestamps",
+    "positions",
+    "rotations",
+    "nominal_positions",
+    "nominal_rotations",
+)
+
 
 class ScanReadError(ValueError):
     """A recording that cannot be read as scans; the message names the file, the topic or
@@ -303,20 +317,7 @@ class Scan:
                     f"scan file {path} has format_version {version}; this reads "
                     f"{SCAN_FORMAT_VERSION}"
                 )
-            arrays = {
-                k: z[k]
-                for k in (
-                    "ranges",
-                    "valid",
-                    "beam_angles",
-                    "plane_angles",
-                    "timestamps",
-                    "positions",
-                    "rotations",
-                    "nominal_positions",
-                    "nominal_rotations",
-                )
-            }
+            arrays = {k: z[k] for k in SCAN_ARRAYS}
             spec = json.loads(str(z["spec"]))
             meta = json.loads(str(z["metadata"]))
         return cls(**arrays, spec=spec, metadata=meta)
