@@ -464,8 +464,8 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     from agents.scripted import SCRIPTED_AGENTS
     from pipe_env.envs import FIDELITIES
+    from pipe_env.envs.sensing_model import DETECTORS
     from pipe_env.lidar import PRESETS
-    from pipe_env.sensing_model import DETECTORS
 
     agents = sorted(SCRIPTED_AGENTS)
     lidars = sorted(PRESETS)

@@ -58,7 +58,7 @@ import numpy as np
 import yaml
 
 from detector.vocab import DETECTORS, Method
-from pipe_env.fidelity import Fidelity
+from pipe_env.envs.fidelity import Fidelity
 
 SCENARIO_KEYS = {
     "name",
@@ -551,8 +551,8 @@ def _goal_point(net: Any, goal: Any, source: str) -> list[float]:
     """A goal given as a point, or as a distance along a true way on of the first structure."""
     if isinstance(goal, list):
         return [float(v) for v in goal]
+    from detector.options import option_vector
     from pipe_env.ground_truth import fitting_ahead, options_at
-    from pipe_env.plant import option_vector
 
     if net.start_pose is None:
         raise _fail(source, "goal", "a goal by way needs a start pose")
@@ -570,7 +570,7 @@ def _goal_point(net: Any, goal: Any, source: str) -> list[float]:
 
 def sensor_settings(sc: Scenario) -> tuple[Any, Any]:
     """(LidarSpec, misalignment Pose or None) of the scenario."""
-    from pipe_env.geometry import Pose, rotation_about
+    from detector.geometry import Pose, rotation_about
     from pipe_env.lidar import get_preset
 
     sensor = sc.data.get("sensor", {})
@@ -827,8 +827,8 @@ def _run_navigate(sc: Scenario, net: Any, seed: int) -> dict[str, Any]:
 def _run_detect(sc: Scenario, net: Any, seed: int) -> dict[str, Any]:
     """Sweep the sensor along the incoming centreline and detect at each distance."""
     import detector
+    from detector.options import option_errors
     from pipe_env.lidar import RotatingLidar
-    from pipe_env.plant import option_errors
     from pipe_env.world import build_world
 
     spec, mis = sensor_settings(sc)

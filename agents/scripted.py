@@ -14,7 +14,7 @@ returning an action index (the options table row; the last row backs out).
 
 GoalGreedy and LeftHand remember nothing themselves: they read the ``taken`` column of the
 options table, the robot's own odometry log of the ways it already took from here
-(:mod:`pipe_env.way_log`), and prefer ways not taken yet.
+(:mod:`pipe_env.envs.way_log`), and prefer ways not taken yet.
 """
 
 from __future__ import annotations
@@ -26,9 +26,10 @@ import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.options import option_vector
 from pipe_env.envs import K_OPTIONS, OPTION_FEATURES
-from pipe_env.network import ROBOT_DIAMETER_RANGE
-from pipe_env.plant import ExecutionTolerance, option_vector
+from pipe_env.envs.plant import ExecutionTolerance
+from pipe_env.robot_limits import ROBOT_DIAMETER_RANGE
 from pipe_env.routing import route
 
 BACK = K_OPTIONS - 1

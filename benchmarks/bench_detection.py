@@ -57,10 +57,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from detector import METHODS, detect, detect_planar  # noqa: E402
 from detector.atomic import atomic_write_text  # noqa: E402
 from detector.detection import Detection  # noqa: E402
+from detector.geometry import Pose  # noqa: E402
 from detector.options import StructureOption  # noqa: E402
 from detector.scan import Scan  # noqa: E402
 from pipe_env import layouts  # noqa: E402
-from pipe_env.geometry import Pose  # noqa: E402
 from pipe_env.lidar import RotatingLidar  # noqa: E402
 from pipe_env.plotting import save_figure  # noqa: E402
 from pipe_env.world import build_world  # noqa: E402

@@ -40,7 +40,7 @@ import mujoco
 import numpy as np
 
 import pipe_env  # noqa: F401
-import pipe_env.plant_full as plant_full
+import pipe_env.envs.plant_full as plant_full
 import pipe_env.world as world_mod
 import primitives.executor as executor_mod
 from agents.evaluate import random_valid_episode

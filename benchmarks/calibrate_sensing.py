@@ -5,7 +5,7 @@ a sensor along the incoming centreline of random single-structure layouts (every
 57-125 mm, random roll directions), scanning every ``--step`` metres from 45 cm down to the
 trigger distance, fuse the detections with ``detector.fusion.StructureTracker`` exactly as the
 full-fidelity closed loop does, and compare the estimate at the trigger distance with ground
-truth. The error statistics become :class:`pipe_env.sensing_model.DetectionErrorModel` entries
+truth. The error statistics become :class:`pipe_env.envs.sensing_model.DetectionErrorModel` entries
 written to ``pipe_env/data/sensing_models.json`` (``--write``), which the fast fidelity loads.
 
 Usage: python benchmarks/calibrate_sensing.py [--samples 60] [--write]
@@ -24,9 +24,9 @@ import numpy as np
 import detector
 from detector.atomic import atomic_write_text
 from detector.fusion import StructureTracker
+from detector.options import match_option
 from pipe_env import layouts
 from pipe_env.lidar import RotatingLidar
-from pipe_env.plant import match_option
 from pipe_env.world import build_world
 
 OUT = Path(__file__).resolve().parents[1] / "pipe_env" / "data" / "sensing_models.json"

@@ -51,9 +51,9 @@ from benchmarks.bench_detection import (  # noqa: E402
 from detector import METHODS, detect, detect_planar  # noqa: E402
 from detector.atomic import atomic_write_text  # noqa: E402
 from detector.detection import Detection  # noqa: E402
+from detector.geometry import Pose  # noqa: E402
 from detector.options import StructureOption  # noqa: E402
 from pipe_env import layouts  # noqa: E402
-from pipe_env.geometry import Pose  # noqa: E402
 from pipe_env.lidar import PRESETS, RotatingLidar  # noqa: E402
 from pipe_env.network import PipeNetwork  # noqa: E402
 from pipe_env.world import PipeWorld, build_world  # noqa: E402

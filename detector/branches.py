@@ -19,10 +19,11 @@ from numpy.typing import NDArray
 
 from detector.detection import Detection
 from detector.fit_kernels import MODEL_LINES, MODEL_OWN_LINES, coarse_branch_cost, residuals
+from detector.geometry import wrap_angle
 from detector.grid import label_regions
 from detector.improved_config import ImprovedConfig
 from detector.long_bend import fit_torus, spread_along_axis
-from detector.options import StructureOption, option_order, wrap_angle
+from detector.options import StructureOption, option_order
 from detector.outgoing import BranchFit
 from detector.pipe_cloud import (
     ANNEAL,

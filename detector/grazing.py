@@ -25,8 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.geometry import wrap_angle
 from detector.grid import label_regions
-from detector.options import wrap_angle
 from detector.robust import robust_gauss_newton
 
 #: A return counts as entering an opening when it lies this far (m) beyond the wall line

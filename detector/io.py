@@ -7,7 +7,7 @@ library (no ROS install).
 
 - :func:`read_scans` reads any of the formats into a list of sweeps;
 - :func:`write_rosbag`, :func:`write_csv` and :func:`write_npz` write them;
-- :func:`scan_from_laserscans` (also ``Scan.from_laserscans``) builds one sweep from
+- :func:`scan_from_laserscans` builds one sweep from
   ``sensor_msgs/LaserScan`` messages and their servo angles, for live use.
 
 Sensor poses (see the user document on real data): every pose is the *sensor frame before the

@@ -26,28 +26,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
+from detector.geometry import clamp, direction_from_angles, wrap_angle
 from detector.vocab import Kind
 
 #: The structure kinds as plain strings, in :class:`~detector.vocab.Kind` order.
 KINDS: tuple[str, ...] = tuple(k.value for k in Kind)
-
-
-def wrap_angle(a: Any) -> Any:
-    """``a`` (radians; a real number or an array of them) wrapped to (-pi, pi].
-
-    A real number gives a float (computed with :func:`math.fmod`, fast for the detector's
-    loops); an array gives an array and a 0-d array a float. Both paths give the same values.
-    """
-    if isinstance(a, numbers.Real):
-        w = math.fmod(a + math.pi, 2.0 * math.pi)
-        if w <= 0.0:
-            w += 2.0 * math.pi
-        w -= math.pi
-        return math.pi if w == -math.pi else w
-    arr = np.mod(np.asarray(a, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
-    arr = np.where(arr == -np.pi, np.pi, arr)
-    return float(arr) if np.ndim(arr) == 0 else arr
 
 
 @dataclass(frozen=True)
@@ -134,3 +119,57 @@ def direction_name(direction: float) -> str:
     k = int(round(wrap_angle(direction) / (math.pi / 4.0))) % 8
     deg = round(math.degrees(wrap_angle(direction)))
     return f"{names[k]} ({deg + 0:+d} deg)"
+
+
+def option_vector(option: StructureOption) -> NDArray[np.float64]:
+    """Outgoing axis of an option in the sensor frame."""
+    return direction_from_angles(option.angle, option.direction)
+
+
+def match_option(chosen: StructureOption, truth: list[StructureOption]) -> tuple[int, float]:
+    """Index of the true way on closest to ``chosen`` and the angle (rad) between their axes."""
+    # cosine of the angle between two (angle, direction) axes, without building the vectors
+    ca, sa = math.cos(chosen.angle), math.sin(chosen.angle)
+    sep = [
+        math.acos(
+            clamp(
+                ca * math.cos(t.angle)
+                + sa * math.sin(t.angle) * math.cos(chosen.direction - t.direction),
+                -1.0,
+                1.0,
+            )
+        )
+        for t in truth
+    ]
+    k = min(range(len(sep)), key=sep.__getitem__)
+    return k, sep[k]
+
+
+#: Roll-direction errors count only for ways turning more than this (rad): the direction of a
+#: nearly straight way is ill-defined.
+DIRECTION_ERROR_MIN_ANGLE = math.radians(10.0)
+
+
+def option_errors(options: list[StructureOption], truth: list[StructureOption]) -> dict[str, float]:
+    """Largest absolute errors of sensed ``options`` against the true ways they match.
+
+    Each option is compared with its closest true way (:func:`match_option`). Returns
+    ``distance`` and ``diameter`` (m) and ``angle`` (rad) when there are options, and
+    ``direction`` (rad, wrapped to [0, pi]) only when a matched true way turns by more than
+    ``DIRECTION_ERROR_MIN_ANGLE``. Empty when there are no options or no true ways.
+    """
+    if not options or not truth:
+        return {}
+    d_err, dia, ang, dirs = [], [], [], []
+    for o in options:
+        k, _ = match_option(o, truth)
+        t = truth[k]
+        d_err.append(abs(o.distance - t.distance))
+        dia.append(abs(o.diameter - t.diameter))
+        ang.append(abs(o.angle - t.angle))
+        if t.angle > DIRECTION_ERROR_MIN_ANGLE:
+            dirs.append(abs(wrap_angle(o.direction - t.direction)))
+    errs = {"distance": max(d_err), "diameter": max(dia), "angle": max(ang)}
+    if dirs:
+        errs["direction"] = max(dirs)
+    return errs

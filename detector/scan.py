@@ -251,14 +251,6 @@ class Scan:
             dict(self.metadata),
         )
 
-    @classmethod
-    def from_laserscans(cls, messages: Any, plane_angles: Any, **kwargs: Any) -> Scan:
-        """One sweep from ``sensor_msgs/LaserScan`` messages (one per plane) and their servo
-        angles (rad), for live use: see :func:`detector.io.scan_from_laserscans`."""
-        from detector.io import scan_from_laserscans
-
-        return scan_from_laserscans(messages, plane_angles, **kwargs)
-
     # ---------------------------------------------------------------- storage
     def save(self, path: str | Path) -> None:
         """Write an ``.npz`` file (arrays plus the spec and metadata as JSON), atomically;

@@ -161,7 +161,7 @@ def observation_table() -> str:
 
 
 def _constructor_options() -> list[tuple[str, object, str]]:
-    from pipe_env.envs import PipeExploreEnv, PipeNavEnv, _DecisionEnv
+    from pipe_env.envs.env import PipeExploreEnv, PipeNavEnv, _DecisionEnv
 
     seen: list[tuple[str, object, str]] = []
     for cls, where in ((_DecisionEnv, "both"), (PipeNavEnv, "PipeNav"), (PipeExploreEnv, "")):

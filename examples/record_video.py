@@ -1,7 +1,7 @@
 """A full-fidelity episode rendered to an mp4 in which the robot is seen moving.
 
 The MuJoCo robot, the rotating LiDAR, the detector and the executor run the closed loop on a
-small generated network while the RoutePlanner chooses; ``pipe_env.wrappers.RecordVideo``
+small generated network while the RoutePlanner chooses; ``pipe_env.envs.wrappers.RecordVideo``
 (Gymnasium's ``RecordVideo`` that keeps the frames the env collects while the robot drives,
 every 0.5 simulated s, instead of one per decision) writes them with ``moviepy``
 (``pip install "pipenav[video]"``). Rendering needs a GL backend (EGL or OSMesa); on a machine
@@ -20,7 +20,7 @@ import gymnasium as gym
 
 import pipe_env  # noqa: F401  (registers the environment ids)
 from agents.scripted import RoutePlanner
-from pipe_env.wrappers import RecordVideo
+from pipe_env.envs.wrappers import RecordVideo
 
 #: What the example prints when it cannot render (tests look for it).
 NO_VIDEO = "no video:"

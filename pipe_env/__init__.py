@@ -22,7 +22,7 @@ except (ImportError, AttributeError, RuntimeError) as _exc:
 
 from gymnasium.envs.registration import register, registry
 
-from pipe_env.geometry import Pose
+from detector.geometry import Pose
 from pipe_env.network import PipeNetwork
 
 #: Environment ids registered on import, with their default decision limits.

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import shortest_path
 
-from pipe_env.geometry import Pose, clamp, cross, frame_from_forward, norm3
+from detector.geometry import Pose, clamp, cross, frame_from_forward, norm3
 
 if TYPE_CHECKING:
     from pipe_env.network import PipeNetwork

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.geometry import frame_from_forward
 from pipe_env.fittings import FittingGeometry
-from pipe_env.geometry import frame_from_forward
 
 #: Pieces around the circumference.
 SECTORS = 24

@@ -20,17 +20,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.geometry import Pose, frame_from_forward, segment_distance
 from pipe_env.fittings import build_fitting
-from pipe_env.geometry import Pose, frame_from_forward, segment_distance
 from pipe_env.network import (
     BEND_RADIUS_RANGE,
     NETWORK_DIAMETER_RANGE,
-    ROBOT_DIAMETER_RANGE,
     WALL_CLEARANCE,
     Fitting,
     PipeNetwork,
     Run,
 )
+from pipe_env.robot_limits import ROBOT_DIAMETER_RANGE
 from pipe_env.routing import route
 
 KIND_CHOICES = ("mitre_bend", "long_bend", "tee", "wye", "cross", "reducer", "closure")

@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.geometry import Pose, clamp, norm3
 from detector.options import StructureOption, option_order
-from pipe_env.geometry import Pose, clamp, norm3
 from pipe_env.routing import locate
 
 if TYPE_CHECKING:

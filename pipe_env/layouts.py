@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.geometry import Pose, direction_from_angles
 from pipe_env.fittings import build_fitting
-from pipe_env.geometry import Pose, direction_from_angles
 from pipe_env.network import Fitting, PipeNetwork, Run
 
 #: Straight pipe kept behind the start pose so that the robot body fits, metres.

@@ -11,7 +11,7 @@ Ray casting backends (``RotatingLidar(..., backend=...)``):
   those meshes (:mod:`pipe_env.raycast_mujoco`). The meshes are faceted, so ranges carry the
   tessellation error of :mod:`pipe_env.meshes` (a fraction of a millimetre radially).
 - ``"analytic"`` (the default of the closed loop: the full-fidelity plant,
-  :class:`pipe_env.plant_full.PhysicalPlant`, argument ``lidar_backend``): exact intersection
+  :class:`pipe_env.envs.plant_full.PhysicalPlant`, argument ``lidar_backend``): exact intersection
   with the network's cylinders, cones, planes and tori (:mod:`pipe_env.raycast_analytic`),
   compiled per ray (numba), one origin per plane.
 
@@ -54,8 +54,8 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.geometry import Pose
 from detector.scan import Scan, beam_directions
-from pipe_env.geometry import Pose
 from pipe_env.world import PipeWorld
 
 MODES = ("stop_and_scan", "continuous")
@@ -540,5 +540,5 @@ def _need_rng(rng: Any) -> None:
 
 def _checked(pose: Any, name: str) -> Pose:
     if not isinstance(pose, Pose):
-        raise ValueError(f"{name} must be a pipe_env.geometry.Pose, got {type(pose).__name__}")
+        raise ValueError(f"{name} must be a detector.geometry.Pose, got {type(pose).__name__}")
     return pose

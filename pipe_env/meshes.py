@@ -19,8 +19,8 @@ import manifold3d as m3
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.geometry import frame_from_forward
 from pipe_env.fittings import FittingGeometry
-from pipe_env.geometry import frame_from_forward
 
 #: Shell thickness of the ray meshes, metres (only the inner surface matters for rays).
 WALL = 0.004

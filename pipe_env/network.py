@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from detector.geometry import Pose, segment_distance
 from pipe_env.fittings import (
     AXIS_TOLERANCE,
     BEND_STYLES,
@@ -43,7 +44,6 @@ from pipe_env.fittings import (
     FittingGeometry,
     build_fitting,
 )
-from pipe_env.geometry import Pose, segment_distance
 
 if TYPE_CHECKING:
     from detector.options import StructureOption
@@ -54,8 +54,6 @@ SCHEMA_VERSION = 1
 #: Inner diameters a network may contain, metres. Wider than the robot's 57-125 mm so that
 #: networks can hold pipes the robot must refuse (a reducer to 40 mm) or the thesis's 20 cm rig.
 NETWORK_DIAMETER_RANGE = (0.020, 0.250)
-#: The PIRATE's working range of inner diameters, metres.
-ROBOT_DIAMETER_RANGE = (0.057, 0.125)
 BEND_ANGLE_RANGE = (math.radians(30.0), math.radians(90.0))
 BEND_RADIUS_RANGE = (1.0, 3.0)  # long-radius bends, in diameters
 TAPER_LENGTH_RANGE = (0.005, 1.0)  # metres

@@ -21,7 +21,7 @@ import numpy as np
 from detector.atomic import atomic_write_text
 
 if TYPE_CHECKING:
-    from pipe_env.geometry import Pose
+    from detector.geometry import Pose
     from pipe_env.network import PipeNetwork
 
 __all__ = [
@@ -135,7 +135,7 @@ def parse_pose(value: Any, path: str = "start") -> Pose:
 
 
 def _start(value: Any, path: str = "start") -> Pose:
-    from pipe_env.geometry import Pose, frame_from_forward
+    from detector.geometry import Pose, frame_from_forward
 
     st = _mapping(value, path, START_KEYS, ("position",))
     position = np.array(_vector(st["position"], f"{path}.position"))

@@ -61,8 +61,8 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from pipe_env.geometry import Pose
-from pipe_env.network import ROBOT_DIAMETER_RANGE
+from detector.geometry import Pose
+from pipe_env.robot_limits import ROBOT_DIAMETER_RANGE
 from pipe_env.world import CONTACT_BIT
 
 ROBOT_GROUP = 3

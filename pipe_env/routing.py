@@ -16,16 +16,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from pipe_env.geometry import clamp
+from detector.geometry import clamp
+from pipe_env.robot_limits import MAX_TURN
 
 if TYPE_CHECKING:
+    from detector.geometry import Pose
     from pipe_env.centreline import CentrelinePath, CentrelinePoint
-    from pipe_env.geometry import Pose
     from pipe_env.network import PipeNetwork
-
-#: Largest deflection the robot can drive through at one fitting, radians: 90 deg plus the
-#: angular tolerance with which networks are validated (a tee branch may be 90.5 deg).
-MAX_TURN = math.radians(90.5) + 1e-6
 
 
 @dataclass(frozen=True)

@@ -44,8 +44,8 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.geometry import Pose, rotation_about
 from detector.scan import Scan as ScanData
-from pipe_env.geometry import Pose, rotation_about
 from pipe_env.lidar import LidarSpec, RotatingLidar
 from pipe_env.network import PipeNetwork
 from pipe_env.robot import Robot, RobotConfig, quat_of
@@ -330,7 +330,7 @@ class Executor:
     def place(self, pose: Pose, diameter: float) -> None:
         """Put the robot straight with its LiDAR at ``pose`` and clamp it at ``diameter`` m."""
         if not isinstance(pose, Pose):
-            raise ValueError(f"pose must be a pipe_env.geometry.Pose, got {type(pose).__name__}")
+            raise ValueError(f"pose must be a detector.geometry.Pose, got {type(pose).__name__}")
         lo, hi = self.config.diameter_range
         if not (isinstance(diameter, (int, float)) and lo - 0.005 <= diameter <= hi + 0.005):
             raise ValueError(

@@ -25,8 +25,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from detector.options import StructureOption
-from pipe_env.plant import SENSED_DIAMETER_MARGIN
 from pipe_env.robot import RobotConfig
+from pipe_env.robot_limits import SENSED_DIAMETER_MARGIN
 from primitives.steps import (
     DEFAULT_SPEED,
     Bend,

@@ -7,9 +7,9 @@ from functools import lru_cache
 
 import numpy as np
 
+from detector.geometry import Pose
 from detector.scan import Scan
 from pipe_env import layouts
-from pipe_env.geometry import Pose
 from pipe_env.lidar import RotatingLidar
 from pipe_env.world import build_world
 

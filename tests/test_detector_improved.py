@@ -12,8 +12,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from detector import Detection, SensorInPipe, detect, detect_planar
+from detector.geometry import Pose
 from detector.scan import Scan
-from pipe_env.geometry import Pose
 
 REPRESENTATIVE = [
     ("mitre_bend", 0.3, {"diameter": 0.1, "angle": math.pi / 2, "direction": 2.0}),

@@ -12,9 +12,9 @@ from detector_scans import continuous_scan, rot_tilt
 
 from detector import Detection, SensorInPipe, StructureOption, detect, detect_planar
 from detector.fusion import StructureTracker
+from detector.geometry import Pose
 from detector.improved_config import DEFAULT_CONFIG, ImprovedConfig
 from detector.scan import Scan
-from pipe_env.geometry import Pose
 from pipe_env.lidar import PRESETS
 
 

@@ -10,9 +10,9 @@ import pytest
 from detector_scans import match, scan_layout, wrap
 
 from detector import Detection, StructureOption, detect, detect_planar
+from detector.geometry import Pose
 from detector.options import option_order
 from detector.scan import corrected_ranges, radial_noise
-from pipe_env.geometry import Pose
 from pipe_env.lidar import PRESETS
 
 PLANAR = [

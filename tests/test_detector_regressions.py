@@ -19,8 +19,8 @@ import yaml
 from detector_scans import match, rot_tilt, scan_layout, wrap
 
 from detector import Detection, detect
+from detector.geometry import Pose
 from detector.robust import robust_gauss_newton
-from pipe_env.geometry import Pose
 
 CORPUS = Path(__file__).parent / "data" / "detector_regressions.yaml"
 #: Keys a case may carry, and keys its ``expect`` may carry.

@@ -114,7 +114,7 @@ def test_wrong_way_then_back_out() -> None:
 
 
 def test_jams_with_a_badly_wrong_detector_and_terminate_after_max_jams() -> None:
-    from pipe_env.sensing_model import DetectionErrorModel
+    from pipe_env.envs.sensing_model import DetectionErrorModel
 
     net = layouts.mitre_bend(0.1).with_goals([[0.0, 0.5, 0.0]])
     env = gym.make(
@@ -321,11 +321,12 @@ def test_noisy_ninety_degree_ways_stay_drivable(monkeypatch: pytest.MonkeyPatch)
     masked). The thesis's published accuracy stands for ordinary noise here."""
     from dataclasses import replace
 
-    import pipe_env.envs
-    from pipe_env.plant import drivable, match_option
-    from pipe_env.sensing_model import THESIS_LITERATURE_MODEL
+    import pipe_env.envs.env
+    from detector.options import match_option
+    from pipe_env.envs.sensing_model import THESIS_LITERATURE_MODEL
+    from pipe_env.robot_limits import drivable
 
-    monkeypatch.setattr(pipe_env.envs, "error_model_for", lambda *a: THESIS_LITERATURE_MODEL)
+    monkeypatch.setattr(pipe_env.envs.env, "error_model_for", lambda *a: THESIS_LITERATURE_MODEL)
     net = layouts.t_junction(0.1).with_goals([[0, 0.5, 0]])
     env = gym.make("pipenav/PipeNav-v0", network=net, detector="thesis")
     masked = 0
@@ -345,7 +346,7 @@ def test_the_mask_and_the_full_fidelity_refusal_share_the_turn_limit() -> None:
     """A way sensed beyond the turn the robot attempts is masked, and the sequence built for
     it halts naming that limit (100 deg: 90 deg fittings plus sensing noise)."""
     from detector.options import StructureOption
-    from pipe_env.plant import drivable
+    from pipe_env.robot_limits import drivable
     from primitives.sequences import MAX_TURN_ATTEMPT, for_option
     from primitives.steps import Halt
 
@@ -441,7 +442,7 @@ def test_an_automatic_way_that_jams_is_sensed_again(monkeypatch: pytest.MonkeyPa
     """The environment took a single way by itself and it jammed: the robot backed off and
     the agent decides on fresh sweeps (the estimate that jammed is not offered again, where
     the fast fidelity would jam on it once more)."""
-    from pipe_env.plant import KinematicPlant
+    from pipe_env.envs.plant import KinematicPlant
 
     resensed = []
     original = KinematicPlant.resense

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from pipe_env import layouts
-from pipe_env.plant_full import PhysicalPlant
+from pipe_env.envs.plant_full import PhysicalPlant
 from pipe_env.routing import EdgePosition, edge_length
 
 
@@ -103,7 +103,7 @@ def test_a_long_straight_is_driven_to_the_bend_at_its_end_and_the_goal_after_it(
 ) -> None:
     """8 m of straight pipe (twice the longest leg ``advance`` drives) with nothing in it: the
     robot drives on to the bend at its end, not stopping halfway with only back-out left."""
-    from pipe_env.plant_full import MAX_DRIVE
+    from pipe_env.envs.plant_full import MAX_DRIVE
 
     net = layouts.mitre_bend(0.1, math.pi / 2, 0.0, distance=8.0, outlet_length=1.0)
     assert edge_length(net, "r_in") > 2 * MAX_DRIVE

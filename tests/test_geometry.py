@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pipe_env.geometry import (
+from detector.geometry import (
     Pose,
     angles_from_direction,
     direction_from_angles,

@@ -22,6 +22,7 @@ from detector.io import (
     matrix_to_quat,
     quat_to_matrix,
     read_scans,
+    scan_from_laserscans,
     sweep_cuts,
     write_csv,
     write_npz,
@@ -223,11 +224,11 @@ def test_quaternions_round_trip():
 def test_from_laserscans_live():
     ts = get_typestore(Stores.ROS2_HUMBLE)
     msgs = [_laserscan(ts, 10**9 + k, np.array([0.5, 0.6, 0.0, 0.7, 0.8])) for k in range(3)]
-    scan = Scan.from_laserscans(msgs, [0.0, 0.5, 1.0], fov=1.2)
+    scan = scan_from_laserscans(msgs, [0.0, 0.5, 1.0], fov=1.2)
     assert scan.n_beams == 3 and np.allclose(scan.beam_angles, [-0.5, 0.0, 0.5])
     assert scan.no_returns["zero"] == 3
     with pytest.raises(ScanReadError, match="expected one plane angle per LaserScan, got 2"):
-        Scan.from_laserscans(msgs, [0.0, 0.5])
+        scan_from_laserscans(msgs, [0.0, 0.5])
 
 
 def test_errors_name_the_file_the_topic_and_what_was_expected(tmp_path, x4_sweep):

@@ -24,8 +24,8 @@ import pytest
 from detector import Detection, StructureOption
 from detector.fusion import StructureTracker
 from pipe_env import layouts
+from pipe_env.envs.plant_full import PhysicalPlant
 from pipe_env.ground_truth import fitting_ahead, option_angles
-from pipe_env.plant_full import PhysicalPlant
 from pipe_env.routing import locate
 from primitives.executor import Executor
 from primitives.sequences import for_option, take_turn

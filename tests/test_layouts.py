@@ -9,8 +9,8 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from detector.geometry import Pose, rotation_about, wrap_angle
 from pipe_env import layouts
-from pipe_env.geometry import Pose, rotation_about, wrap_angle
 
 diameters = st.floats(0.057, 0.125)
 distances = st.floats(0.1, 0.4)

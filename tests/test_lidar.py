@@ -8,9 +8,9 @@ from dataclasses import fields
 import numpy as np
 import pytest
 
+from detector.geometry import Pose, rotation_about
 from detector.scan import Scan
 from pipe_env import layouts
-from pipe_env.geometry import Pose, rotation_about
 from pipe_env.lidar import BACKENDS, PRESETS, LidarSpec, RotatingLidar, get_preset
 from pipe_env.meshes import circle_segments, polygon_radius
 from pipe_env.raycast_analytic import AnalyticBore
@@ -156,9 +156,9 @@ def test_bad_poses_and_rng_raise_clear_errors(straight_world) -> None:
     rng = np.random.default_rng(0)
     with pytest.raises(ValueError, match="Pose.position must be finite"):
         Pose(np.array([0.0, math.nan, 0.0]), np.eye(3))
-    with pytest.raises(ValueError, match="body_pose must be a pipe_env.geometry.Pose"):
+    with pytest.raises(ValueError, match="body_pose must be a detector.geometry.Pose"):
         lidar.scan(np.zeros(3), rng)
-    with pytest.raises(ValueError, match="body_pose must be a pipe_env.geometry.Pose"):
+    with pytest.raises(ValueError, match="body_pose must be a detector.geometry.Pose"):
         lidar.scan_plane((0, 0, 0), 0.0, rng)
     with pytest.raises(ValueError, match="plane_angle"):
         lidar.scan_plane(Pose.identity(), math.nan, rng)
@@ -167,7 +167,7 @@ def test_bad_poses_and_rng_raise_clear_errors(straight_world) -> None:
     with pytest.raises(ValueError, match="t0"):
         lidar.scan(Pose.identity(), rng, t0=math.nan)
     moving = RotatingLidar(straight_world, "ideal", servo_step=math.radians(30), mode="continuous")
-    with pytest.raises(ValueError, match=r"body_pose\(0.0\) must be a pipe_env.geometry.Pose"):
+    with pytest.raises(ValueError, match=r"body_pose\(0.0\) must be a detector.geometry.Pose"):
         moving.scan(lambda t: None, rng)
 
 

@@ -11,8 +11,8 @@ import pytest
 
 import pipe_env  # noqa: F401
 from pipe_env import layouts
-from pipe_env.plant import KinematicPlant, Plant
-from pipe_env.plant_full import PhysicalPlant
+from pipe_env.envs.plant import KinematicPlant, Plant
+from pipe_env.envs.plant_full import PhysicalPlant
 from primitives.executor import Executor
 
 

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from detector.options import StructureOption
-from pipe_env.lidar import PRESETS, LidarSpec
-from pipe_env.sensing_model import (
+from pipe_env.envs.sensing_model import (
     DETECTORS,
     THESIS_LITERATURE_MODEL,
     calibrated_models,
     error_model_for,
 )
+from pipe_env.lidar import PRESETS, LidarSpec
 
 
 def test_every_detector_and_preset_has_a_calibrated_model() -> None:
@@ -53,7 +53,7 @@ def test_a_model_perturbs_reproducibly_and_sorted() -> None:
 
 
 def test_gross_errors_come_at_their_rate_with_their_own_spread() -> None:
-    from pipe_env.sensing_model import DetectionErrorModel
+    from pipe_env.envs.sensing_model import DetectionErrorModel
 
     truth = [StructureOption("bend", 0.2, 0.1, 0.5, math.pi / 2, 1.0)]
     model = DetectionErrorModel(

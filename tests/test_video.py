@@ -32,7 +32,7 @@ def _episode(env: gym.Env) -> int:
 def test_record_video_of_a_full_fidelity_episode_shows_motion(tmp_path: Path, needs_gl: str):
     imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg")
     pytest.importorskip("moviepy")
-    from pipe_env.wrappers import RecordVideo
+    from pipe_env.envs.wrappers import RecordVideo
 
     env = gym.make(
         "pipenav/PipeNav-v0",

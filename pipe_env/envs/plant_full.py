@@ -1,6 +1,6 @@
 """Full fidelity: the MuJoCo robot, the rotating LiDAR, the detector and the primitives' executor.
 
-:class:`PhysicalPlant` implements the plant interface of :mod:`pipe_env.plant` for real:
+:class:`PhysicalPlant` implements the plant interface of :mod:`pipe_env.envs.plant` for real:
 
 - ``advance``: the robot drives forward in stop-and-scan steps of ``scan_interval`` metres (the
   thesis's position-controlled servo sweep at each stop). Every sweep goes to the detector with
@@ -33,17 +33,17 @@ from numpy.typing import NDArray
 
 import detector as detection
 from detector.fusion import StructureTracker, TrackState
+from detector.geometry import Pose
 from detector.options import StructureOption, option_order
 from detector.scan import Scan
 from detector.vocab import Method
-from pipe_env.fidelity import Fidelity
-from pipe_env.geometry import Pose
+from pipe_env.envs.fidelity import Fidelity
+from pipe_env.envs.plant import BACK_OUT, Decision, Outcome, detection_record, goal_edge_position
+from pipe_env.envs.sensing_model import DETECTORS
 from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
 from pipe_env.network import PipeNetwork
-from pipe_env.plant import BACK_OUT, Decision, Outcome, detection_record, goal_edge_position
 from pipe_env.routing import EdgePosition, edge_length, locate
-from pipe_env.sensing_model import DETECTORS
 from primitives.steps import SequenceStatus
 
 #: Fewer valid returns than this in a sweep means the sensor cannot see the pipe ahead.
@@ -212,7 +212,7 @@ class PhysicalPlant:
     @property
     def state(self):
         """Edge state (run, position, heading) of the true sensor pose."""
-        from pipe_env.plant import EdgeState
+        from pipe_env.envs.plant import EdgeState
 
         ep, towards = locate(self.network, self.pose())
         return EdgeState(ep.run_id, ep.s, towards)

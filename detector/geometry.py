@@ -8,19 +8,34 @@ REP-103 (x forward along the pipe, y left, z up when the robot's roll is zero).
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-# re-exported for existing imports: the one wrap_angle lives in the lowest layer (detector)
-from detector.options import wrap_angle as wrap_angle
-
 WORLD_UP = np.array([0.0, 0.0, 1.0])
 #: Fallback "up" hint for frames whose forward axis is (nearly) vertical.
 FALLBACK_UP = np.array([1.0, 0.0, 0.0])
 _VERTICAL_COS = 0.999
+
+
+def wrap_angle(a: Any) -> Any:
+    """``a`` (radians; a real number or an array of them) wrapped to (-pi, pi].
+
+    A real number gives a float (computed with :func:`math.fmod`, fast for the detector's
+    loops); an array gives an array and a 0-d array a float. Both paths give the same values.
+    """
+    if isinstance(a, numbers.Real):
+        w = math.fmod(a + math.pi, 2.0 * math.pi)
+        if w <= 0.0:
+            w += 2.0 * math.pi
+        w -= math.pi
+        return math.pi if w == -math.pi else w
+    arr = np.mod(np.asarray(a, dtype=float) + np.pi, 2.0 * np.pi) - np.pi
+    arr = np.where(arr == -np.pi, np.pi, arr)
+    return float(arr) if np.ndim(arr) == 0 else arr
 
 
 def norm3(v: NDArray[np.float64]) -> float:

@@ -21,7 +21,7 @@ Observation (a flat ``Dict``, fixed shapes, finite bounds):
 - ``options`` (K, 15): per row ``valid``, kind one-hot (straight, reducer, closure, bend,
   junction, back out), ``distance`` (m), ``diameter`` (m), ``cos`` and ``sin`` of the direction,
   ``angle`` (rad), ``confidence``, and ``taken``: how often the robot's own log says it took
-  this way from here before (:mod:`pipe_env.way_log`; 0, 1/3, 2/3, 1 for 3 or more; the
+  this way from here before (:mod:`pipe_env.envs.way_log`; 0, 1/3, 2/3, 1 for 3 or more; the
   back-out row counts back-outs from here); ``goal_alignment``: cosine between the way's
   outgoing axis and the direction to the goal, both from odometry (0 without a goal);
 - ``goal`` (3,): the goal in the robot frame from noisy odometry (m, clipped to +-20; PipeNav);
@@ -40,7 +40,7 @@ Options (keyword arguments of ``gymnasium.make``): ``detector`` in ``"improved"`
 for RL iterations) or ``"full"`` (MuJoCo robot, rotating LiDAR, detector, executor); ``lidar``
 preset name or :class:`~pipe_env.lidar.LidarSpec`: the simulated sensor in full fidelity, and in
 fast fidelity the sensor whose measured error model perturbs the options
-(:func:`~pipe_env.sensing_model.error_model_for` of the detector and the sensor);
+(:func:`~pipe_env.envs.sensing_model.error_model_for` of the detector and the sensor);
 ``network_config`` (a :class:`~pipe_env.generator.NetworkConfig` or its dict);
 ``network`` (a fixed network, dict or file path, instead of generating one per episode);
 ``misalignment`` (a Pose: the true sensor pose relative to its nominal mount, full fidelity);
@@ -62,7 +62,7 @@ the walls translucent, on a light background); ``"rgb_array_list"`` returns the 
 since the last ``render()`` call: in full fidelity one every :attr:`frame_interval` simulated
 seconds while the robot moves (during ``reset`` and each ``step``) plus one at the end of each,
 so a video shows the motion; in fast fidelity (no simulated motion) one per ``reset``/``step``.
-To record an mp4, wrap the env in :class:`pipe_env.wrappers.RecordVideo` (Gymnasium's
+To record an mp4, wrap the env in :class:`pipe_env.envs.wrappers.RecordVideo` (Gymnasium's
 ``RecordVideo``, keeping every motion frame; the stock one keeps one frame per step), with
 ``render_mode="rgb_array"`` or ``"rgb_array_list"``; it needs the ``video`` extra. Videos play
 at ``metadata["render_fps"]`` frames per second. Rendering picks an OpenGL backend on first use
@@ -82,13 +82,11 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
-from detector.options import KINDS, StructureOption
+from detector.geometry import Pose, clamp, norm3
+from detector.options import KINDS, StructureOption, option_errors, option_vector
 from detector.vocab import Kind
-from pipe_env.fidelity import FIDELITIES, Fidelity
-from pipe_env.generator import NetworkConfig, generate_network
-from pipe_env.geometry import Pose, clamp, norm3
-from pipe_env.network import PipeNetwork
-from pipe_env.plant import (
+from pipe_env.envs.fidelity import FIDELITIES, Fidelity
+from pipe_env.envs.plant import (
     BACK_OUT,
     Decision,
     EdgeState,
@@ -96,13 +94,14 @@ from pipe_env.plant import (
     Outcome,
     Plant,
     PlantStatus,
-    drivable,
     goal_edge_position,
-    option_errors,
-    option_vector,
 )
+from pipe_env.envs.sensing_model import DETECTORS, error_model_for
+from pipe_env.envs.way_log import WayLog
+from pipe_env.generator import NetworkConfig, generate_network
+from pipe_env.network import PipeNetwork
+from pipe_env.robot_limits import MAX_TURN, drivable
 from pipe_env.routing import (
-    MAX_TURN,
     EdgePosition,
     edge_geodesic,
     edge_length,
@@ -111,8 +110,6 @@ from pipe_env.routing import (
     route,
     turn_angle,
 )
-from pipe_env.sensing_model import DETECTORS, error_model_for
-from pipe_env.way_log import WayLog
 
 K_OPTIONS = 6
 OPTION_FEATURES = (
@@ -138,7 +135,7 @@ MAX_AUTO_STRUCTURES = 64
 
 _LOW = np.array([0, 0, 0, 0, 0, 0, 0, -1.0, 0.0, -1, -1, 0.0, 0.0, 0.0, -1], dtype=np.float32)
 _HIGH = np.array([1, 1, 1, 1, 1, 1, 1, 5.0, 0.3, 1, 1, math.pi, 1.0, 1.0, 1], dtype=np.float32)
-#: ``taken`` saturates at this many times (see :mod:`pipe_env.way_log`).
+#: ``taken`` saturates at this many times (see :mod:`pipe_env.envs.way_log`).
 MAX_TAKEN = 3
 
 
@@ -322,7 +319,7 @@ class _DecisionEnv(gym.Env):
         self._renderer: Any = None
         self._world_for_render: Any = None
         #: collect frames while the robot moves (``rgb_array_list`` does; so does
-        #: :class:`pipe_env.wrappers.RecordVideo` for ``rgb_array``)
+        #: :class:`pipe_env.envs.wrappers.RecordVideo` for ``rgb_array``)
         self.collect_frames = render_mode == "rgb_array_list"
         self._frames: list[NDArray[np.uint8]] = []
         self._next_frame_time = 0.0
@@ -358,7 +355,7 @@ class _DecisionEnv(gym.Env):
                 self.trigger_distance,
                 error_model=error_model_for(self.detector, self.lidar),
             )
-        from pipe_env.plant_full import PhysicalPlant
+        from pipe_env.envs.plant_full import PhysicalPlant
 
         return PhysicalPlant(
             network,
@@ -819,7 +816,7 @@ def pool_network(config: NetworkConfig, pool_seed: int, index: int) -> PipeNetwo
 
 def _roll_of(pose: Pose) -> float:
     """Roll of a pose about its forward axis relative to the roll-zero frame."""
-    from pipe_env.geometry import frame_from_forward
+    from detector.geometry import frame_from_forward
 
     ref = frame_from_forward(pose.forward)
     return math.atan2(float(pose.up @ ref[:, 1]) * -1.0, float(pose.up @ ref[:, 2]))

@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
+from detector.geometry import clamp
 from detector.options import KINDS, StructureOption, option_order
 from detector.vocab import DETECTORS, Kind, Method
-from pipe_env.geometry import clamp
 
 _SIGMAS = ("distance_sigma", "diameter_sigma", "angle_sigma", "direction_sigma")
 

@@ -10,11 +10,11 @@ An environment step is a decision. The plant answers two calls:
 Both fidelities implement the typed :class:`Plant` protocol (the environment holds a
 ``Plant``; only its factory knows which). :class:`KinematicPlant` (``fidelity="fast"``, this
 module) moves the robot along the centreline graph and senses by perturbing the true options
-with a detector's measured error model (:mod:`pipe_env.sensing_model`); whether a primitive
+with a detector's measured error model (:mod:`pipe_env.envs.sensing_model`); whether a primitive
 survives its option's errors follows the tolerances measured by the primitives' tolerance
 study. It runs thousands of decisions per second for RL iterations. The full fidelity (MuJoCo
 robot, rotating LiDAR, the detector and the primitives' executor) lives in
-:mod:`pipe_env.plant_full`.
+:mod:`pipe_env.envs.plant_full`.
 
 Edge positions: the robot is on a run's edge at ``s`` metres (centreline) from fitting
 ``run.a``, heading towards fitting ``towards``.
@@ -30,28 +30,21 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from detector.options import StructureOption, wrap_angle
-from detector.vocab import StrEnum
-from pipe_env.fidelity import Fidelity
-from pipe_env.geometry import (
+from detector.geometry import (
     Pose,
     clamp,
-    direction_from_angles,
     frame_from_forward,
     norm3,
+    wrap_angle,
 )
+from detector.options import StructureOption, match_option, option_vector
+from detector.vocab import StrEnum
+from pipe_env.envs.fidelity import Fidelity
+from pipe_env.envs.sensing_model import DETECTORS, DetectionErrorModel, error_model_for
 from pipe_env.ground_truth import options_at
-from pipe_env.network import ROBOT_DIAMETER_RANGE, PipeNetwork
-from pipe_env.routing import (
-    MAX_TURN,
-    EdgePosition,
-    edge_length,
-    edge_path,
-    edge_position,
-    locate,
-    turn_angle,
-)
-from pipe_env.sensing_model import DETECTORS, DetectionErrorModel, error_model_for
+from pipe_env.network import PipeNetwork
+from pipe_env.robot_limits import MAX_TURN, ROBOT_DIAMETER_RANGE, drivable
+from pipe_env.routing import EdgePosition, edge_length, edge_path, edge_position, locate, turn_angle
 
 if TYPE_CHECKING:
     from pipe_env.world import PipeWorld
@@ -228,83 +221,6 @@ class Plant(Protocol):
     def close(self) -> None:
         """Release what the plant holds."""
         ...
-
-
-#: Sensed values are noisy: a true 90 deg way may be sensed at 91 deg. The robot attempts ways
-#: sensed up to this much beyond its turn limit (fittings turn at most 90 deg, thesis
-#: assumption ii) and diameters this far outside its range; execution checks the truth.
-SENSED_ANGLE_MARGIN = math.radians(10.0)
-SENSED_DIAMETER_MARGIN = 0.001
-
-
-def drivable(
-    option: StructureOption,
-    diameter_range: tuple[float, float] = ROBOT_DIAMETER_RANGE,
-    max_turn: float = MAX_TURN,
-) -> bool:
-    """Whether the robot would attempt this sensed way on: inside its diameter range and turn
-    limit, with the sensing margins above."""
-    if option.kind in ("closure", "straight"):
-        return False
-    lo, hi = diameter_range
-    return (
-        lo - SENSED_DIAMETER_MARGIN <= option.diameter <= hi + SENSED_DIAMETER_MARGIN
-        and option.angle <= max_turn + SENSED_ANGLE_MARGIN
-    )
-
-
-def option_vector(option: StructureOption) -> NDArray[np.float64]:
-    """Outgoing axis of an option in the sensor frame."""
-    return direction_from_angles(option.angle, option.direction)
-
-
-def match_option(chosen: StructureOption, truth: list[StructureOption]) -> tuple[int, float]:
-    """Index of the true way on closest to ``chosen`` and the angle (rad) between their axes."""
-    # cosine of the angle between two (angle, direction) axes, without building the vectors
-    ca, sa = math.cos(chosen.angle), math.sin(chosen.angle)
-    sep = [
-        math.acos(
-            clamp(
-                ca * math.cos(t.angle)
-                + sa * math.sin(t.angle) * math.cos(chosen.direction - t.direction),
-                -1.0,
-                1.0,
-            )
-        )
-        for t in truth
-    ]
-    k = min(range(len(sep)), key=sep.__getitem__)
-    return k, sep[k]
-
-
-#: Roll-direction errors count only for ways turning more than this (rad): the direction of a
-#: nearly straight way is ill-defined.
-DIRECTION_ERROR_MIN_ANGLE = math.radians(10.0)
-
-
-def option_errors(options: list[StructureOption], truth: list[StructureOption]) -> dict[str, float]:
-    """Largest absolute errors of sensed ``options`` against the true ways they match.
-
-    Each option is compared with its closest true way (:func:`match_option`). Returns
-    ``distance`` and ``diameter`` (m) and ``angle`` (rad) when there are options, and
-    ``direction`` (rad, wrapped to [0, pi]) only when a matched true way turns by more than
-    ``DIRECTION_ERROR_MIN_ANGLE``. Empty when there are no options or no true ways.
-    """
-    if not options or not truth:
-        return {}
-    d_err, dia, ang, dirs = [], [], [], []
-    for o in options:
-        k, _ = match_option(o, truth)
-        t = truth[k]
-        d_err.append(abs(o.distance - t.distance))
-        dia.append(abs(o.diameter - t.diameter))
-        ang.append(abs(o.angle - t.angle))
-        if t.angle > DIRECTION_ERROR_MIN_ANGLE:
-            dirs.append(abs(wrap_angle(o.direction - t.direction)))
-    errs = {"distance": max(d_err), "diameter": max(dia), "angle": max(ang)}
-    if dirs:
-        errs["direction"] = max(dirs)
-    return errs
 
 
 class KinematicPlant:

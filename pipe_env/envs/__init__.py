@@ -1,0 +1,34 @@
+"""The Gymnasium environments and what only they need: the two plants (fast and full), the
+fast fidelity's sensing error models, the fidelity names, the way log and the wrappers.
+
+This package sits above :mod:`primitives` (the full plant runs primitive sequences) and below
+:mod:`agents`. The environments' public names are re-exported here; import a submodule for the
+rest (``pipe_env.envs.plant`` for the plant interface).
+"""
+
+from __future__ import annotations
+
+from pipe_env.envs.env import (
+    GOAL_CLIP,
+    K_OPTIONS,
+    OPTION_FEATURES,
+    SCAN_SHAPE,
+    PipeExploreEnv,
+    PipeNavEnv,
+    pool_network,
+    reachable_runs,
+)
+from pipe_env.envs.fidelity import FIDELITIES, Fidelity
+
+__all__ = [
+    "FIDELITIES",
+    "GOAL_CLIP",
+    "K_OPTIONS",
+    "OPTION_FEATURES",
+    "SCAN_SHAPE",
+    "Fidelity",
+    "PipeExploreEnv",
+    "PipeNavEnv",
+    "pool_network",
+    "reachable_runs",
+]
