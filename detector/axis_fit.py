@@ -111,7 +111,7 @@ def refine_wall_axis(
 
 
 @njit(cache=True)
-def _axis_returns(xyz, r, big_r, gate, u_max):  # type: ignore[no-untyped-def]
+def _axis_returns(xyz, r, big_r, gate, u_max):
     """The wall-like returns (within ``gate`` of the radius ``big_r``, m) an axis refinement
     fits, ``(3, n)`` in their order: with ``u_max`` NaN, the nearest 60 % of them along the
     axis (at least 400); else those nearer than ``u_max`` (m). None (``(3, 0)``) when fewer
@@ -187,7 +187,7 @@ def measure_wall_radius(
 
 
 @njit(cache=True)
-def _wall_returns(u, r, tol, big_r, u_max, reach):  # type: ignore[no-untyped-def]
+def _wall_returns(u, r, tol, big_r, u_max, reach):
     """The returns nearer than ``u_max`` along the axis whose distance ``e`` from the wall of
     radius ``big_r`` is within ``reach`` plus their tolerance ``tol`` (m): their indices and
     ``e`` (m)."""
@@ -311,7 +311,7 @@ def wall_intact(
 
 
 @njit(cache=True)
-def _off_wall_counts(r, tol, big_r):  # type: ignore[no-untyped-def]
+def _off_wall_counts(r, tol, big_r):
     """How many returns at distances ``r`` from the axis lie beyond the wall of radius
     ``big_r`` by more than their tolerance ``tol``, and how many inside it (m)."""
     n_beyond = 0
@@ -347,7 +347,7 @@ def structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> floa
 
 
 @njit(cache=True)
-def _off_wall_entries(cell, g, k, wraps, u, r, tol, big_r, min_points):  # type: ignore[no-untyped-def]
+def _off_wall_entries(cell, g, k, wraps, u, r, tol, big_r, min_points):
     """How many returns lie off the wall by more than twice their tolerance, and for those in
     regions (:func:`detector.grid.label_grid`) of at least ``min_points`` of them, where along
     the axis each entered the structure: ``min(u, u R / r)``, where its beam crossed the wall

@@ -178,6 +178,7 @@ def _refit_without_end_wall(
                     best = (cost, refit)
                     diag["reducer_refit_start"] = ("first fit", "returns left")[k]
             diag["reducer_end_wall_radius"] = r_end
+            assert best is not None  # (the loop above always keeps its first refit)
             return best[1]
     return None
 

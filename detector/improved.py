@@ -300,7 +300,7 @@ def _choose_pose(
         if straight is not None:
             return _with_ring_holes(cloud, big_r, straight)
     diag.pop("axis_pass")
-    candidates = [(pose0, {})]
+    candidates: list[tuple[SensorInPipe, dict[str, Any]]] = [(pose0, {})]
     passes = [0]  # the pass each candidate pose comes from
     xyz_of = [cloud.xyz_v]
     u_start0 = structure_start(cloud, big_r, config)

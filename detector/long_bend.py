@@ -162,6 +162,8 @@ def spread_along_axis(
             sharing -= 1
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     picked = [
-        order[s0 + even_subsample(np.arange(c), k)] for s0, c, k in zip(starts, counts, take) if k
+        order[s0 + even_subsample(np.arange(c), int(k))]
+        for s0, c, k in zip(starts, counts, take)
+        if k
     ]
     return idx[np.sort(np.concatenate(picked))]

@@ -222,7 +222,7 @@ def prepare_cloud(
 
 
 @njit(cache=True)
-def _gather_returns(valid, ranges, src, missing, dirs, bias):  # type: ignore[no-untyped-def]
+def _gather_returns(valid, ranges, src, missing, dirs, bias):
     """The valid returns of the grid cells in raster order: their cells, scan indices, ranges
     less ``bias`` (clamped at 0 m, as :func:`detector.scan.corrected_ranges`) and sensor-frame
     points ``(3, n)``; ``missing``: cells without a beam."""
@@ -255,7 +255,7 @@ def _gather_returns(valid, ranges, src, missing, dirs, bias):  # type: ignore[no
 
 
 @njit(cache=True)
-def _crop(cell, ranges, local, trig, k_cols, horizon):  # type: ignore[no-untyped-def]
+def _crop(cell, ranges, local, trig, k_cols, horizon):
     """The returns nearer than ``horizon`` along the sensor's axis, with their cells on the
     grid cropped to the beam-angle columns that hold returns, their ranges, points ``(3, n)``
     and ``|sin|, |cos|`` of their beam angles ``(2, n)``; and the cropped grid's width."""
@@ -320,7 +320,7 @@ def classify_returns(
 
 
 @njit(cache=True)
-def _classify_kernel(cell, g, k, r_v, sigma_v, u_v, big_r, floor, noise_k, slope, lift):  # type: ignore[no-untyped-def]
+def _classify_kernel(cell, g, k, r_v, sigma_v, u_v, big_r, floor, noise_k, slope, lift):
     tol = np.full((g, k), floor + noise_k * 0.0 + slope * 0.0)
     wall = np.zeros((g, k), dtype=np.bool_)
     beyond = np.zeros((g, k), dtype=np.bool_)
@@ -411,7 +411,7 @@ def azimuth_uniformity(p: NDArray, bins: int = 12) -> float:
     phi = np.arctan2(p[:, 2], p[:, 1])
     k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
     cnt = np.bincount(k, minlength=bins)
-    med = float(partial_percentile(cnt, 50.0))
+    med = float(partial_percentile(cnt.astype(np.float64), 50.0))
     return float(cnt.min()) / med if med > 0 else 0.0
 
 
