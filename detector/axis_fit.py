@@ -20,9 +20,6 @@ from detector.fit_kernels import MODEL_CYLINDER, wall_distances, wall_fit
 from detector.grid import label_grid
 from detector.improved_config import ImprovedConfig
 from detector.pipe_cloud import (
-    ANNEAL,
-    COST_TOL,
-    STEP_TOL,
     PipeCloud,
     covers_azimuth,
     even_subsample,
@@ -31,9 +28,6 @@ from detector.pipe_cloud import (
 )
 from detector.robust import mad_sigma, median, robust_fit
 from detector.transforms import SensorInPipe
-
-#: The wall's own radius replaces the clamped one when they differ by more than this, m.
-RADIUS_DEAD_BAND = 0.00025
 
 
 # --------------------------------------------------------------------------- axis refinement
@@ -92,9 +86,9 @@ def refine_wall_axis(
         iterations=10,
         prior_sigma=prior,
         c_final=0.004,
-        step_tol=STEP_TOL,
-        anneal=ANNEAL,
-        cost_tol=COST_TOL,
+        step_tol=cfg.fit_step_tol,
+        anneal=cfg.fit_anneal,
+        cost_tol=cfg.fit_cost_tol,
         fpar=np.array([big_r]),
     )
     info.update(
@@ -166,7 +160,7 @@ def measure_wall_radius(
     ``big_r`` otherwise, and when they scatter about it by more than their noise explains (a
     curved wall: no straight pipe in view). Records ``wall_radius`` and the returns' scatter
     about it (``wall_radius_rms``, 1.4826 MAD, m) in ``diag``. Corrections below
-    ``RADIUS_DEAD_BAND`` are not made (the clamp reading is as good as the fit there)."""
+    ``cfg.radius_dead_band`` are not made (the clamp reading is as good as the fit there)."""
     xyz = cloud.xyz_v
     idx, e_sel = _wall_returns(
         xyz[0], cloud.r_v, wall_tolerance(cloud, cfg), big_r, u_max, cfg.max_radius_correction
@@ -174,7 +168,7 @@ def measure_wall_radius(
     if idx.size < 100:
         return big_r
     de = median(e_sel)
-    if not RADIUS_DEAD_BAND <= abs(de) <= cfg.max_radius_correction:
+    if not cfg.radius_dead_band <= abs(de) <= cfg.max_radius_correction:
         return big_r
     if not covers_azimuth(xyz, idx, 0.75):
         return big_r

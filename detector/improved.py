@@ -131,7 +131,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.axis_fit import (
-    RADIUS_DEAD_BAND,
     common_wall_fit,
     count_wall_returns,
     measure_wall_radius,
@@ -450,6 +449,7 @@ def _with_ring_holes(
         big_r,
         before,
         cloud.beam_step,
+        cfg,
     )
     if not holes or (weak and len(holes) < sum(not o.is_straight_on for o in det.options)):
         return det  # (nothing, or fewer ways than the openings the fit had to explain)
@@ -785,7 +785,7 @@ def _taper_radius_check(
         diag_pose, {k: v for k, v in det.diagnostics.items() if k.startswith(records)}
     )
     radius = measure_wall_radius(cloud, given.clamped_radius, cfg, u_cap, sub)
-    if abs(radius - big_r) < RADIUS_DEAD_BAND:
+    if abs(radius - big_r) < cfg.radius_dead_band:
         return None
     redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
     if redone.kind != Kind.REDUCER:

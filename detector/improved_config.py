@@ -100,6 +100,25 @@ class ImprovedConfig:
             of its returns.
         short_wall_share_slack: a turn under the given pose may keep this much less of a share
             of its returns than the junction found under a pose refined on a short wall.
+        radius_dead_band: the wall's own radius replaces the clamped one only when they differ
+            by more than this (m; the clamp reading is as good as the fit within it).
+        fit_step_tol: the robust fits stop when no parameter moves by more than this (m, rad):
+            far below the accuracy that matters, and most fits then end in a few iterations.
+        fit_anneal: the robust fits shrink their cut-off over this many iterations, then run
+            to convergence ...
+        fit_cost_tol: ... or until a step lowers the robust cost by less than this fraction.
+        hole_min_step, hole_noise_k: a return enters a side hole that one ring of beams sees
+            (:mod:`detector.grazing`) when it lies this far (m) beyond the wall line through
+            the rings on either side, and at least ``hole_noise_k`` times its radial noise.
+        hole_wall_band: the rings on either side of such a bump must lie on the wall: within
+            this (m, plus ``hole_noise_k`` times their radial noise) of the run's radius.
+        hole_min_returns: fewest returns (and rows of roll) in one hole's bump.
+        hole_sparse_rings: holes are sought only where neighbouring rings meet the wall at
+            least this many radii apart along the axis (``u^2 / R x beam step``).
+        hole_max_rings: most rings of beams a hole's bump may span.
+        hole_max_roll_span: a bump around more than this much of the circumference (rad) is no
+            side hole.
+        hole_max_fit_rms: largest rms (m) of a hole's far-side fit for the hole to be accepted.
     """
 
     tol_floor: float = 0.002
@@ -150,6 +169,18 @@ class ImprovedConfig:
     taper_pose_poor_support: float = 0.6
     taper_pose_min_support: float = 0.9
     short_wall_share_slack: float = 0.02
+    radius_dead_band: float = 0.00025
+    fit_step_tol: float = 1e-6
+    fit_anneal: int = 3
+    fit_cost_tol: float = 1e-4
+    hole_min_step: float = 0.00035
+    hole_noise_k: float = 4.0
+    hole_wall_band: float = 0.002
+    hole_min_returns: int = 6
+    hole_sparse_rings: float = 0.25
+    hole_max_rings: int = 3
+    hole_max_roll_span: float = math.radians(200.0)
+    hole_max_fit_rms: float = 0.002
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -216,6 +247,18 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "taper_pose_poor_support": (float, 0.0, True, 1.0, "a number in [0, 1]"),
     "taper_pose_min_support": (float, 0.0, True, 1.0, "a number in [0, 1]"),
     "short_wall_share_slack": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "radius_dead_band": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "fit_step_tol": (float, 0.0, False, 1.0, "a number in (0, 1] (m, rad)"),
+    "fit_anneal": (int, 1, True, math.inf, "an integer >= 1"),
+    "fit_cost_tol": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "hole_min_step": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "hole_noise_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "hole_wall_band": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "hole_min_returns": (int, 1, True, math.inf, "an integer >= 1"),
+    "hole_sparse_rings": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "hole_max_rings": (int, 1, True, math.inf, "an integer >= 1"),
+    "hole_max_roll_span": (float, 0.0, True, 2.0 * math.pi, "a number in [0, 2 pi] rad"),
+    "hole_max_fit_rms": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
 }
 
 

@@ -22,14 +22,6 @@ from detector.robust import mad_sigma, tukey_weights
 from detector.scan import Scan, radial_noise
 from detector.transforms import SensorInPipe
 
-#: Fits stop when no parameter moves by more than this (metres, radians): far below the
-#: accuracy that matters, and most fits then end in a few iterations.
-STEP_TOL = 1e-6
-#: Fits shrink their robust cut-off over this many iterations, then run to convergence.
-ANNEAL = 3
-#: ... or once a step lowers the robust cost by less than this fraction.
-COST_TOL = 1e-4
-
 
 @dataclass
 class PipeCloud:
