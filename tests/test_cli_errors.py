@@ -33,7 +33,7 @@ def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, s
         (["eval", "goal_greedy", "--network-config", "[1]"], "must be a JSON object"),
         (
             ["eval", "goal_greedy", "--network-config", '{"n_fittings": -3}'],
-            "error: --network-config: NetworkConfig.n_fittings = -3 is invalid",
+            "error: --network-config: NetworkConfig.n_fittings = -3: out of range",
         ),
         (["plot", "/nonexistent/episode.json"], "error: /nonexistent/episode.json: not a readable"),
         (["train", "--config", "/nonexistent/run.yaml"], "error: --config '/nonexistent/run.yaml'"),

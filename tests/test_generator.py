@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import math
 
 import numpy as np
 import pytest
@@ -119,12 +120,29 @@ def test_bounded_retries_then_clear_error() -> None:
     [
         (
             {"n_fittings": 0},
-            r"NetworkConfig.n_fittings = 0 is invalid; allowed: an integer in \[1, 200\]",
+            r"^NetworkConfig.n_fittings = 0: out of range; allowed: an integer 1 to 200$",
         ),
-        ({"kind_weights": {"spiral": 1.0}}, r"kind_weights = \['spiral'\] is invalid"),
-        ({"diameter_range": (0.1, 0.05)}, r"diameter_range = \(0.1, 0.05\) is invalid"),
-        ({"bend_angle_range": (10.0, 90.0)}, r"bend_angle_range .* 30 <= lo <= hi <= 90 deg"),
-        ({"run_length_range": (0.01, 1.0)}, r"run_length_range"),
+        (
+            {"kind_weights": {"spiral": 1.0}},
+            r"^NetworkConfig.kind_weights key = 'spiral': unknown; allowed: mitre_bend",
+        ),
+        (
+            {"diameter_range": (0.1, 0.05)},
+            r"^NetworkConfig.diameter_range = \(0.1, 0.05\): lo above hi; allowed: two numbers",
+        ),
+        (
+            {"bend_deflection_range": (0.1, 1.5)},
+            r"^NetworkConfig.bend_deflection_range\[0\] = 0.1: out of range; allowed: 0.523599 "
+            r"to 1.5708 \(rad\)",
+        ),
+        (
+            {"bend_deflection_step": 15.0},
+            r"^NetworkConfig.bend_deflection_step = 15.0: out of range; allowed: 0 to 1.0472",
+        ),
+        ({"run_length_range": (0.01, 1.0)}, r"^NetworkConfig.run_length_range\[0\] = 0.01"),
+        ({"planar": 1}, r"^NetworkConfig.planar = 1: not a boolean"),
+        ({"start_offset": 1.5}, r"^NetworkConfig.start_offset = 1.5: the start would lie"),
+        ({"max_extent": 1.0}, r"^NetworkConfig.max_extent = 1.0: out of range; allowed: above 1.2"),
     ],
 )
 def test_config_errors_name_the_field(kwargs: dict, message: str) -> None:
@@ -135,12 +153,12 @@ def test_config_errors_name_the_field(kwargs: dict, message: str) -> None:
 def test_config_round_trip() -> None:
     cfg = NetworkConfig(n_fittings=5, planar=False)
     assert NetworkConfig.from_dict(cfg.to_dict()) == cfg
-    with pytest.raises(ValueError, match="no keys"):
+    with pytest.raises(ValueError, match=r"^NetworkConfig.size = 3: no key; allowed: n_fittings"):
         NetworkConfig.from_dict({"size": 3})
 
 
 def test_rng_must_be_a_generator() -> None:
-    with pytest.raises(ValueError, match="numpy.random.Generator"):
+    with pytest.raises(ValueError, match=r"^rng = 42: a int; allowed: a numpy.random.Generator"):
         generate_network(NetworkConfig(), 42)  # type: ignore[arg-type]
 
 
@@ -239,6 +257,23 @@ GOLDEN_DIGESTS: dict[str, list[str]] = {
 GOLDEN_CONFIGS: dict[str, dict] = {
     "default": {},
     "3d_loops": {"n_fittings": 10, "planar": False, "allow_loops": True},
+    "continuous": {
+        "n_fittings": 7,
+        "planar": False,
+        "bend_deflection_step": 0.0,
+        "roll_angle_step": 0.0,
+    },
+    "custom": {
+        "n_fittings": 6,
+        "planar": False,
+        "bend_deflection_range": (math.radians(40.0), math.radians(80.0)),
+        "bend_deflection_step": math.radians(10.0),
+        "roll_angle_step": math.pi / 6,
+    },
+}
+#: The same configs as they were written when NetworkConfig took degrees.
+GOLDEN_DEGREE_CONFIGS: dict[str, dict] = {
+    "default": {},
     "continuous": {"n_fittings": 7, "planar": False, "bend_angle_step": 0.0, "roll_step": 0.0},
     "custom": {
         "n_fittings": 6,
@@ -259,3 +294,45 @@ def test_same_config_and_seed_give_the_recorded_network(name: str) -> None:
     cfg = NetworkConfig(**GOLDEN_CONFIGS[name])
     got = [_digest(generate_network(cfg, np.random.default_rng(seed))) for seed in range(20)]
     assert got == GOLDEN_DIGESTS[name]
+
+
+@pytest.mark.parametrize("name", sorted(GOLDEN_DEGREE_CONFIGS))
+def test_deprecated_degree_fields_give_the_recorded_network(name: str) -> None:
+    kwargs = GOLDEN_DEGREE_CONFIGS[name]
+    if kwargs:
+        with pytest.warns(DeprecationWarning, match=r"\(degrees\) is deprecated"):
+            cfg = NetworkConfig(**kwargs)
+    else:
+        cfg = NetworkConfig(**kwargs)
+    assert cfg == NetworkConfig(**GOLDEN_CONFIGS[name])
+    got = [_digest(generate_network(cfg, np.random.default_rng(seed))) for seed in range(20)]
+    assert got == GOLDEN_DIGESTS[name]
+
+
+def test_deprecated_degree_fields_warn_naming_the_new_field() -> None:
+    with pytest.warns(
+        DeprecationWarning,
+        match=r"NetworkConfig.roll_step \(degrees\) is "
+        r"deprecated .* use roll_angle_step \(radians\)",
+    ):
+        cfg = NetworkConfig.from_dict({"roll_step": 90.0})
+    assert cfg.roll_angle_step == math.pi / 2
+    assert "roll_step" not in cfg.to_dict() and cfg.to_dict()["roll_angle_step"] == math.pi / 2
+    with pytest.warns(DeprecationWarning, match="use bend_deflection_step"):
+        assert NetworkConfig(bend_angle_step=30.0).bend_deflection_step == math.radians(30.0)
+    with pytest.raises(ValueError, match=r"^NetworkConfig.bend_angle_range\[0\] = 10.0: out of"):
+        with pytest.warns(DeprecationWarning):
+            NetworkConfig(bend_angle_range=(10.0, 90.0))
+    with pytest.raises(ValueError, match=r"NetworkConfig.roll_step = 30.0: given with roll_angle"):
+        NetworkConfig(roll_step=30.0, roll_angle_step=0.5)
+
+
+def test_config_angles_are_radians_and_round_trip() -> None:
+    cfg = NetworkConfig(bend_deflection_range=(math.pi / 6, math.pi / 3), roll_angle_step=0.0)
+    assert cfg.bend_deflection_range == (math.pi / 6, math.pi / 3)
+    assert NetworkConfig.from_dict(cfg.to_dict()) == cfg
+    net = generate_network(cfg, np.random.default_rng(1))
+    assert NetworkConfig.from_dict(net.metadata["generator"]) == cfg
+    for f in net.fittings:
+        if f.kind == "bend":
+            assert math.pi / 6 - 1e-6 <= net.geometry[f.id].deflection <= math.pi / 3 + 1e-6
