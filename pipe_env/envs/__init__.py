@@ -1,5 +1,6 @@
-"""The Gymnasium environments and what only they need: the two plants (fast and full), the
-fast fidelity's sensing error models, the fidelity names, the way log and the wrappers.
+"""The Gymnasium environments and what only they need: their config, observation and action
+types, tasks and network sources, the oracle accessor, the two plants (fast and full), the fast
+fidelity's sensing error models, the fidelity names, the way log and the wrappers.
 
 This package sits above :mod:`primitives` (the full plant runs primitive sequences) and below
 :mod:`agents`. The environments' public names are re-exported here; import a submodule for the
