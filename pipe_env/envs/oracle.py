@@ -15,6 +15,10 @@ what they use is named, typed and documented here.
 | :attr:`Oracle.clamped_diameter` | the diameter the robot is clamped in, m | no |
 | :attr:`Oracle.last_scan` | the last LiDAR sweep (full fidelity), None otherwise | no |
 | :attr:`Oracle.detection_log` | one record per detection: sensed and true options | yes |
+| :meth:`Oracle.driven_path` | the path driven so far, world positions, m | yes |
+| :attr:`Oracle.decision_points` | where the robot was asked to decide, world positions, m | yes |
+
+Get it with :func:`oracle_of` (``oracle_of(env)`` for any wrapped pipenav environment).
 """
 
 from __future__ import annotations
@@ -41,6 +45,12 @@ class _Source(Protocol):
 
     @property
     def goal_point(self) -> NDArray[np.float64] | None: ...
+
+    @property
+    def path(self) -> NDArray[np.float64]: ...
+
+    @property
+    def decision_points(self) -> list[NDArray[np.float64]]: ...
 
 
 class Oracle:
@@ -93,3 +103,25 @@ class Oracle:
     def detection_log(self) -> list[dict]:
         """One record per detection since the reset (sensed and true options)."""
         return self._plant().detection_log
+
+    def driven_path(self) -> NDArray[np.float64]:
+        """The path driven so far as (N, 3) world positions, m."""
+        self._plant()
+        return self._env.path
+
+    @property
+    def decision_points(self) -> list[NDArray[np.float64]]:
+        """The true sensor positions where the robot was asked to decide (world frame, m)."""
+        return list(self._env.decision_points)
+
+
+def oracle_of(env: Any) -> Oracle:
+    """The oracle of a pipenav environment (``env`` may be wrapped).
+
+    Raises:
+        TypeError: ``env`` is not a pipenav environment.
+    """
+    oracle = getattr(getattr(env, "unwrapped", env), "oracle", None)
+    if not isinstance(oracle, Oracle):
+        raise TypeError(f"{type(env).__name__} is not a pipenav environment (it has no oracle)")
+    return oracle
