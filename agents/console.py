@@ -71,7 +71,7 @@ class OperatorConsole:
             if not net.goals:
                 end = [f for f in net.fittings if f.kind == "closure" and f.id != "entry"]
                 goal = net.geometry[end[-1].id]
-                net = net.with_goals([goal.centre + goal.ports[0].axis * 0.2])
+                net = net.with_goals([(goal.centre + goal.ports[0].axis * 0.2).tolist()])
             kwargs["network"] = net
         elif args.network:
             kwargs["network"] = PipeNetwork.load(args.network)

@@ -119,6 +119,7 @@ def observation_table() -> str:
     """The observation keys and the options table's columns, with shapes, bounds and meanings
     (from the observation type, :mod:`pipe_env.envs.observations`)."""
     import numpy as np
+    from gymnasium.spaces import Box
 
     from pipe_env.envs.actions import K_OPTIONS
     from pipe_env.envs.observations import OPTION_COLUMNS, DecisionObservation
@@ -126,9 +127,10 @@ def observation_table() -> str:
     space = DecisionObservation(scan_image=True).space()
     lines = [_row("key", "shape", "meaning"), _row("---", "---", "---")]
     for key, sub in space.spaces.items():
-        lines.append(_row(f"`{key}`", str(tuple(sub.shape)), OBSERVATION_DOCS[key]))
+        lines.append(_row(f"`{key}`", str(tuple(sub.shape or ())), OBSERVATION_DOCS[key]))
     lines += ["", _row("column", "name", "range", "meaning"), _row("---", "---", "---", "---")]
     opt = space["options"]
+    assert isinstance(opt, Box)
     for i, col in enumerate(OPTION_COLUMNS):
         lo, hi = float(np.min(opt.low[:, i])), float(np.max(opt.high[:, i]))
         lines.append(_row(str(i), f"`{col.name}`", f"[{lo:.3g}, {hi:.3g}]", col.meaning))
@@ -255,7 +257,11 @@ def render_readme(text: str) -> str:
         if not pattern.search(text):
             raise KeyError(f"README.md has no generated section {name!r}")
         table = make()
-        text = pattern.sub(lambda m, t=table: m.group(1) + t + "\n" + m.group(2), text)
+
+        def put(m: re.Match[str], table: str = table) -> str:
+            return m.group(1) + table + "\n" + m.group(2)
+
+        text = pattern.sub(put, text)
     return text
 
 

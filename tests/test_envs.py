@@ -11,8 +11,8 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import pipe_env
-from detector.validation import ArgumentError
 from agents import GoalGreedy, RandomAgent, RoutePlanner
+from detector.validation import ArgumentError
 from pipe_env import layouts
 from pipe_env.envs import K_OPTIONS, OPTION_FEATURES
 

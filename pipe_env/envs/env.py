@@ -32,7 +32,7 @@ else needs one.
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, Generic, SupportsFloat, TypeVar
+from typing import Any, ClassVar, Generic, SupportsFloat, TypeVar, cast
 
 import gymnasium as gym
 import numpy as np
@@ -87,7 +87,8 @@ __all__ = [
 #: A chain of this many single ways taken automatically truncates the episode.
 MAX_AUTO_STRUCTURES = 64
 
-Observation = dict[str, NDArray[np.float32]]
+#: An observation: the keys of :class:`~pipe_env.envs.observations.DecisionObservation`.
+Observation = dict[str, Any]
 ConfigT = TypeVar("ConfigT", bound=EnvConfig)
 TaskT = TypeVar("TaskT", bound=Task)
 
@@ -110,7 +111,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
     each episode comes from one hook, :meth:`_gen_network`.
     """
 
-    metadata: ClassVar[dict[str, Any]] = {"render_modes": list(RENDER_MODES), "render_fps": 10}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 10}
 
     #: Simulated seconds between the frames collected while the robot moves (full fidelity);
     #: at ``render_fps`` 10 a video plays 5 times faster than the robot drives.
@@ -141,7 +142,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         self.observation_type = DecisionObservation(self.config.scan_image)
         self.action_type = OptionAction()
         self.observation_space = self.observation_type.space()
-        self.action_space = self.action_type.space()  # type: ignore[assignment]
+        self.action_space = self.action_type.space()
         self.task: TaskT = self._make_task()
         #: what agents may know beyond the observation (:mod:`pipe_env.envs.oracle`)
         self.oracle = Oracle(self)
@@ -223,14 +224,18 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
             )
         from pipe_env.envs.plant_full import PhysicalPlant
 
-        return PhysicalPlant(
-            network,
-            cfg.detector,
-            cfg.trigger_distance,
-            lidar=cfg.lidar_spec,
-            misalignment=cfg.misalignment,
-            scan_image=cfg.scan_image,
-            physics=cfg.physics,
+        # (a cast: PhysicalPlant declares ``world`` as always set, the protocol as optional)
+        return cast(
+            Plant,
+            PhysicalPlant(
+                network,
+                cfg.detector,
+                cfg.trigger_distance,
+                lidar=cfg.lidar_spec,
+                misalignment=cfg.misalignment,
+                scan_image=cfg.scan_image,
+                physics=cfg.physics,
+            ),
         )
 
     def reset(
@@ -569,6 +574,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
             ):
                 from pipe_env.world import build_world
 
+                assert self.network is not None
                 self._world_for_render = build_world(self.network, contact_walls=False)
                 self._renderer = None
             world = self._world_for_render
