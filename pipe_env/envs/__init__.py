@@ -9,6 +9,7 @@ rest (``pipe_env.envs.plant`` for the plant interface).
 
 from __future__ import annotations
 
+from pipe_env.envs.config import EnvConfig, ExploreConfig, NavConfig
 from pipe_env.envs.env import (
     GOAL_CLIP,
     K_OPTIONS,
@@ -20,9 +21,15 @@ from pipe_env.envs.env import (
     reachable_runs,
 )
 from pipe_env.envs.fidelity import FIDELITIES, Fidelity
+from pipe_env.envs.oracle import Oracle, oracle_of
 
 __all__ = [
     "FIDELITIES",
+    "EnvConfig",
+    "ExploreConfig",
+    "NavConfig",
+    "Oracle",
+    "oracle_of",
     "GOAL_CLIP",
     "K_OPTIONS",
     "OPTION_FEATURES",
