@@ -44,6 +44,12 @@ CASES: dict[str, tuple[str, dict, str, tuple[int, ...]]] = {
         "route_planner",
         (10, 11),
     ),
+    "nav_full_route_planner": (
+        "pipenav/PipeNav-v0",
+        {"fidelity": "full", "scan_image": True, "network_config": {"n_fittings": 3}},
+        "route_planner",
+        (12,),
+    ),
     "explore_left_hand": (
         "pipenav/PipeExplore-v0",
         {"network_config": {"n_fittings": 8, "allow_loops": True}},
@@ -71,6 +77,7 @@ DIGESTS = {
     "explore_random_no_auto": "2b36a4f6003cf6b687b3f23ce7028c35ba8b006d59759f3fa0c02959c7c1de9b",
     "nav_improved_random": "e2f9f8ac2fa2287890b5c4670c0bfc46c83cbebcb078e65c2b6f9f9821776468",
     "nav_route_planner": "b9cf0cf3a403a75fb5c9a48d09ace58f2de3e76c814f3421b1242a0d2daa311f",
+    "nav_full_route_planner": "c288a5bbf549bd1187a680af357d0f8fb046b4b4916a8a5ae9f380c5ea98a50b",
     "nav_thesis_greedy": "8e384bf3fc26f4fb2da19f251341df2acfa44a31de6e948ea7492bba6498b1ec",
     "nav_truth_pool_scan": "3f344f5bdff376e512d2bff3da22839d0f2ae229755720894c7bfb4c25236b16",
 }
@@ -108,7 +115,13 @@ def trace_digest(case: str, max_steps: int = 40) -> str:
     return h.hexdigest()
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
+#: cases over ~10 s (full fidelity)
+SLOW = {"nav_full_route_planner"}
+
+
+@pytest.mark.parametrize(
+    "case", [pytest.param(c, marks=pytest.mark.slow) if c in SLOW else c for c in sorted(CASES)]
+)
 def test_seeded_rollouts_are_bit_identical(case: str) -> None:
     assert trace_digest(case) == DIGESTS[case]
 

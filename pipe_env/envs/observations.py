@@ -193,10 +193,10 @@ class DecisionObservation:
         if goal is not None:
             rel = pose.rotation.T @ (goal - pose.position)
             obs["goal"] = np.clip(rel, -GOAL_CLIP, GOAL_CLIP).astype(np.float32)
-        if self.scan_image:
+        if self.scan_image:  # a copy: observations never share the plant's array
             img = robot.scan_image
             obs["scan"] = (
-                np.zeros(SCAN_SHAPE, np.float32) if img is None else np.asarray(img, np.float32)
+                np.zeros(SCAN_SHAPE, np.float32) if img is None else np.array(img, np.float32)
             )
         return obs
 
