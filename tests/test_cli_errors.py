@@ -88,7 +88,7 @@ def test_training_config_with_bad_env_kwargs_is_a_usage_error(
     config.write_text("env_kwargs:\n  trigger_distance: -1.0\n")
     code, text = run_cli(["train", "--config", str(config)], capsys)
     assert code == EXIT_USAGE, text
-    assert "env_kwargs: PipeNav-v0: trigger_distance=-1.0 is not allowed" in text, text
+    assert "env_kwargs: PipeNav-v0: trigger_distance = -1.0: out of range" in text, text
 
 
 def test_plot_reports_only_the_files_it_wrote(
