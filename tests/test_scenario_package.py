@@ -158,6 +158,19 @@ def test_packaged_library_is_the_data_folder_of_the_package() -> None:
     ]
 
 
+def test_packaged_scenarios_name_files_that_exist() -> None:
+    """Model and network paths of packaged scenarios are relative to the file: they must
+    survive the files moving inside the package."""
+    named = []
+    for f in scenario_files():
+        data = yaml.safe_load(f.read_text())
+        if str(data.get("agent", "")).endswith(".zip"):
+            named.append(f.parent / data["agent"])
+        if "file" in data["network"]:
+            named.append(f.parent / data["network"]["file"])
+    assert named and all(p.is_file() for p in named), named
+
+
 def test_an_installed_package_finds_its_scenario_files(tmp_path: Path) -> None:
     """Build a wheel from the sources, unpack it as an installed (non-editable) package would
     be, and load the packaged scenarios from it, away from the source tree."""
