@@ -122,10 +122,17 @@ def test_count_limits_match_their_definition(jams: int, limit: int) -> None:
         ({"goal": {"way": 5, "distance": 0.3}}, r"goal.way = 5: no such way; allowed: 0 to 1 "),
         (
             {"start": {"position": [0, 0, 0], "forward": [0, 0, 0]}},
-            r"start.forward = \[0, 0, 0\]: not allowed; allowed: a non-zero direction",
+            r"start.forward = \[0, 0, 0\]: .*; allowed: a non-zero direction",
         ),
         ({"network": {"file": "nope.json"}}, r"network.file = 'nope.json': .*not found"),
-        ({"network": {"generator": {"n_fittings": -3}}}, r"network.generator"),
+        (
+            {"network": {"generator": {"n_fittings": -3}}},
+            r"network.generator.n_fittings = -3: out of range; allowed: an integer 1 to",
+        ),
+        (
+            {"network": {"inline": {"version": 1, "fittings": [{"x": 1}]}}},
+            r"network.inline.fittings\[0\].x = 1: unknown key; allowed: ",
+        ),
     ],
 )
 def test_building_errors_name_the_file_and_the_field(extra: dict, message: str) -> None:

@@ -212,7 +212,7 @@ def _run_navigate(sc: Scenario, net: PipeNetwork, seed: int) -> dict[str, Any]:
     import gymnasium as gym
 
     import pipe_env  # noqa: F401  (registers the environments)
-    from pipe_env.envs import K_OPTIONS, PipeExploreEnv, PipeNavEnv
+    from pipe_env.envs import K_OPTIONS, PipeExploreEnv, PipeNavEnv, oracle_of
 
     env = gym.make(f"pipenav/{sc.env}", max_episode_steps=sc.max_decisions, **env_kwargs(sc, net))
     agent = _make_agent(sc, env)
@@ -231,8 +231,9 @@ def _run_navigate(sc: Scenario, net: PipeNetwork, seed: int) -> dict[str, Any]:
         done = term or trunc
     base = env.unwrapped
     assert isinstance(base, (PipeNavEnv, PipeExploreEnv)), type(base)
-    runs_visited = {net.nearest_centreline_point(p).run_id for p in base.path} - {None}
-    fidelity = getattr(base.plant, "fidelity", sc.fidelity)
+    path = oracle_of(env).driven_path()
+    runs_visited = {net.nearest_centreline_point(p).run_id for p in path} - {None}
+    fidelity = base.config.fidelity
     env.close()
     return {
         "is_success": bool(info["is_success"]),

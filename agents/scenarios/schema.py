@@ -107,7 +107,13 @@ class ScenarioFieldError(ArgumentError, ScenarioError):
     def of(cls, exc: ArgumentError, where: str, prefix: str = "") -> ScenarioFieldError:
         """``exc`` placed in the file ``where``, its field under ``prefix`` (``network.params``)
         when given; an error already in ``where`` keeps its place."""
-        field_path = f"{prefix}.{exc.field}" if prefix else exc.field
+        field_path = exc.field
+        owner, dot, rest = field_path.partition(".")
+        if prefix and dot and owner[:1].isupper():  # NetworkConfig.n_fittings -> n_fittings
+            field_path = rest
+        if prefix:  # a field named like the prefix's last key is that key (network.file)
+            same = field_path == prefix.rpartition(".")[2]
+            field_path = prefix if same else f"{prefix}.{field_path}"
         place = exc.where if exc.where and exc.where.startswith(where) else where
         return cls(field_path, exc.value, exc.allowed, exc.problem, place)
 
