@@ -41,6 +41,7 @@ from xml.etree import ElementTree as ET
 
 from agents.scenarios import (
     DEFAULT_TIMEOUT_S,
+    ResultStatus,
     Scenario,
     ScenarioError,
     ScenarioResult,
@@ -441,12 +442,12 @@ def summary_of(results: Sequence[ScenarioResult], strict: bool = False) -> dict[
     statuses = [r.status for r in results]
     return {
         "total": len(results),
-        "passed": sum(s in ("passed", "unexpected_pass") for s in statuses),
+        "passed": sum(s in (ResultStatus.PASSED, ResultStatus.UNEXPECTED_PASS) for s in statuses),
         "failed": sum(r.counts_as_failure(strict) for r in results),
-        "errors": statuses.count("error"),
-        "expected_failures": statuses.count("expected_failure"),
-        "unexpected_passes": statuses.count("unexpected_pass"),
-        "not_run": statuses.count("not_run"),
+        "errors": statuses.count(ResultStatus.ERROR),
+        "expected_failures": statuses.count(ResultStatus.EXPECTED_FAILURE),
+        "unexpected_passes": statuses.count(ResultStatus.UNEXPECTED_PASS),
+        "not_run": statuses.count(ResultStatus.NOT_RUN),
     }
 
 
@@ -513,21 +514,21 @@ def write_junit(results: Sequence[ScenarioResult], path: str | Path, strict: boo
         status = r.status
         msgs = "; ".join(c.message for c in r.failures)
         detail = "\n".join([c.message for c in r.failures] + [f"replay: {r.replay_command()}"])
-        if status == "not_run":
+        if status == ResultStatus.NOT_RUN:
             ET.SubElement(case, "skipped", message="not run: the suite was interrupted")
-        elif status == "error":
+        elif status == ResultStatus.ERROR:
             err = ET.SubElement(case, "error", message=r.error or "", type="RunError")
             err.text = f"replay: {r.replay_command()}"
-        elif status == "failed" or (status == "expected_failure" and strict):
-            kind = "KnownFailure" if status == "expected_failure" else "CriterionFailed"
+        elif status == ResultStatus.FAILED or (status == ResultStatus.EXPECTED_FAILURE and strict):
+            kind = "KnownFailure" if status == ResultStatus.EXPECTED_FAILURE else "CriterionFailed"
             fail = ET.SubElement(case, "failure", message=msgs, type=kind)
             fail.text = detail
-        elif status == "expected_failure":
+        elif status == ResultStatus.EXPECTED_FAILURE:
             skip = ET.SubElement(
                 case, "skipped", message=f"expected failure (known_failure: {r.known_failure})"
             )
             skip.text = detail
-        elif status == "unexpected_pass":
+        elif status == ResultStatus.UNEXPECTED_PASS:
             note = (
                 f"unexpected pass: the scenario is marked known_failure "
                 f"({r.known_failure}) but passed; remove the note"

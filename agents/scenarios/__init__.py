@@ -79,6 +79,7 @@ from agents.scenarios.files import (
     scenario_files,
 )
 from agents.scenarios.running import (
+    ResultStatus,
     ScenarioResult,
     error_result,
     evaluate_criteria,

@@ -21,13 +21,24 @@ from agents.scenarios.building import build_network, env_kwargs, sensor_settings
 from agents.scenarios.criteria import CriterionResult, evaluate
 from agents.scenarios.files import packaged_scenario_dir
 from agents.scenarios.schema import DEFAULT_DETECT_DISTANCES, Scenario, ScenarioFieldError
-from detector.vocab import Method
+from detector.vocab import Method, StrEnum
 from pipe_env.network import PipeNetwork
 
 __all__ = ["ScenarioResult", "error_result", "evaluate_criteria", "run_scenario"]
 
 #: The option fields whose largest detection error a navigate run records (m, m, rad, rad).
 ERROR_KEYS = ("distance", "diameter", "angle", "direction")
+
+
+class ResultStatus(StrEnum):
+    """The verdict of one scenario and seed, as reports show it."""
+
+    PASSED = "passed"
+    FAILED = "failed"
+    ERROR = "error"  # the run itself failed: a broken file, a dead worker, a timeout
+    EXPECTED_FAILURE = "expected_failure"  # failed, and marked known_failure
+    UNEXPECTED_PASS = "unexpected_pass"  # passed, but marked known_failure
+    NOT_RUN = "not_run"  # interrupted before it ran
 
 
 @dataclass
@@ -68,26 +79,25 @@ class ScenarioResult:
         return bool(self.known_failure) and self.passed
 
     @property
-    def status(self) -> str:
-        """One of ``passed``, ``failed``, ``error``, ``expected_failure``,
-        ``unexpected_pass``, ``not_run``."""
+    def status(self) -> ResultStatus:
+        """The verdict (:class:`ResultStatus`)."""
         if self.not_run:
-            return "not_run"
+            return ResultStatus.NOT_RUN
         if self.error is not None:
-            return "error"
+            return ResultStatus.ERROR
         if self.expected_failure:
-            return "expected_failure"
+            return ResultStatus.EXPECTED_FAILURE
         if self.unexpected_pass:
-            return "unexpected_pass"
-        return "passed" if self.passed else "failed"
+            return ResultStatus.UNEXPECTED_PASS
+        return ResultStatus.PASSED if self.passed else ResultStatus.FAILED
 
     def counts_as_failure(self, strict: bool = False) -> bool:
         """Whether this result fails the suite: errors and failures always; not run never;
         an expected failure or an unexpected pass only when ``strict``."""
         status = self.status
-        if status in ("error", "failed"):
+        if status in (ResultStatus.ERROR, ResultStatus.FAILED):
             return True
-        if status in ("expected_failure", "unexpected_pass"):
+        if status in (ResultStatus.EXPECTED_FAILURE, ResultStatus.UNEXPECTED_PASS):
             return strict
         return False
 
