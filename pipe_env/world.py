@@ -35,6 +35,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.validation import check_number
 from pipe_env.contact_walls import BoxPanel, HullPiece, fitting_pieces, run_panels
 from pipe_env.meshes import TriangleMesh, fitting_shell, run_shell, to_triangle_mesh
 from pipe_env.network import PipeNetwork
@@ -270,8 +271,7 @@ class NearContacts:
                 f"the world holds {m.npair} predefined pairs; NearContacts needs "
                 f"{CONTACT_PAIR_POOL} (a world built with contact_walls=True)"
             )
-        if not (math.isfinite(reach) and 0.001 <= reach <= 0.1):
-            raise ValueError(f"reach = {reach!r} is invalid; allowed [0.001, 0.1] m")
+        check_number("reach", reach, 0.001, 0.1, "m", where="NearContacts")
         self.world = world
         self.model = m
         self.geoms = np.asarray(geoms, dtype=int)

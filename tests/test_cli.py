@@ -179,8 +179,8 @@ def test_bad_layout_parameters_and_values_are_usage_errors(tmp_path: Path) -> No
     assert proc.returncode == 1 and "Traceback" not in proc.stdout + proc.stderr
     assert "ERROR too_wide [seed=0]" in proc.stdout
     assert (
-        "too_wide.yaml: network.params = {'diameter': 0.5}: layout parameter diameter=0.5 is "
-        "outside" in proc.stdout
+        "too_wide.yaml: network.params.diameter = 0.5: out of range; allowed: 0.02 to 0.25 (m)"
+        in proc.stdout
     )
     (tmp_path / "too_wide.yaml").unlink()
     write(tmp_path, "unhashable", {"network": {"layout": [1]}, "sensor": {"preset": ["ideal"]}})

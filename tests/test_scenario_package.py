@@ -113,7 +113,7 @@ def test_count_limits_match_their_definition(jams: int, limit: int) -> None:
     [
         (
             {"network": {"layout": "t_junction", "params": {"diameter": 0.5}}},
-            r"network.params = \{'diameter': 0.5\}: layout parameter diameter=0.5 is outside",
+            r"network.params.diameter = 0.5: out of range; allowed: 0.02 to 0.25 \(m\)",
         ),
         (
             {"network": {"layout": "t_junction", "params": {"diametre": 0.1}}},
