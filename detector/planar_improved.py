@@ -17,7 +17,9 @@ size as the diameter, this method fits lines, using the clamped diameter:
    of a turn seen head on (inside returns, nearly parallel) gives the second wall and the
    outgoing diameter; without it the outgoing pipe has the clamped diameter. The outgoing axis
    is the mid-line (or the far wall moved in by the radius); where it crosses the incoming axis
-   is the distance. Two openings, or a pipe that visibly goes on, make a junction.
+   is the distance. Two openings, or a pipe that visibly goes on (returns on the incoming
+   wall's line well beyond the structure, or far ahead near the axis, not on an outgoing
+   pipe's walls), make a junction.
 5. **No opening.** Inside returns on one line across the axis are a closure (end wall) at
    their mean ``u``; otherwise a reducer: the most frequent inner ``|v|`` is the new radius and
    a robust line ``|v|(u)`` through the taper gives where it starts. Beyond returns on both
@@ -225,6 +227,7 @@ def _openings(
     dists = []
     confs = []
     gap_diag = []
+    explained = np.zeros(u.shape, dtype=bool)  # returns on an outgoing pipe's walls
     for sgn, m in sides:
         # the outgoing pipe: two walls at +-rho about an axis through (L, 0) deflected by
         # theta towards this side; its returns are the side's beyond returns and the inside
@@ -247,15 +250,18 @@ def _openings(
         options.append(StructureOption("bend", big_l, 2.0 * rho, direction, theta, conf))
         dists.append(big_l)
         confs.append(conf)
+        explained |= np.abs(_line_res(u, v * sgn, np.array([big_l, theta, rho]))) <= tol
         gap_diag.append({"side": sgn, "rms": rms, "support": n_sup, "rho": rho})
     diag["openings"] = gap_diag
     if not options:
         diag["reason"] = "no opening gave a physical outgoing axis"
         return Detection.straight(confidence=0.1, **diag)
     big_l = float(np.mean(dists))
-    # straight on: the incoming walls seen again well beyond the structure, or a far centre
-    central = np.abs(v) <= 0.2 * big_r
-    far_wall = wall & (u > big_l + 2.0 * big_r)
+    # straight on: the incoming walls seen again well beyond the structure, or a far centre;
+    # returns on an outgoing pipe's walls do not count (under range noise those of a 45 deg
+    # bend's outgoing wall, where it crosses the incoming wall's line, pass for that wall)
+    central = (np.abs(v) <= 0.2 * big_r) & ~explained
+    far_wall = wall & (u > big_l + 2.0 * big_r) & ~explained
     goes_on = bool(far_wall.sum() >= 3) or (
         bool(central.any()) and float(np.max(u[central])) > big_l + 3.0 * big_r
     )
