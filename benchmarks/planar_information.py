@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import detector
+from detector.geometry import Pose
 from detector.options import option_errors
 from pipe_env.layouts import make_layout
 from pipe_env.lidar import LidarSpec, RotatingLidar, get_preset
@@ -110,6 +111,14 @@ class Row:
     d_moved: float  # separation from the true structure moved by the distance tolerance
 
 
+def _start(net: Any) -> Pose:
+    """The layout's start pose (every layout has one)."""
+    start = net.start_pose
+    if start is None:
+        raise ValueError("the layout has no start pose")
+    return start
+
+
 def _noiseless(spec: LidarSpec) -> LidarSpec:
     return replace(
         spec, noise_sigma=0.0, noise_sigma_rel=0.0, dropout=0.0, angular_jitter=0.0, bias=0.0
@@ -120,7 +129,7 @@ def _profile(layout: str, params: dict[str, float], spec: LidarSpec, offset: flo
     """The noiseless plane-0 scan of ``layout`` with the sensor ``offset`` m past the start."""
     net = make_layout(layout, **params)
     lidar = RotatingLidar(build_world(net, contact_walls=False), _noiseless(spec))
-    pose = net.start_pose.translated(offset)
+    pose = _start(net).translated(offset)
     scan = lidar.scan_plane(pose, 0.0, np.random.default_rng(0))
     return scan.ranges[0], scan.valid[0]
 
@@ -191,7 +200,7 @@ def method_share(case: Case, distance: float, draws: int, seed: int) -> tuple[fl
     net = make_layout(case.layout, **case.params)
     spec = get_preset(case.preset)
     lidar = RotatingLidar(build_world(net, contact_walls=False), spec)
-    pose = net.start_pose.translated(case.params["distance"] - distance)
+    pose = _start(net).translated(case.params["distance"] - distance)
     truth = net.structures_ahead(pose, 10.0)
     diameter = net.inner_diameter_at(pose.position)
     ok, wrong = 0, Counter[str]()
