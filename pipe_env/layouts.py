@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -307,7 +308,7 @@ def cross_junction(
 
 
 #: Layout builders by name, for configuration files and the CLI.
-LAYOUTS = {
+LAYOUTS: dict[str, Callable[..., PipeNetwork]] = {
     "straight": straight,
     "closure": closure,
     "reducer": reducer,

@@ -136,7 +136,7 @@ class LidarSpec:
     def beam_angles(self) -> NDArray[np.float64]:
         """(B,) in-plane beam angles, radians, symmetric about forward."""
         half = 0.5 * (self.n_beams - 1) * self.beam_step
-        return -half + self.beam_step * np.arange(self.n_beams)
+        return -half + self.beam_step * np.arange(self.n_beams, dtype=np.float64)
 
     @property
     def is_noiseless(self) -> bool:

@@ -105,7 +105,7 @@ def network_contact_pieces(
     network: PipeNetwork,
 ) -> list[tuple[str, list[HullPiece], list[BoxPanel]]]:
     """Contact pieces per element: (element id, hull pieces, box panels)."""
-    out = []
+    out: list[tuple[str, list[HullPiece], list[BoxPanel]]] = []
     for r in network.runs:
         if network.straight_length(r.id) <= 1e-6:
             continue
@@ -305,7 +305,18 @@ class NearContacts:
         self._last: NDArray[np.float64] | None = None
         self._motion = 0.0
         self._pairs: tuple[NDArray[np.int_], NDArray[np.int_]] | None = None
-        self._coarse: tuple[NDArray[np.float64], ...] | None = None
+        # the coarse selection: (geom positions when made, piece indices, their centres,
+        # rotations and half sizes)
+        self._coarse: (
+            tuple[
+                NDArray[np.float64],
+                NDArray[np.intp],
+                NDArray[np.float64],
+                NDArray[np.float64],
+                NDArray[np.float64],
+            ]
+            | None
+        ) = None
         self.n_pairs = 0
         self.selections = 0
         self.fallbacks = 0
