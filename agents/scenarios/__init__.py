@@ -103,6 +103,7 @@ __all__ = [
     "Scenario",
     "ScenarioError",
     "ScenarioFieldError",
+    "ResultStatus",
     "ScenarioResult",
     "build_network",
     "discover",
