@@ -70,7 +70,8 @@ class SequentialNetworks(gym.Wrapper):
         return self.env.reset(seed=episode_seed, options={**(options or {}), "network": network})
 
     def action_masks(self) -> np.ndarray:
-        return self.env.unwrapped.action_masks()
+        base: Any = self.env.unwrapped
+        return np.asarray(base.action_masks())
 
 
 class PolicyAgent:
@@ -213,13 +214,16 @@ def _evaluate_policy(
     torch.set_num_threads(1)
     if is_maskable_model(path):
         from sb3_contrib import MaskablePPO
-        from sb3_contrib.common.maskable.evaluation import evaluate_policy
+        from sb3_contrib.common.maskable.evaluation import evaluate_policy as masked_evaluation
 
+        evaluate_policy: Callable[..., Any] = masked_evaluation
         model: Any = MaskablePPO.load(str(path), device="cpu")
         masking: dict[str, Any] = {"use_masking": True}
     else:
         from stable_baselines3 import PPO
-        from stable_baselines3.common.evaluation import evaluate_policy  # type: ignore[no-redef]
+        from stable_baselines3.common.evaluation import evaluate_policy as plain_evaluation
+
+        evaluate_policy = plain_evaluation
 
         model = PPO.load(str(path), device="cpu")
         masking = {}

@@ -58,6 +58,15 @@ def trimmed_rss_mb() -> float:
     return rss_mb()
 
 
+def live_objects() -> tuple[int, int]:
+    """(Python objects the garbage collector tracks, live MuJoCo worlds): what the process
+    holds besides the allocator's pages; both stay flat when nothing accumulates."""
+    from pipe_env.world import PipeWorld
+
+    objs = gc.get_objects()
+    return len(objs), sum(1 for o in objs if isinstance(o, PipeWorld))
+
+
 def soak_full(episodes: int, every: int, seed: int = 0) -> list[tuple[int, float]]:
     """Run ``episodes`` full-fidelity episodes; (episodes done, RSS MB) every ``every``."""
     env = gym.make(
@@ -77,9 +86,11 @@ def soak_full(episodes: int, every: int, seed: int = 0) -> list[tuple[int, float
             gc.collect()
             raw = rss_mb()
             marks.append((ep, trimmed_rss_mb()))
+            objects, models = live_objects()
             print(
                 f"full  episode {ep:5d}/{episodes}: RSS {raw:7.1f} MB, after malloc_trim "
-                f"{marks[-1][1]:7.1f} MB ({time.perf_counter() - t0:6.0f} s)",
+                f"{marks[-1][1]:7.1f} MB, {objects} objects, {models} MuJoCo world(s) "
+                f"({time.perf_counter() - t0:6.0f} s)",
                 flush=True,
             )
     env.close()
