@@ -1,6 +1,10 @@
 """The executor: runs primitive sequences on the MuJoCo robot at a fixed control rate.
 
-It owns the robot's drive state (see the drive model in :mod:`pipe_env.robot`):
+It owns the robot's drive state (see the drive model in :mod:`pipe_env.robot`), held in named
+parts: :class:`~primitives.command.DriveCommand` (``Executor.command``: drive target, commanded
+heading, steering, roll, bends), :class:`~primitives.vclamp.VClamp` (``Executor.vclamp``: the
+clamping V's angle and side), :class:`~primitives.path.DrivenPath` (``Executor.path``) and
+:class:`~primitives.telemetry.Telemetry` (``Executor.telemetry``: the current run's rows):
 
 - the drive target of the front module, moved every control tick (``CONTROL_DT``) forward along
   the front's heading, turned by the steering bend, and re-anchored to where the walls let the

@@ -21,6 +21,12 @@
 With ``detector="ground_truth"`` the robot still drives and turns physically, but the options
 come from the plant drawing at the pose where a real detector would have confirmed them (the
 oracle ablation of the detection).
+
+Sensing while driving is :class:`SweepSensing` (the executor's scan callback: goal, log, axis
+following, cadence, stop/rescan verdicts) over a detector source: :class:`DetectorSource` (the
+detector with the plant's tracker) or :class:`OracleSource` (the plant drawing).
+:meth:`PhysicalPlant.close` releases the MuJoCo world; a closed plant builds it again on
+:meth:`~PhysicalPlant.reset`.
 """
 
 from __future__ import annotations
