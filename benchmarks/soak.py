@@ -16,7 +16,7 @@ Measured (full fidelity, small generated networks): the plain RSS climbs from ab
 once), and the live Python objects stay at one world, one plant and at most one renderer.
 
 Usage: python benchmarks/soak.py [--episodes 100] [--decisions 1000000] [--every 10]
-       [--max-growth-mb 30] [--write-docs]
+       [--max-steps 12] [--max-growth-mb 30] [--write-docs]
 """
 
 from __future__ import annotations
@@ -67,14 +67,17 @@ def live_objects() -> tuple[int, int]:
     return len(objs), sum(1 for o in objs if isinstance(o, PipeWorld))
 
 
-def soak_full(episodes: int, every: int, seed: int = 0) -> list[tuple[int, float]]:
-    """Run ``episodes`` full-fidelity episodes; (episodes done, RSS MB) every ``every``."""
+def soak_full(
+    episodes: int, every: int, seed: int = 0, max_steps: int = 12
+) -> list[tuple[int, float]]:
+    """Run ``episodes`` full-fidelity episodes of at most ``max_steps`` decisions; (episodes
+    done, RSS MB) every ``every``."""
     env = gym.make(
         "pipenav/PipeNav-v0",
         fidelity="full",
         detector="improved",
         network_config={"n_fittings": 6, "planar": False, "allow_loops": True},
-        max_episode_steps=12,
+        max_episode_steps=max_steps,
     )
     rng = np.random.default_rng(seed)
     marks = [(0, rss_mb())]
@@ -136,14 +139,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=100, help="full-fidelity episodes")
     parser.add_argument("--decisions", type=int, default=1_000_000, help="fast decisions")
     parser.add_argument("--every", type=int, default=10, help="print RSS every this many episodes")
+    parser.add_argument(
+        "--max-steps", type=int, default=12, help="decisions per full-fidelity episode at most"
+    )
     parser.add_argument("--max-growth-mb", type=float, default=30.0)
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args(argv)
-    if args.episodes < 0 or args.decisions < 0 or args.every < 1:
-        parser.error("--episodes and --decisions must be >= 0 and --every >= 1")
+    if args.episodes < 0 or args.decisions < 0 or args.every < 1 or args.max_steps < 1:
+        parser.error("--episodes and --decisions must be >= 0, --every and --max-steps >= 1")
     rows: list[tuple[str, Any, float, float, float]] = []
     if args.episodes:
-        marks = soak_full(args.episodes, args.every)
+        marks = soak_full(args.episodes, args.every, max_steps=args.max_steps)
         rows.append(("full episodes", args.episodes, *growth(marks)))
     if args.decisions:
         marks = soak_fast(args.decisions)
