@@ -76,3 +76,16 @@ def test_bad_parallel_arguments_name_the_field() -> None:
         evaluate("route_planner", n_episodes=2, jobs=0)
     with pytest.raises(ValueError, match="backend = 'threads'"):
         evaluate("route_planner", n_episodes=2, jobs=2, backend="threads")
+
+
+@pytest.mark.slow
+def test_parallel_full_fidelity_evaluation_gives_the_sequential_figures() -> None:
+    """The MuJoCo loop in two worker processes: the same outcomes as in one."""
+    kwargs = {
+        "fidelity": "full",
+        "network_config": {"n_fittings": 3, "planar": True, "allow_loops": False},
+        "max_episode_steps": 6,
+    }
+    sequential = evaluate("route_planner", n_episodes=2, env_kwargs=kwargs)
+    parallel = evaluate("route_planner", n_episodes=2, env_kwargs=kwargs, jobs=2)
+    assert parallel.to_dict() | {"wall_seconds": 0} == sequential.to_dict() | {"wall_seconds": 0}
