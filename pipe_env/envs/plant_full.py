@@ -51,6 +51,7 @@ from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
 from pipe_env.network import PipeNetwork
 from pipe_env.routing import EdgePosition, edge_length, locate
+from pipe_env.world import PipeWorld
 from primitives.steps import SequenceStatus
 
 #: Fewer valid returns than this in a sweep means the sensor cannot see the pipe ahead.
@@ -177,7 +178,7 @@ class PhysicalPlant:
         from primitives.executor import Executor
 
         self.executor = Executor.for_network(self.network, **self._executor_args)
-        self.world: Any = self.executor.world
+        self.world: PipeWorld | None = self.executor.world
         self.robot = self.executor.robot
         self._started = False
 
