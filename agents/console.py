@@ -26,7 +26,8 @@ from rich.table import Table
 
 import pipe_env  # noqa: F401  (registers the environment ids)
 from detector.options import direction_name
-from pipe_env.envs import K_OPTIONS
+from pipe_env.envs.actions import K_OPTIONS
+from pipe_env.envs.oracle import oracle_of
 from pipe_env.plotting import save_figure
 
 
@@ -70,7 +71,7 @@ class OperatorConsole:
             if not net.goals:
                 end = [f for f in net.fittings if f.kind == "closure" and f.id != "entry"]
                 goal = net.geometry[end[-1].id]
-                net = net.with_goals([goal.centre + goal.ports[0].axis * 0.2])
+                net = net.with_goals([(goal.centre + goal.ports[0].axis * 0.2).tolist()])
             kwargs["network"] = net
         elif args.network:
             kwargs["network"] = PipeNetwork.load(args.network)
@@ -78,12 +79,12 @@ class OperatorConsole:
         return cls(env, seed=args.seed, out=args.out)
 
     def table(self, info: dict[str, Any]) -> Table:
-        base = self.env.unwrapped
-        dec = base.decision
+        oracle = oracle_of(self.env)
+        dec = oracle.decision
         title = f"structure ahead: {dec.kind}" if dec is not None else "no decision pending"
         t = Table(
             title=title,
-            caption=f"clamped diameter {base.plant.clamped_diameter * 1000:.0f}"
+            caption=f"clamped diameter {oracle.clamped_diameter * 1000:.0f}"
             f" mm, jams {info['jams']}, travelled {info['travelled']:.2f} m",
         )
         for col in ("key", "way", "angle", "direction", "distance", "diameter", "confidence"):
@@ -113,8 +114,8 @@ class OperatorConsole:
             matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
 
-        base = self.env.unwrapped
-        scan = getattr(base.plant, "last_scan", None)
+        oracle = oracle_of(self.env)
+        scan = oracle.last_scan
         if self._fig is None:
             self._fig = plt.figure(figsize=(7, 6))
         fig = self._fig
@@ -131,7 +132,13 @@ class OperatorConsole:
             from pipe_env.plotting import draw_network
 
             ax = fig.add_subplot()
-            draw_network(ax, base.network, "top", path=base.path, decisions=base.decision_points)
+            draw_network(
+                ax,
+                oracle.network,
+                "top",
+                path=oracle.driven_path(),
+                decisions=oracle.decision_points,
+            )
             ax.set_title("map (fast fidelity has no scans)")
         self.out.mkdir(parents=True, exist_ok=True)
         target = self.out / "view.png"
@@ -148,7 +155,7 @@ class OperatorConsole:
             return 2
         # the reset's drive can end the episode (jams, or a chain of single ways too long to
         # follow): nothing to ask
-        done = self.env.unwrapped.decision is None
+        done = oracle_of(self.env).decision is None
         while True:
             self.console.print(self.table(info))
             where = self.picture()

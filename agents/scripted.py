@@ -3,9 +3,9 @@
 All are built with the environment they act in and choose with ``act(observation, info)``,
 returning an action index (the options table row; the last row backs out).
 
-- :class:`RoutePlanner`: the ideal operator. It knows the plant drawing and its true pose,
-  plans the shortest drivable route to the goal and picks the detected option closest to the
-  route's next pipe.
+- :class:`RoutePlanner`: the ideal operator. It knows the plant drawing and its true pose
+  (through the environment's oracle, :mod:`pipe_env.envs.oracle`), plans the shortest drivable
+  route to the goal and picks the detected option closest to the route's next pipe.
 - :class:`GoalGreedy`: picks the option whose outgoing direction best matches the goal vector
   (from odometry), trying other ways at a junction it has come back to.
 - :class:`LeftHand`: the wall follower for exploration: leftmost way first, the next one to
@@ -20,33 +20,36 @@ options table, the robot's own odometry log of the ways it already took from her
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
 
 from detector.options import option_vector
-from pipe_env.envs import K_OPTIONS, OPTION_FEATURES
+from pipe_env.envs.actions import BACK_ROW
+from pipe_env.envs.observations import ANGLE, COS_DIR, SIN_DIR, TAKEN
+from pipe_env.envs.oracle import oracle_of
 from pipe_env.envs.plant import ExecutionTolerance
 from pipe_env.robot_limits import ROBOT_DIAMETER_RANGE
 from pipe_env.routing import route
 
-BACK = K_OPTIONS - 1
-TAKEN = OPTION_FEATURES.index("taken")
+BACK = BACK_ROW
 #: A detected way counts as the planned one within this angle (the executor's match limit).
 MATCH_ANGLE = ExecutionTolerance().match
 
 
 def _mask(info: dict[str, Any], env: gym.Env) -> NDArray[np.bool_]:
     m = info.get("action_mask")
-    return np.asarray(m, dtype=bool) if m is not None else env.unwrapped.action_masks()
+    if m is None:
+        m = cast(Any, env.unwrapped).action_masks()
+    return np.asarray(m, dtype=bool)
 
 
 def _option_vectors(observation: dict[str, NDArray]) -> NDArray[np.float64]:
     """Outgoing axes (K, 3) in the robot frame from the options table."""
     t = np.asarray(observation["options"], dtype=float)
-    angle, c, s = t[:, 11], t[:, 9], t[:, 10]
+    angle, c, s = t[:, ANGLE], t[:, COS_DIR], t[:, SIN_DIR]
     return np.stack([np.cos(angle), np.sin(angle) * c, np.sin(angle) * s], axis=1)
 
 
@@ -77,19 +80,20 @@ class RoutePlanner(_Agent):
     """The ideal operator: shortest drivable route on the plant drawing from the true pose."""
 
     def act(self, observation: dict[str, NDArray], info: dict[str, Any]) -> int:
-        env = self.env.unwrapped
+        oracle = oracle_of(self.env)
         mask = _mask(info, self.env)
-        dec = env.decision
+        dec = oracle.decision
         if dec is None or not mask[:BACK].any():
             return BACK
-        goal = env.network.goals[0] if env.network.goals else None
+        network = oracle.network
+        goal = network.goals[0] if network.goals else None
         if goal is None:
             return int(np.flatnonzero(mask)[0])
-        planned = route(env.network, env.plant.pose(), goal, diameter_range=ROBOT_DIAMETER_RANGE)
+        planned = route(network, oracle.true_pose(), goal, diameter_range=ROBOT_DIAMETER_RANGE)
         if planned is None or not planned.nodes or planned.nodes[0] != dec.node_id:
             return BACK
         run_out = planned.runs[1]
-        want = env.network.geometry[dec.node_id].port(run_out).axis
+        want = network.geometry[dec.node_id].port(run_out).axis
         best, best_sep = BACK, math.inf
         for i, o in enumerate(dec.options[:BACK]):
             if not mask[i]:

@@ -95,6 +95,13 @@ class Record:
     arc_end_seen: bool | None = None
 
 
+def start_of(net: Any) -> Pose:
+    """The start pose of a layout's network (every layout sets one)."""
+    if net.start_pose is None:
+        raise ValueError(f"{net!r}: the layout has no start pose")
+    return net.start_pose
+
+
 def rot_from_tilt(yaw: float, pitch: float) -> np.ndarray:
     cy, sy = math.cos(yaw), math.sin(yaw)
     cp, sp = math.cos(pitch), math.sin(pitch)
@@ -318,7 +325,7 @@ class Runner:
         rng = self.rng if rng is None else rng
         net = layouts.make_layout(case.layout, **case.params, distance=0.5)
         lid = self.lidar(net, sensor, misalignment)
-        ref_x = net.start_pose.position[0] + 0.5
+        ref_x = start_of(net).position[0] + 0.5
         out = []
         for dist in distances:
             if dist < arc_lead(case):
@@ -486,7 +493,7 @@ def planar_study(rng: np.random.Generator, distances: np.ndarray) -> tuple[str, 
     for d in (0.06, 0.1):
         net = layouts.mitre_bend(diameter=d, angle=math.pi / 2, direction=math.pi, distance=0.5)
         lid = RotatingLidar(build_world(net, contact_walls=False), "ideal")
-        ref_x = net.start_pose.position[0] + 0.5
+        ref_x = start_of(net).position[0] + 0.5
         recs = []
         for dist in distances:
             pose = Pose(np.array([ref_x - dist, 0.0, 0.0]), np.eye(3))
@@ -774,15 +781,34 @@ def plots(out: Path, series_3d: list, sweep: list, planar: list) -> list[str]:
     return written
 
 
+#: Layouts the warm-up detects on (the compiled kernels of straight pipe, turns, long bends,
+#: junctions and reducers), 100 mm, 25 cm ahead.
+WARM_UP_LAYOUTS: tuple[tuple[str, dict[str, Any]], ...] = (
+    ("straight", {}),
+    ("mitre_bend", {"angle": math.pi / 2, "direction": 0.5}),
+    ("long_bend", {"angle": math.pi / 3, "direction": 0.5, "radius_factor": 2.0}),
+    ("t_junction", {"branch_diameter": 0.075, "direction": 0.5, "entry": "run"}),
+    ("reducer", {"diameter_in": 0.1, "diameter_out": 0.06, "taper_length": 0.1}),
+)
+
+
 def warm_up() -> None:
-    """Detect once with each method on a scan of its own (a straight pipe, ideal sensor, its
-    own seed), untimed: the compiled kernels load (or compile) on their first call, and the
-    study's speed figures are per scan, not per process."""
-    net = layouts.straight(diameter=0.1, distance=1.0)
-    lid = RotatingLidar(build_world(net, contact_walls=False), "ideal")
-    scan = lid.scan(Pose(np.zeros(3), np.eye(3)), np.random.default_rng(0))
-    for m in METHODS:
-        detect(scan, 0.1, m)
+    """Detect once with each method on a scan of each of :data:`WARM_UP_LAYOUTS` (ideal
+    sensor, its own seed), untimed: the compiled kernels load (or compile) on their first call
+    with each argument type, and the study's speed figures are per scan, not per process."""
+    rng = np.random.default_rng(0)
+    for layout, params in WARM_UP_LAYOUTS:
+        if layout == "straight":
+            net = layouts.straight(diameter=0.1, distance=1.0)
+            pose = Pose(np.zeros(3), np.eye(3))
+        else:
+            args = params if layout == "reducer" else {"diameter": 0.1, **params}
+            net = layouts.make_layout(layout, **args, distance=0.5)
+            pose = Pose(start_of(net).position + np.array([0.25, 0.0, 0.0]), np.eye(3))
+        lid = RotatingLidar(build_world(net, contact_walls=False), "ideal")
+        scan = lid.scan(pose, rng)
+        for m in METHODS:
+            detect(scan, 0.1, m)
 
 
 def speed_table(runner: Runner, sensors: list[str]) -> str:

@@ -21,6 +21,7 @@ from detector.planar import detect_planar_thesis
 from detector.planar_improved import detect_planar_improved
 from detector.scan import Scan, spec_value
 from detector.spatial import detect_spatial_thesis
+from detector.validation import fail
 from detector.vocab import Method
 
 #: Methods of :func:`detect`.
@@ -37,27 +38,27 @@ MAX_CLAMPED_DIAMETER = 2.0
 
 
 def _check(scan: Any, clamped_diameter: Any) -> float:
+    """``clamped_diameter`` (m) as a float, checked against the scan's sensor; ``scan`` must
+    be a :class:`Scan`."""
     if not isinstance(scan, Scan):
-        raise ValueError(f"scan must be a detector.scan.Scan, got {type(scan).__name__}")
+        raise fail("scan", scan, "a detector.scan.Scan", f"a {type(scan).__name__}")
     hi = min(MAX_CLAMPED_DIAMETER, 2.0 * spec_value(scan.spec, "max_range", math.inf))
-    allowed = f"[{MIN_CLAMPED_DIAMETER:g}, {hi:g}] m"
+    why = (
+        f"; the sensor's max_range is {spec_value(scan.spec, 'max_range', 0.0):g} m"
+        if hi < MAX_CLAMPED_DIAMETER
+        else ""
+    )
+    allowed = f"{MIN_CLAMPED_DIAMETER:g} to {hi:g} (m{why})"
     if isinstance(clamped_diameter, (bool, np.bool_)):
-        raise ValueError(
-            f"clamped_diameter must be a number in {allowed}, got {clamped_diameter!r}"
-        )
+        raise fail("clamped_diameter", clamped_diameter, allowed, "not a number")
     try:
         d = float(clamped_diameter)
     except (TypeError, ValueError) as exc:
-        raise ValueError(
-            f"clamped_diameter must be a number (m), got {clamped_diameter!r}"
-        ) from exc
-    if not (math.isfinite(d) and MIN_CLAMPED_DIAMETER <= d <= hi):
-        why = (
-            f" (the sensor's max_range is {spec_value(scan.spec, 'max_range', 0.0):g} m)"
-            if hi < MAX_CLAMPED_DIAMETER
-            else ""
-        )
-        raise ValueError(f"clamped_diameter must be in {allowed}{why}, got {clamped_diameter!r}")
+        raise fail("clamped_diameter", clamped_diameter, allowed, "not a number") from exc
+    if not math.isfinite(d):
+        raise fail("clamped_diameter", clamped_diameter, allowed, "not finite")
+    if not MIN_CLAMPED_DIAMETER <= d <= hi:
+        raise fail("clamped_diameter", clamped_diameter, allowed, "out of range")
     return d
 
 

@@ -20,9 +20,6 @@ from detector.fit_kernels import MODEL_CYLINDER, wall_distances, wall_fit
 from detector.grid import label_grid
 from detector.improved_config import ImprovedConfig
 from detector.pipe_cloud import (
-    ANNEAL,
-    COST_TOL,
-    STEP_TOL,
     PipeCloud,
     covers_azimuth,
     even_subsample,
@@ -31,9 +28,6 @@ from detector.pipe_cloud import (
 )
 from detector.robust import mad_sigma, median, robust_fit
 from detector.transforms import SensorInPipe
-
-#: The wall's own radius replaces the clamped one when they differ by more than this, m.
-RADIUS_DEAD_BAND = 0.00025
 
 
 # --------------------------------------------------------------------------- axis refinement
@@ -92,9 +86,9 @@ def refine_wall_axis(
         iterations=10,
         prior_sigma=prior,
         c_final=0.004,
-        step_tol=STEP_TOL,
-        anneal=ANNEAL,
-        cost_tol=COST_TOL,
+        step_tol=cfg.fit_step_tol,
+        anneal=cfg.fit_anneal,
+        cost_tol=cfg.fit_cost_tol,
         fpar=np.array([big_r]),
     )
     info.update(
@@ -111,7 +105,7 @@ def refine_wall_axis(
 
 
 @njit(cache=True)
-def _axis_returns(xyz, r, big_r, gate, u_max):  # type: ignore[no-untyped-def]
+def _axis_returns(xyz, r, big_r, gate, u_max):
     """The wall-like returns (within ``gate`` of the radius ``big_r``, m) an axis refinement
     fits, ``(3, n)`` in their order: with ``u_max`` NaN, the nearest 60 % of them along the
     axis (at least 400); else those nearer than ``u_max`` (m). None (``(3, 0)``) when fewer
@@ -166,7 +160,7 @@ def measure_wall_radius(
     ``big_r`` otherwise, and when they scatter about it by more than their noise explains (a
     curved wall: no straight pipe in view). Records ``wall_radius`` and the returns' scatter
     about it (``wall_radius_rms``, 1.4826 MAD, m) in ``diag``. Corrections below
-    ``RADIUS_DEAD_BAND`` are not made (the clamp reading is as good as the fit there)."""
+    ``cfg.radius_dead_band`` are not made (the clamp reading is as good as the fit there)."""
     xyz = cloud.xyz_v
     idx, e_sel = _wall_returns(
         xyz[0], cloud.r_v, wall_tolerance(cloud, cfg), big_r, u_max, cfg.max_radius_correction
@@ -174,7 +168,7 @@ def measure_wall_radius(
     if idx.size < 100:
         return big_r
     de = median(e_sel)
-    if not RADIUS_DEAD_BAND <= abs(de) <= cfg.max_radius_correction:
+    if not cfg.radius_dead_band <= abs(de) <= cfg.max_radius_correction:
         return big_r
     if not covers_azimuth(xyz, idx, 0.75):
         return big_r
@@ -187,7 +181,7 @@ def measure_wall_radius(
 
 
 @njit(cache=True)
-def _wall_returns(u, r, tol, big_r, u_max, reach):  # type: ignore[no-untyped-def]
+def _wall_returns(u, r, tol, big_r, u_max, reach):
     """The returns nearer than ``u_max`` along the axis whose distance ``e`` from the wall of
     radius ``big_r`` is within ``reach`` plus their tolerance ``tol`` (m): their indices and
     ``e`` (m)."""
@@ -311,7 +305,7 @@ def wall_intact(
 
 
 @njit(cache=True)
-def _off_wall_counts(r, tol, big_r):  # type: ignore[no-untyped-def]
+def _off_wall_counts(r, tol, big_r):
     """How many returns at distances ``r`` from the axis lie beyond the wall of radius
     ``big_r`` by more than their tolerance ``tol``, and how many inside it (m)."""
     n_beyond = 0
@@ -347,7 +341,7 @@ def structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> floa
 
 
 @njit(cache=True)
-def _off_wall_entries(cell, g, k, wraps, u, r, tol, big_r, min_points):  # type: ignore[no-untyped-def]
+def _off_wall_entries(cell, g, k, wraps, u, r, tol, big_r, min_points):
     """How many returns lie off the wall by more than twice their tolerance, and for those in
     regions (:func:`detector.grid.label_grid`) of at least ``min_points`` of them, where along
     the axis each entered the structure: ``min(u, u R / r)``, where its beam crossed the wall

@@ -19,9 +19,6 @@ from detector.fit_kernels import MODEL_TAPER
 from detector.improved_config import ImprovedConfig
 from detector.options import StructureOption
 from detector.pipe_cloud import (
-    ANNEAL,
-    COST_TOL,
-    STEP_TOL,
     PipeCloud,
     azimuth_coverage,
     even_subsample,
@@ -178,6 +175,7 @@ def _refit_without_end_wall(
                     best = (cost, refit)
                     diag["reducer_refit_start"] = ("first fit", "returns left")[k]
             diag["reducer_end_wall_radius"] = r_end
+            assert best is not None  # (the loop above always keeps its first refit)
             return best[1]
     return None
 
@@ -242,9 +240,9 @@ def detect_axisymmetric(
             lower=lower,
             upper=upper,
             c_final=c_fin,
-            step_tol=STEP_TOL,
-            anneal=ANNEAL,
-            cost_tol=COST_TOL,
+            step_tol=cfg.fit_step_tol,
+            anneal=cfg.fit_anneal,
+            cost_tol=cfg.fit_cost_tol,
             fpar=np.array([big_r]),
         )
 

@@ -26,9 +26,6 @@ from detector.long_bend import fit_torus, spread_along_axis
 from detector.options import StructureOption, option_order
 from detector.outgoing import BranchFit
 from detector.pipe_cloud import (
-    ANNEAL,
-    COST_TOL,
-    STEP_TOL,
     PipeCloud,
     axis_direction,
     azimuth_coverage,
@@ -154,6 +151,7 @@ def _fit_axes(
     upper: NDArray[np.float64],
     c: float,
     c_final: float,
+    cfg: ImprovedConfig,
     iterations: int = 8,
     own: NDArray[np.intp] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -171,9 +169,9 @@ def _fit_axes(
         lower=lower,
         upper=upper,
         c_final=c_final,
-        step_tol=STEP_TOL,
-        anneal=ANNEAL,
-        cost_tol=COST_TOL,
+        step_tol=cfg.fit_step_tol,
+        anneal=cfg.fit_anneal,
+        cost_tol=cfg.fit_cost_tol,
         ipar=own,
     )
 
@@ -235,6 +233,7 @@ class BranchProblem:
             upper,
             c=c,
             c_final=self.c_fin,
+            cfg=self.cfg,
             iterations=iterations,
             own=own,
         )
@@ -593,7 +592,9 @@ def _try_long_bend(bp: BranchProblem, om: OutgoingModel) -> OutgoingModel:
         u_flat = bp.cloud.xyz[0].reshape(-1)
         spread = spread_along_axis(arc_cells, u_flat[arc_cells], bp.cfg.fit_points)
         p_fit = np.ascontiguousarray(bp.cloud.points_at(spread))
-    tor = fit_torus(bp.p_all, bp.big_r, om.big_l, om.fits[0], bp.c0, bp.c_fin, bp.noise_med, p_fit)
+    tor = fit_torus(
+        bp.p_all, bp.big_r, om.big_l, om.fits[0], bp.c0, bp.c_fin, bp.noise_med, bp.cfg, p_fit
+    )
     if tor is None:
         return om
     xt, rms_t, sup_t, vis = tor
@@ -842,7 +843,7 @@ def _standard_angles(
         for xs in starts:
             xs[idx] = angles
             xs = np.clip(xs, np.minimum(lo, xs), np.maximum(up, xs))
-            fit = _fit_axes(pts, xs, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin, own=own)
+            fit = _fit_axes(pts, xs, n_b, lo, up, c=2.0 * c_fin, c_final=c_fin, cfg=cfg, own=own)
             if accepted(fit[0], fit[1], len(idx)):
                 return fit, False
             if radius_bounds is not None and bool(np.all(lo[rho] >= up[rho])):
@@ -850,7 +851,9 @@ def _standard_angles(
                 held_r = x[rho]
                 lo_r[rho] = np.maximum(radius_bounds[0], held_r * (1.0 - cfg.snap_radius))
                 up_r[rho] = np.minimum(radius_bounds[1], held_r * (1.0 + cfg.snap_radius))
-                fit = _fit_axes(pts, fit[0], n_b, lo_r, up_r, c=2.0 * c_fin, c_final=c_fin, own=own)
+                fit = _fit_axes(
+                    pts, fit[0], n_b, lo_r, up_r, c=2.0 * c_fin, c_final=c_fin, cfg=cfg, own=own
+                )
                 if accepted(fit[0], fit[1], len(idx)):
                     return fit, True
         return None

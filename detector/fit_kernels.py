@@ -52,7 +52,7 @@ TORUS_FD_STEP = 1e-6
 
 
 @njit(cache=True, fastmath=False)
-def _cylinder(data, fpar, x, r, jt, want_jac):  # type: ignore[no-untyped-def]
+def _cylinder(data, fpar, x, r, jt, want_jac):
     y0, z0, a, b = x[0], x[1], x[2], x[3]
     big_r = fpar[0]
     n = math.sqrt(1.0 + a * a + b * b)
@@ -80,7 +80,7 @@ def _cylinder(data, fpar, x, r, jt, want_jac):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _line_one(px, py, pz, r2, x0, ct, st, cp, sp, rho):  # type: ignore[no-untyped-def]
+def _line_one(px, py, pz, r2, x0, ct, st, cp, sp, rho):
     """(residual, d/dL, d/dtheta, d/dphi) of one return to one outgoing cylinder."""
     qx = px - x0
     qq = qx * qx + r2
@@ -100,7 +100,7 @@ def _line_one(px, py, pz, r2, x0, ct, st, cp, sp, rho):  # type: ignore[no-untyp
 
 
 @njit(cache=True)
-def _lines(data, ipar, x, r, jt, want_jac, own):  # type: ignore[no-untyped-def]
+def _lines(data, ipar, x, r, jt, want_jac, own):
     n_l = (x.size - 1) // 3
     ct = np.empty(n_l)
     st = np.empty(n_l)
@@ -139,7 +139,7 @@ def _lines(data, ipar, x, r, jt, want_jac, own):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def torus_distance(data, big_l, theta, phi, rb, out):  # type: ignore[no-untyped-def]
+def torus_distance(data, big_l, theta, phi, rb, out):
     """Distance of each return (``data`` rows x, y, z) to the centreline of a long-radius
     bend (the incoming axis up to the tangent point, an arc of radius ``rb`` turning by
     ``theta`` towards roll ``phi``, the outgoing axis; the straight axes meet at
@@ -168,7 +168,7 @@ def torus_distance(data, big_l, theta, phi, rb, out):  # type: ignore[no-untyped
 
 
 @njit(cache=True)
-def _torus(data, x, r, jt, want_jac):  # type: ignore[no-untyped-def]
+def _torus(data, x, r, jt, want_jac):
     n = data.shape[1]
     torus_distance(data, x[0], x[1], x[2], x[4], r)
     if want_jac:
@@ -189,7 +189,7 @@ def _torus(data, x, r, jt, want_jac):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _taper(data, fpar, x, r, jt, want_jac):  # type: ignore[no-untyped-def]
+def _taper(data, fpar, x, r, jt, want_jac):
     big_l, t_len, rr2 = x[0], x[1], x[2]
     big_r = fpar[0]
     if t_len < 1e-4:
@@ -207,7 +207,7 @@ def _taper(data, fpar, x, r, jt, want_jac):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def model_eval(model, data, ipar, fpar, x, r, jt, want_jac):  # type: ignore[no-untyped-def]
+def model_eval(model, data, ipar, fpar, x, r, jt, want_jac):
     """Residuals of ``model`` at ``x`` into ``r`` (N,) and, with ``want_jac``, its Jacobian
     into ``jt`` (n_params, N)."""
     if model == MODEL_CYLINDER:
@@ -223,19 +223,16 @@ def model_eval(model, data, ipar, fpar, x, r, jt, want_jac):  # type: ignore[no-
 
 
 @njit(cache=True)
-def _solve(a, b, out):  # type: ignore[no-untyped-def]
-    """``a out = b`` for a small symmetric ``a``: Cholesky, or LU with partial pivoting when
-    ``a`` is not positive definite. False when ``a`` is singular."""
-    n = b.size
-    low = np.zeros((n, n))
-    spd = True
+def _cholesky(a, low):
+    """The Cholesky factor of a small symmetric ``a`` into ``low`` (lower triangle; ``low``
+    zeroed by the caller). False when ``a`` is not positive definite."""
+    n = a.shape[0]
     for j in range(n):
         s = a[j, j]
         for k in range(j):
             s -= low[j, k] * low[j, k]
         if not s > 0.0:  # (also NaN)
-            spd = False
-            break
+            return False
         d = math.sqrt(s)
         low[j, j] = d
         for i in range(j + 1, n):
@@ -243,19 +240,31 @@ def _solve(a, b, out):  # type: ignore[no-untyped-def]
             for k in range(j):
                 s -= low[i, k] * low[j, k]
             low[i, j] = s / d
-    if spd:
-        y = np.empty(n)
-        for i in range(n):
-            s = b[i]
-            for k in range(i):
-                s -= low[i, k] * y[k]
-            y[i] = s / low[i, i]
-        for i in range(n - 1, -1, -1):
-            s = y[i]
-            for k in range(i + 1, n):
-                s -= low[k, i] * out[k]
-            out[i] = s / low[i, i]
-        return True
+    return True
+
+
+@njit(cache=True)
+def _cholesky_solve(low, b, out):
+    """``low low^T out = b`` by forward then back substitution."""
+    n = b.size
+    y = np.empty(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= low[i, k] * y[k]
+        y[i] = s / low[i, i]
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= low[k, i] * out[k]
+        out[i] = s / low[i, i]
+
+
+@njit(cache=True)
+def _lu_solve(a, b, out):
+    """``a out = b`` by LU with partial pivoting (``a``, ``b`` left unchanged). False when
+    ``a`` is singular."""
+    n = b.size
     m = a.copy()
     v = b.copy()
     for j in range(n):
@@ -285,7 +294,140 @@ def _solve(a, b, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def gauss_newton(  # type: ignore[no-untyped-def]
+def _solve(a, b, out):
+    """``a out = b`` for a small symmetric ``a``: Cholesky, or LU with partial pivoting when
+    ``a`` is not positive definite. False when ``a`` is singular."""
+    n = b.size
+    low = np.zeros((n, n))
+    if _cholesky(a, low):
+        _cholesky_solve(low, b, out)
+        return True
+    return _lu_solve(a, b, out)
+
+
+@njit(cache=True)
+def _tukey_weights(r, k2, w):
+    """Tukey's biweight of each residual into ``w`` (``k2 = -1 / c^2``); returns
+    ``(sum of weights, weighted cost)``."""
+    w_sum = 0.0
+    cost = 0.0
+    for i in range(r.size):
+        r2 = r[i] * r[i]
+        wi = r2 * k2 + 1.0
+        if wi < 0.0:
+            wi = 0.0
+        wi *= wi
+        w[i] = wi
+        w_sum += wi
+        cost += wi * r2
+    return w_sum, cost
+
+
+@njit(cache=True)
+def _normal_equations(jt, w, r, jw, h, g):
+    """The weighted normal equations ``h = J^T W J`` and ``g = J^T W r`` (``jw``: scratch)."""
+    n_p, n = jt.shape
+    for p in range(n_p):
+        for i in range(n):
+            jw[i] = jt[p, i] * w[i]
+        s = 0.0
+        for i in range(n):
+            s += jw[i] * r[i]
+        g[p] = s
+        for q in range(p + 1):
+            s = 0.0
+            for i in range(n):
+                s += jw[i] * jt[q, i]
+            h[p, q] = s
+            h[q, p] = s
+
+
+@njit(cache=True)
+def _add_prior_and_pins(h, g, x, inv_prior, prior_mean, fixed, any_fixed):
+    """The gaussian prior's terms, then the pinned parameters' rows and columns cleared."""
+    n_p = x.size
+    for p in range(n_p):
+        h[p, p] += inv_prior[p]
+        g[p] += inv_prior[p] * (x[p] - prior_mean[p])
+    if not any_fixed:
+        return
+    for p in range(n_p):
+        if fixed[p]:
+            for q in range(n_p):
+                h[p, q] = 0.0
+                h[q, p] = 0.0
+            h[p, p] = 1.0
+            g[p] = 0.0
+
+
+@njit(cache=True)
+def _clipped_step(x, dx, lower, upper, xn):
+    """``x - dx`` clipped to the bounds, into ``xn``."""
+    for p in range(x.size):
+        v = x[p] - dx[p]
+        if v < lower[p]:
+            v = lower[p]
+        if v > upper[p]:
+            v = upper[p]
+        xn[p] = v
+
+
+@njit(cache=True)
+def _weighted_cost(w, r):
+    """``sum w r^2``."""
+    cost = 0.0
+    for i in range(r.size):
+        cost += w[i] * (r[i] * r[i])
+    return cost
+
+
+@njit(cache=True)
+def _max_abs(v):
+    """The largest ``|v_i|``."""
+    big = 0.0
+    for p in range(v.size):
+        big = max(big, abs(v[p]))
+    return big
+
+
+@njit(cache=True)
+def _damped_step(model, data, ipar, fpar, x, h, g, w, cost0, lam, lower, upper, rn, jn, a, work):
+    """Up to four Levenberg-Marquardt tries from ``x``: the first that lowers the weighted
+    cost (or any once ``lam > 1e3``) is taken. On success ``x`` is moved, ``dx`` (``work[1]``)
+    holds the step actually taken, and ``rn``/``jn`` hold the residuals and Jacobian at the
+    new ``x``; ``a`` is scratch. Returns ``(taken, lam, cost at the last try)``."""
+    n_p = x.size
+    hd = work[0]
+    dx = work[1]
+    xn = work[2]
+    for p in range(n_p):
+        hd[p] = h[p, p] + 1e-12
+    cost1 = 0.0
+    for _ in range(4):
+        for p in range(n_p):
+            for q in range(n_p):
+                a[p, q] = h[p, q]
+            a[p, p] += lam * hd[p]
+        if not _solve(a, g, dx):
+            lam *= 10.0
+            continue
+        _clipped_step(x, dx, lower, upper, xn)
+        model_eval(model, data, ipar, fpar, xn, rn, jn, True)
+        cost1 = _weighted_cost(w, rn)
+        if not math.isfinite(cost1):
+            lam *= 10.0
+            continue
+        if cost1 <= cost0 * (1.0 + 1e-9) or lam > 1e3:
+            for p in range(n_p):
+                dx[p] = xn[p] - x[p]
+                x[p] = xn[p]
+            return True, max(lam / 3.0, 1e-6), cost1
+        lam *= 10.0
+    return False, lam, cost1
+
+
+@njit(cache=True)
+def gauss_newton(
     model,
     data,
     ipar,
@@ -322,94 +464,25 @@ def gauss_newton(  # type: ignore[no-untyped-def]
     h = np.empty((n_p, n_p))
     g = np.empty(n_p)
     a = np.empty((n_p, n_p))
-    hd = np.empty(n_p)
-    dx = np.empty(n_p)
-    xn = np.empty(n_p)
+    work = np.empty((3, n_p))  # diagonal of h, step, trial point
     any_fixed = False
     for p in range(n_p):
         any_fixed = any_fixed or fixed[p]
-    cost1 = 0.0
     for it in range(iterations):
         ci = c * ratio ** (min(it, n_anneal) / n_anneal)
-        k2 = -1.0 / (ci * ci)
-        w_sum = 0.0
-        cost0 = 0.0
-        for i in range(n):
-            r2 = r[i] * r[i]
-            wi = r2 * k2 + 1.0
-            if wi < 0.0:
-                wi = 0.0
-            wi *= wi
-            w[i] = wi
-            w_sum += wi
-            cost0 += wi * r2
+        w_sum, cost0 = _tukey_weights(r, -1.0 / (ci * ci), w)
         if w_sum < n_p + 1:
             break
-        for p in range(n_p):
-            for i in range(n):
-                jw[i] = jt[p, i] * w[i]
-            s = 0.0
-            for i in range(n):
-                s += jw[i] * r[i]
-            g[p] = s
-            for q in range(p + 1):
-                s = 0.0
-                for i in range(n):
-                    s += jw[i] * jt[q, i]
-                h[p, q] = s
-                h[q, p] = s
-        for p in range(n_p):
-            h[p, p] += inv_prior[p]
-            g[p] += inv_prior[p] * (x[p] - prior_mean[p])
-        if any_fixed:
-            for p in range(n_p):
-                if fixed[p]:
-                    for q in range(n_p):
-                        h[p, q] = 0.0
-                        h[q, p] = 0.0
-                    h[p, p] = 1.0
-                    g[p] = 0.0
-        for p in range(n_p):
-            hd[p] = h[p, p] + 1e-12
-        step_ok = False
-        for _ in range(4):
-            for p in range(n_p):
-                for q in range(n_p):
-                    a[p, q] = h[p, q]
-                a[p, p] += lam * hd[p]
-            if not _solve(a, g, dx):
-                lam *= 10.0
-                continue
-            for p in range(n_p):
-                v = x[p] - dx[p]
-                if v < lower[p]:
-                    v = lower[p]
-                if v > upper[p]:
-                    v = upper[p]
-                xn[p] = v
-            model_eval(model, data, ipar, fpar, xn, rn, jn, True)
-            cost1 = 0.0
-            for i in range(n):
-                cost1 += w[i] * (rn[i] * rn[i])
-            if not math.isfinite(cost1):
-                lam *= 10.0
-                continue
-            if cost1 <= cost0 * (1.0 + 1e-9) or lam > 1e3:
-                for p in range(n_p):
-                    dx[p] = xn[p] - x[p]
-                    x[p] = xn[p]
-                r, rn = rn, r
-                jt, jn = jn, jt
-                lam = max(lam / 3.0, 1e-6)
-                step_ok = True
-                break
-            lam *= 10.0
-        if not step_ok:
+        _normal_equations(jt, w, r, jw, h, g)
+        _add_prior_and_pins(h, g, x, inv_prior, prior_mean, fixed, any_fixed)
+        taken, lam, cost1 = _damped_step(
+            model, data, ipar, fpar, x, h, g, w, cost0, lam, lower, upper, rn, jn, a, work
+        )
+        if not taken:
             break
-        big = 0.0
-        for p in range(n_p):
-            big = max(big, abs(dx[p]))
-        if big < step_tol:
+        r, rn = rn, r
+        jt, jn = jn, jt
+        if _max_abs(work[1]) < step_tol:
             break
         if it >= n_anneal and cost1 >= cost0 * (1.0 - cost_tol):
             break
@@ -417,7 +490,7 @@ def gauss_newton(  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def coarse_branch_cost(lq, l_grid, dirs, big_r, c0):  # type: ignore[no-untyped-def]
+def coarse_branch_cost(lq, l_grid, dirs, big_r, c0):
     """The coarse start of an outgoing pipe: for each reference point ``l_grid[l]`` (m along the
     incoming axis) and direction ``dirs[:, j]`` (unit, (3, M)), the mean over the returns ``lq``
     ((n, 3)) of the squared distance from the pipe's wall (radius ``big_r``), capped at
@@ -450,7 +523,7 @@ def coarse_branch_cost(lq, l_grid, dirs, big_r, c0):  # type: ignore[no-untyped-
 
 
 @njit(cache=True)
-def wall_distances(sp, rot, pos, big_r):  # type: ignore[no-untyped-def]
+def wall_distances(sp, rot, pos, big_r):
     """The returns ``sp`` ((3, n), sensor frame) under the pose ``(rot, pos)``: their position
     along the pipe axis and their distance from the wall of radius ``big_r`` (m), both (n,)."""
     n = sp.shape[1]
@@ -466,7 +539,7 @@ def wall_distances(sp, rot, pos, big_r):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def wall_fit(e, tol, near, tol_scale):  # type: ignore[no-untyped-def]
+def wall_fit(e, tol, near, tol_scale):
     """Of the returns ``near`` (a mask) at distances ``e`` (m) from the wall, with tolerances
     ``tol_scale`` x ``tol`` (m): how many lie within their tolerance, the truncated quadratic
     cost ``sum min((e / tol)^2, 1)``, and the rms of ``e`` over those within (m; ``inf`` when

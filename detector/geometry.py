@@ -28,7 +28,7 @@ def wrap_angle(a: Any) -> Any:
     loops); an array gives an array and a 0-d array a float. Both paths give the same values.
     """
     if isinstance(a, numbers.Real):
-        w = math.fmod(a + math.pi, 2.0 * math.pi)
+        w = math.fmod(float(a) + math.pi, 2.0 * math.pi)
         if w <= 0.0:
             w += 2.0 * math.pi
         w -= math.pi

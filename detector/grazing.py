@@ -27,28 +27,11 @@ from numpy.typing import NDArray
 
 from detector.geometry import wrap_angle
 from detector.grid import label_regions
+from detector.improved_config import DEFAULT_CONFIG, ImprovedConfig
 from detector.robust import robust_gauss_newton
 
-#: A return counts as entering an opening when it lies this far (m) beyond the wall line
-#: through the rings on either side, and at least ``NOISE_K`` times its radial noise.
-MIN_STEP = 0.00035
-NOISE_K = 4.0
-#: Fewest returns (and rows of roll) in one hole's bump.
-MIN_RETURNS = 6
-#: Holes are sought only where neighbouring rings meet the wall at least this many radii
-#: apart along the axis (``u^2 / R x beam step``).
-SPARSE_RINGS = 0.25
-#: Most rings of beams a hole's bump may span.
-MAX_RINGS = 3
-#: A bump around more than this much of the circumference (rad) is no side hole.
-MAX_ROLL_SPAN = math.radians(200.0)
 #: Deflections of standard branch fittings tried for the branch behind a hole, rad.
 DEFLECTIONS = (0.5 * math.pi, 0.25 * math.pi, 0.75 * math.pi)
-#: Largest rms (m) of the far-side fit for a hole to be accepted.
-MAX_FIT_RMS = 0.002
-#: The rings on either side of the bump must lie on the wall: within this (m, plus
-#: ``NOISE_K`` times their radial noise) of the run's radius.
-WALL_BAND = 0.002
 
 
 @dataclass(frozen=True)
@@ -106,9 +89,10 @@ def find_ring_holes(
     big_r: float,
     before: float,
     beam_step: float,
+    cfg: ImprovedConfig = DEFAULT_CONFIG,
 ) -> list[RingHole]:
     """Side holes that one ring of beams (or two or three) enters, nearer than ``before``
-    along the axis, where the rings meet the wall sparsely (``SPARSE_RINGS``).
+    along the axis, where the rings meet the wall sparsely (``cfg.hole_sparse_rings``).
 
     Args:
         xyz: (3, G, K) pipe-frame returns on the unrolled grid.
@@ -118,16 +102,19 @@ def find_ring_holes(
         big_r: the run's radius, m.
         before: only holes whose ring meets the wall nearer than this, m.
         beam_step: angle between neighbouring beams of a plane, rad.
+        cfg: tuning (the ``hole_*`` fields).
     """
     step, ok = ring_steps(xyz, valid, big_r)
-    thr = np.maximum(MIN_STEP, NOISE_K * sigma_r)
+    thr = np.maximum(cfg.hole_min_step, cfg.hole_noise_k * sigma_r)
     bump = ok & (step > thr) & (xyz[0] < before)
-    if np.count_nonzero(bump) < MIN_RETURNS:
+    if np.count_nonzero(bump) < cfg.hole_min_returns:
         return []
     # ... between rings that lie on the wall (the run goes on past the hole)
-    on_wall = np.abs(np.hypot(xyz[1], xyz[2]) - big_r) <= WALL_BAND + NOISE_K * sigma_r
+    on_wall = (
+        np.abs(np.hypot(xyz[1], xyz[2]) - big_r) <= cfg.hole_wall_band + cfg.hole_noise_k * sigma_r
+    )
     bump[:, 1:-1] &= on_wall[:, :-2] & on_wall[:, 2:]
-    if np.count_nonzero(bump) < MIN_RETURNS:
+    if np.count_nonzero(bump) < cfg.hole_min_returns:
         return []
     labels, n_lab = label_regions(bump, wraps)
     g = valid.shape[0]
@@ -150,7 +137,7 @@ def find_ring_holes(
     fitted: list[tuple[RingHole, NDArray[np.intp], NDArray[np.intp]]] = []
     for _, rs, cs in groups:
         rows, cols = np.concatenate(rs), np.concatenate(cs)
-        hole = _accepted(xyz, rows, cols, g, big_r)
+        hole = _accepted(xyz, rows, cols, g, big_r, cfg)
         if hole is None:
             continue
         for k, (other, r_o, c_o) in enumerate(fitted):
@@ -159,7 +146,7 @@ def find_ring_holes(
                 and abs(hole.position - other.position) < big_r
             ):
                 rows, cols = np.concatenate([r_o, rows]), np.concatenate([c_o, cols])
-                merged = _accepted(xyz, rows, cols, g, big_r)
+                merged = _accepted(xyz, rows, cols, g, big_r, cfg)
                 if merged is not None:
                     fitted[k] = (merged, rows, cols)
                 break
@@ -170,30 +157,38 @@ def find_ring_holes(
     return [
         h
         for h, _, _ in fitted
-        if h.entry < before and h.entry * h.entry / big_r * beam_step >= SPARSE_RINGS * big_r
+        if h.entry < before
+        and h.entry * h.entry / big_r * beam_step >= cfg.hole_sparse_rings * big_r
     ]
 
 
 def _accepted(
-    xyz: NDArray[np.float64], rows: NDArray[np.intp], cols: NDArray[np.intp], g: int, big_r: float
+    xyz: NDArray[np.float64],
+    rows: NDArray[np.intp],
+    cols: NDArray[np.intp],
+    g: int,
+    big_r: float,
+    cfg: ImprovedConfig,
 ) -> RingHole | None:
     """The hole fitted to the bump returns at ``(rows, cols)`` of a grid of ``g`` rows, if the
-    bump is one: enough returns and rows, on at most ``MAX_RINGS`` rings, not all around."""
+    bump is one: enough returns and rows, on at most ``cfg.hole_max_rings`` rings, not all
+    around."""
     n_rows = np.unique(rows).size
-    if rows.size < MIN_RETURNS or n_rows < MIN_RETURNS:
+    if rows.size < cfg.hole_min_returns or n_rows < cfg.hole_min_returns:
         return None
-    if np.ptp(cols) > MAX_RINGS - 1:
+    if np.ptp(cols) > cfg.hole_max_rings - 1:
         return None  # a long opening: the regular detector's
-    if n_rows * 2.0 * math.pi / g > MAX_ROLL_SPAN:
+    if n_rows * 2.0 * math.pi / g > cfg.hole_max_roll_span:
         return None  # (almost) all around: a widening, not a side hole
-    return _fit_far_side(xyz[:, rows, cols], big_r)
+    return _fit_far_side(xyz[:, rows, cols], big_r, cfg.hole_max_fit_rms)
 
 
-def _fit_far_side(p: NDArray[np.float64], big_r: float) -> RingHole | None:
+def _fit_far_side(p: NDArray[np.float64], big_r: float, max_rms: float) -> RingHole | None:
     """Fit a branch to the far-side returns ``p`` (3, n): a cylinder of radius ``rho`` whose
     axis leaves the run's axis at ``position``, deflected by a standard fitting angle (90 deg
     first, then 45 and 135 deg: the patch a ring sees cannot measure the deflection, only tell
-    these apart) towards ``roll``; the deflection with the smallest rms wins."""
+    these apart) towards ``roll``; the deflection with the smallest rms wins, if at most
+    ``max_rms`` (m)."""
     u = p[0]
     r = np.hypot(p[1], p[2])
     phi = np.arctan2(p[2], p[1])
@@ -231,7 +226,7 @@ def _fit_far_side(p: NDArray[np.float64], big_r: float) -> RingHole | None:
         if not np.all(np.isfinite(x)):
             continue
         rms = float(np.sqrt(np.mean(np.square(res))))
-        if rms > MAX_FIT_RMS or (best is not None and rms >= best.rms):
+        if rms > max_rms or (best is not None and rms >= best.rms):
             continue
         entry = float(np.median(u * big_r / np.maximum(r, 1e-9)))
         best = RingHole(

@@ -41,7 +41,7 @@ class ScanGrid:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.plane.shape  # type: ignore[return-value]
+        return self.plane.shape
 
     def take(self, values: NDArray, fill: float | bool = np.nan) -> NDArray:
         """Scatter a (P, B) per-beam array onto the grid; missing cells get ``fill``."""
@@ -111,32 +111,34 @@ def _union(parent: NDArray[np.int64], a: int, b: int) -> None:
 
 
 @njit(cache=True)
-def label_grid(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32], int]:
-    """The labelling of :func:`label_regions`, compiled (callable from other compiled code):
-    union-find; ``wraps``: the first and last rows are neighbours."""
+def _join_rows(mask: NDArray[np.bool_], parent: NDArray[np.int64], r: int, r_prev: int) -> None:
+    """Union every set cell of row ``r`` with its set 8-neighbours in row ``r_prev``."""
+    k = mask.shape[1]
+    for c in range(k):
+        if not mask[r, c]:
+            continue
+        for dc in (-1, 0, 1):
+            cc = c + dc
+            if 0 <= cc < k and mask[r_prev, cc]:
+                _union(parent, r * k + c, r_prev * k + cc)
+
+
+@njit(cache=True)
+def _join_within_row(mask: NDArray[np.bool_], parent: NDArray[np.int64], r: int) -> None:
+    """Union every set cell of row ``r`` with its set left neighbour."""
+    k = mask.shape[1]
+    for c in range(1, k):
+        if mask[r, c] and mask[r, c - 1]:
+            _union(parent, r * k + c, r * k + c - 1)
+
+
+@njit(cache=True)
+def _number_components(
+    mask: NDArray[np.bool_], parent: NDArray[np.int64]
+) -> tuple[NDArray[np.int32], int]:
+    """Labels 1..n of the union-find components of the set cells, in row-major order of their
+    first cell; 0 for unset cells."""
     g, k = mask.shape
-    parent = np.arange(g * k)
-    for r in range(g):
-        for c in range(k):
-            if not mask[r, c]:
-                continue
-            i = r * k + c
-            if c > 0 and mask[r, c - 1]:
-                _union(parent, i, i - 1)
-            if r > 0:
-                for dc in (-1, 0, 1):
-                    cc = c + dc
-                    if 0 <= cc < k and mask[r - 1, cc]:
-                        _union(parent, i, (r - 1) * k + cc)
-    if wraps:
-        last = (g - 1) * k
-        for c in range(k):
-            if not mask[g - 1, c]:
-                continue
-            for dc in (-1, 0, 1):
-                cc = c + dc
-                if 0 <= cc < k and mask[0, cc]:
-                    _union(parent, last + c, cc)
     labels = np.zeros((g, k), dtype=np.int32)
     number = np.zeros(g * k, dtype=np.int32)
     n = 0
@@ -149,6 +151,21 @@ def label_grid(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32],
                     number[root] = n
                 labels[r, c] = number[root]
     return labels, n
+
+
+@njit(cache=True)
+def label_grid(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32], int]:
+    """The labelling of :func:`label_regions`, compiled (callable from other compiled code):
+    union-find; ``wraps``: the first and last rows are neighbours."""
+    g, k = mask.shape
+    parent = np.arange(g * k)
+    for r in range(g):
+        _join_within_row(mask, parent, r)
+        if r > 0:
+            _join_rows(mask, parent, r, r - 1)
+    if wraps and g > 1:
+        _join_rows(mask, parent, g - 1, 0)
+    return _number_components(mask, parent)
 
 
 def region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:

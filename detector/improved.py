@@ -131,7 +131,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.axis_fit import (
-    RADIUS_DEAD_BAND,
     common_wall_fit,
     count_wall_returns,
     measure_wall_radius,
@@ -166,50 +165,6 @@ from detector.scan import Scan
 from detector.transforms import SensorInPipe, option_direction
 from detector.vocab import Kind
 
-#: With the structure starting less than ``NO_WALL_VIEW`` (m) past the nearest returns, a
-#: refined pipe axis replaces the given pose only when it explains this fraction (and ten)
-#: more of the wall returns.
-NO_WALL_VIEW = 0.01
-GIVEN_POSE_MARGIN = 0.02
-#: A scan whose beams would see a straight pipe's wall ahead of the sensor in at least
-#: ``BLIND_MIN_EXPECTED`` returns, but sees at most ``BLIND_MAX_AHEAD`` of that many there, is
-#: blocked ahead within the minimum range (an end wall 10 cm ahead of a sensor whose minimum
-#: range is 12 cm); the end wall gets confidence ``BLIND_CONFIDENCE`` (its distance is a bound).
-BLIND_MIN_EXPECTED = 200
-BLIND_MAX_AHEAD = 0.01
-BLIND_CONFIDENCE = 0.5
-#: Less straight wall than this in view along the axis (m) before a structure: the given pose
-#: stands when it explains that wall.
-SHORT_WALL_VIEW = 0.05
-#: ... unless a refined axis explains as many of those returns and fits at least
-#: ``LONG_WALL_SPAN`` (m) of straight wall to within ``LONG_WALL_RMS`` of the scatter a straight
-#: wall may show (a sensor misaligned by 20 % of D and 4 deg sees its wall drift off the
-#: tolerance 12 cm ahead under the given pose).
-LONG_WALL_SPAN = 0.1
-LONG_WALL_RMS = 0.25
-#: The wall this far along the axis beyond the nearest returns (m) gives the first estimate of
-#: the pipe radius.
-NEAR_WALL = 0.03
-#: The pose of a long-radius bend or a reducer is chosen again on the wall ending this far
-#: (m) before the fitted arc or taper starts, when it was chosen on wall returns past that.
-GENTLE_START_MARGIN = 0.01
-#: A long bend's torus under the given pose fitting this many times more closely (rms, before
-#: any polish) than under the refined one: the refinement was laid into the arc, the given
-#: pose stands (under range noise both fit to the noise, and the ratio stays near 1).
-TORUS_POSE_RATIO = 1.5
-#: A reducer under the given pose fitting its returns this many times more closely (rms) than
-#: the structure found under a refined pose: the refinement leaned onto the taper, the given
-#: pose stands (:func:`_taper_pose_check`).
-TAPER_POSE_RATIO = 1.25
-#: ... when the structure under the refined pose is a reducer, or a turn whose fit keeps less
-#: than this fraction of its returns.
-TAPER_POSE_POOR_SUPPORT = 0.6
-#: ... and the given pose's reducer keeps at least this fraction of its returns.
-TAPER_POSE_MIN_SUPPORT = 0.9
-#: A turn under the given pose may keep this much less of a share of its returns than the
-#: junction found under a pose refined on a short wall (:func:`_short_wall_pose_check`).
-SHORT_WALL_SHARE_SLACK = 0.02
-
 
 # --------------------------------------------------------------------------- main entry
 def detect_improved(
@@ -243,11 +198,11 @@ def detect_improved(
     diag: dict[str, Any] = {"method": "improved", "n_points": int(scan.n_valid)}
     try:
         cloud = prepare_cloud(scan, pose0, bias, config)
-        reach = _blocked_within_min_range(scan, cloud, big_r)
+        reach = _blocked_within_min_range(scan, cloud, big_r, config)
         if reach is not None:
             diag["blocked_within_min_range"] = reach
-            opt = StructureOption("closure", reach, 0.0, 0.0, 0.0, BLIND_CONFIDENCE)
-            return Detection("closure", [opt], BLIND_CONFIDENCE, diag)
+            opt = StructureOption("closure", reach, 0.0, 0.0, 0.0, config.blind_confidence)
+            return Detection("closure", [opt], config.blind_confidence, diag)
         # the given pose and the clamp reading explain every return already: straight pipe,
         # nothing to measure or refine (the common case, kept cheap)
         if refine_axis:
@@ -260,7 +215,7 @@ def detect_improved(
         # the structure again once the axis is refined
         u_nearest = partial_percentile(cloud.xyz_v[0], 1.0)
         r_clamped = big_r
-        big_r = measure_wall_radius(cloud, big_r, config, u_nearest + NEAR_WALL, diag)
+        big_r = measure_wall_radius(cloud, big_r, config, u_nearest + config.near_wall, diag)
         given: GivenPose | None = None
         if refine_axis:
             chosen = _choose_pose(cloud, pose0, big_r, r_clamped, u_nearest, config, diag)
@@ -300,7 +255,7 @@ def _choose_pose(
         if straight is not None:
             return _with_ring_holes(cloud, big_r, straight)
     diag.pop("axis_pass")
-    candidates = [(pose0, {})]
+    candidates: list[tuple[SensorInPipe, dict[str, Any]]] = [(pose0, {})]
     passes = [0]  # the pass each candidate pose comes from
     xyz_of = [cloud.xyz_v]
     u_start0 = structure_start(cloud, big_r, config)
@@ -361,14 +316,14 @@ def _choose_pose(
     best = min(tied, key=lambda k: (counts[k][2], -k))
     if (
         best
-        and u_start0 < u_nearest + NO_WALL_VIEW
-        and scores[best] <= scores[0] + max(GIVEN_POSE_MARGIN * scores[0], 10)
+        and u_start0 < u_nearest + config.pose_no_wall_view
+        and scores[best] <= scores[0] + max(config.pose_given_margin * scores[0], 10)
     ):
         # no wall in view before the structure (the stem of a tee ending before the
         # nearest returns): a refinement that explains hardly more returns than the
         # given pose (a few of thousands) rests on the structure
         best = 0
-    if best and given_fits and u_start0 - u_nearest < SHORT_WALL_VIEW:
+    if best and given_fits and u_start0 - u_nearest < config.short_wall_view:
         # hardly any straight wall in view before the structure: a refinement can only
         # lean on the structure (a cylinder tilted about the nearest wall, pivoting
         # onto the arc of a turn); the given pose stands, as it explains that wall,
@@ -379,9 +334,9 @@ def _choose_pose(
             k
             for k, sc in enumerate(scores)
             if k
-            and sc >= scores[best] - max(GIVEN_POSE_MARGIN * scores[best], 2)
-            and candidates[k][1].get("axis_span", 0.0) >= LONG_WALL_SPAN
-            and candidates[k][1].get("axis_rms", 1.0) <= LONG_WALL_RMS * rms_cap
+            and sc >= scores[best] - max(config.pose_given_margin * scores[best], 2)
+            and candidates[k][1].get("axis_span", 0.0) >= config.long_wall_span
+            and candidates[k][1].get("axis_rms", 1.0) <= config.long_wall_rms * rms_cap
         ]
         best = long_straight[-1] if long_straight else 0
     pose, info = candidates[best]
@@ -402,7 +357,9 @@ def _choose_pose(
     return big_r, given
 
 
-def _blocked_within_min_range(scan: Scan, cloud: PipeCloud, big_r: float) -> float | None:
+def _blocked_within_min_range(
+    scan: Scan, cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
+) -> float | None:
     """How far ahead (m) at most an end wall blocks the pipe within the sensor's minimum range,
     when hardly any return comes from ahead of the sensor although a straight pipe would show
     its wall to many beams there; ``None`` otherwise.
@@ -419,7 +376,7 @@ def _blocked_within_min_range(scan: Scan, cloud: PipeCloud, big_r: float) -> flo
     if not (math.isfinite(min_range) and min_range > big_r):
         return None
     n_ahead = int(np.count_nonzero(cloud.xyz_v[0] > 0.0))
-    if n_ahead > BLIND_MAX_AHEAD * scan.ranges.size:  # (more than any expected count allows)
+    if n_ahead > cfg.blind_max_ahead * scan.ranges.size:  # (more than any expected count allows)
         return None
     sb = np.abs(np.sin(scan.beam_angles))
     ahead = np.cos(scan.beam_angles) > 0.0
@@ -427,9 +384,9 @@ def _blocked_within_min_range(scan: Scan, cloud: PipeCloud, big_r: float) -> flo
         wall_range = big_r / sb
     seen = ahead & (wall_range >= min_range) & (wall_range <= max_range)
     expected = int(np.count_nonzero(seen)) * scan.n_planes
-    if expected < BLIND_MIN_EXPECTED:
+    if expected < cfg.blind_min_expected:
         return None
-    if n_ahead > BLIND_MAX_AHEAD * expected:
+    if n_ahead > cfg.blind_max_ahead * expected:
         return None
     return math.sqrt(min_range * min_range - big_r * big_r)
 
@@ -492,6 +449,7 @@ def _with_ring_holes(
         big_r,
         before,
         cloud.beam_step,
+        cfg,
     )
     if not holes or (weak and len(holes) < sum(not o.is_straight_on for o in det.options)):
         return det  # (nothing, or fewer ways than the openings the fit had to explain)
@@ -608,7 +566,7 @@ def _start_recheck(
         # (a reducer under range noise: its tolerance is the noise's, and a pose chosen again
         # on less wall sizes the wider pipe no better)
         return None
-    u_cap = start - GENTLE_START_MARGIN
+    u_cap = start - cfg.gentle_start_margin
     if u_cap >= wall_until:
         return None
     chosen, xyz_chosen = cloud.pose, cloud.xyz_v
@@ -651,9 +609,9 @@ def _torus_pose_check(
     wall: an axis refined on the nearest wall-like returns is a cylinder laid into the arc's
     start (up to 2 cm off centre), and the torus fitted under it misses its returns by a
     millimetre where the right pose leaves a tenth of that. When the pose moved from the given
-    one and the bend's torus fits the returns under the given pose at most ``TORUS_POSE_RATIO``
-    times as loosely (rms), the given pose and its detection stand. ``(radius, detection)``
-    then, else ``None`` (the cloud keeps its pose)."""
+    one and the bend's torus fits the returns under the given pose at most
+    ``cfg.torus_pose_ratio`` times as loosely (rms), the given pose and its detection stand.
+    ``(radius, detection)`` then, else ``None`` (the cloud keeps its pose)."""
     rms = det.diagnostics.get("torus_rms")
     if det.kind != Kind.BEND or det.diagnostics.get("model") != "torus" or rms is None:
         return None
@@ -664,7 +622,7 @@ def _torus_pose_check(
             redone.kind == det.kind
             and redone.diagnostics.get("model") == "torus"
             and rms0 is not None
-            and rms0 * TORUS_POSE_RATIO <= rms
+            and rms0 * cfg.torus_pose_ratio <= rms
         )
         return rms0 if ok else None
 
@@ -731,14 +689,14 @@ def _taper_pose_check(
     onto its near side (0.3-4 deg): the narrower pipe comes out too wide (60-77 mm for 55), or
     the taper's far side passes for a turn that fits half its returns. When the pose moved
     from the given one and found a reducer, or a turn or junction keeping less than
-    ``TAPER_POSE_POOR_SUPPORT`` of its returns, detect again under the given pose: its reducer
-    stands when it keeps ``TAPER_POSE_MIN_SUPPORT`` of its returns and fits them at least
-    ``TAPER_POSE_RATIO`` times as closely (rms). ``(radius, detection)`` then, else ``None``
-    (the cloud keeps its pose)."""
+    ``cfg.taper_pose_poor_support`` of its returns, detect again under the given pose: its
+    reducer stands when it keeps ``cfg.taper_pose_min_support`` of its returns and fits them at
+    least ``cfg.taper_pose_ratio`` times as closely (rms). ``(radius, detection)`` then, else
+    ``None`` (the cloud keeps its pose)."""
     rms = _fit_rms(det)
     if rms is None or det.diagnostics.get("start_recheck"):
         return None
-    if det.kind != Kind.REDUCER and _fit_share(det) >= TAPER_POSE_POOR_SUPPORT:
+    if det.kind != Kind.REDUCER and _fit_share(det) >= cfg.taper_pose_poor_support:
         return None
 
     def stands(redone: Detection) -> float | None:
@@ -746,8 +704,8 @@ def _taper_pose_check(
         ok = (
             redone.kind == Kind.REDUCER
             and rms0 is not None
-            and redone.diagnostics.get("axisymmetric_support", 0.0) >= TAPER_POSE_MIN_SUPPORT
-            and rms0 * TAPER_POSE_RATIO <= rms
+            and redone.diagnostics.get("axisymmetric_support", 0.0) >= cfg.taper_pose_min_support
+            and rms0 * cfg.taper_pose_ratio <= rms
         )
         return rms0 if ok else None
 
@@ -766,16 +724,16 @@ def _short_wall_pose_check(
     of wall in view (a mitre bend 10 cm ahead of a ydlidar_x4, 12 cm): an axis refined on them
     takes in the outgoing pipe's first returns and moves 5-7 mm off the centre, and the bend's
     far side then reads as a second way on (a pipe across). When the pose moved from the given
-    one on less than ``SHORT_WALL_VIEW`` of wall and found a turn or a junction, detect again
-    under the given pose: its turn or junction stands when it has no more ways on and fits its
-    returns at least as closely (rms), keeping as large a share of them (less
-    ``SHORT_WALL_SHARE_SLACK``). ``(radius,
-    detection)`` then, else ``None`` (the cloud keeps its pose)."""
+    one on less than ``cfg.short_wall_view`` of wall and found a turn or a junction, detect
+    again under the given pose: its turn or junction stands when it has no more ways on and fits
+    its returns at least as closely (rms), keeping as large a share of them (less
+    ``cfg.short_wall_share_slack``). ``(radius, detection)`` then, else ``None`` (the cloud
+    keeps its pose)."""
     rms = _fit_rms(det)
     span = det.diagnostics.get("axis_span")
     if det.kind not in (Kind.BEND, Kind.JUNCTION) or rms is None or span is None:
         return None
-    if span >= SHORT_WALL_VIEW or det.diagnostics.get("axis_pass", 0) == 0:
+    if span >= cfg.short_wall_view or det.diagnostics.get("axis_pass", 0) == 0:
         return None
     if det.diagnostics.get("start_recheck") or det.diagnostics.get("model") == "torus":
         return None  # (chosen again on the wall before its arc; a torus has its own check)
@@ -787,7 +745,7 @@ def _short_wall_pose_check(
             and rms0 is not None
             and len(redone.options) <= len(det.options)
             and rms0 <= rms
-            and _fit_share(redone) >= _fit_share(det) - SHORT_WALL_SHARE_SLACK
+            and _fit_share(redone) >= _fit_share(det) - cfg.short_wall_share_slack
         )
         return rms0 if ok else None
 
@@ -820,14 +778,14 @@ def _taper_radius_check(
     opt = det.options[0]
     if opt.diameter >= 2.0 * big_r:  # (a widening: its start is where the beams leave the wall)
         return None
-    u_cap = opt.distance - GENTLE_START_MARGIN
+    u_cap = opt.distance - cfg.gentle_start_margin
     # (the pose and the tolerance floor stand: only the radius is measured again)
     records = ("axis_", "tolerance_", "taper_pose_check", "short_wall_pose_check")
     sub = _pose_diagnostics(
         diag_pose, {k: v for k, v in det.diagnostics.items() if k.startswith(records)}
     )
     radius = measure_wall_radius(cloud, given.clamped_radius, cfg, u_cap, sub)
-    if abs(radius - big_r) < RADIUS_DEAD_BAND:
+    if abs(radius - big_r) < cfg.radius_dead_band:
         return None
     redone = _detect_in_pipe_frame(cloud, radius, cfg, sub)
     if redone.kind != Kind.REDUCER:

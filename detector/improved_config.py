@@ -66,6 +66,59 @@ class ImprovedConfig:
         hinge_reach: the rings' hinge looks this far before the first returns off the wall; a
             ring rises when its median lies ``hinge_min_snr`` times its noise and at least
             ``hinge_min_rise`` off the wall.
+        pose_no_wall_view: with the structure starting less than this (m) past the nearest
+            returns, a refined pipe axis replaces the given pose only when it explains
+            ``pose_given_margin`` (a fraction, and ten) more of the wall returns.
+        blind_min_expected, blind_max_ahead, blind_confidence: a scan whose beams would see a
+            straight pipe's wall ahead of the sensor in at least ``blind_min_expected``
+            returns, but sees at most ``blind_max_ahead`` (a fraction) of that many there, is
+            blocked ahead within the minimum range (an end wall 10 cm ahead of a sensor whose
+            minimum range is 12 cm); the end wall gets confidence ``blind_confidence`` (its
+            distance is a bound).
+        short_wall_view: less straight wall than this in view along the axis (m) before a
+            structure: the given pose stands when it explains that wall ...
+        long_wall_span, long_wall_rms: ... unless a refined axis explains as many of those
+            returns and fits at least ``long_wall_span`` (m) of straight wall to within
+            ``long_wall_rms`` of the scatter a straight wall may show (a sensor misaligned by
+            20 % of D and 4 deg sees its wall drift off the tolerance 12 cm ahead under the
+            given pose).
+        near_wall: the wall this far along the axis beyond the nearest returns (m) gives the
+            first estimate of the pipe radius.
+        gentle_start_margin: the pose of a long-radius bend or a reducer is chosen again on the
+            wall ending this far (m) before the fitted arc or taper starts, when it was chosen
+            on wall returns past that.
+        torus_pose_ratio: a long bend's torus under the given pose fitting this many times more
+            closely (rms, before any polish) than under the refined one: the refinement was laid
+            into the arc, the given pose stands (under range noise both fit to the noise, and
+            the ratio stays near 1).
+        taper_pose_ratio: a reducer under the given pose fitting its returns this many times
+            more closely (rms) than the structure found under a refined pose: the refinement
+            leaned onto the taper, the given pose stands ...
+        taper_pose_poor_support: ... when the structure under the refined pose is a reducer,
+            or a turn whose fit keeps less than this fraction of its returns ...
+        taper_pose_min_support: ... and the given pose's reducer keeps at least this fraction
+            of its returns.
+        short_wall_share_slack: a turn under the given pose may keep this much less of a share
+            of its returns than the junction found under a pose refined on a short wall.
+        radius_dead_band: the wall's own radius replaces the clamped one only when they differ
+            by more than this (m; the clamp reading is as good as the fit within it).
+        fit_step_tol: the robust fits stop when no parameter moves by more than this (m, rad):
+            far below the accuracy that matters, and most fits then end in a few iterations.
+        fit_anneal: the robust fits shrink their cut-off over this many iterations, then run
+            to convergence ...
+        fit_cost_tol: ... or until a step lowers the robust cost by less than this fraction.
+        hole_min_step, hole_noise_k: a return enters a side hole that one ring of beams sees
+            (:mod:`detector.grazing`) when it lies this far (m) beyond the wall line through
+            the rings on either side, and at least ``hole_noise_k`` times its radial noise.
+        hole_wall_band: the rings on either side of such a bump must lie on the wall: within
+            this (m, plus ``hole_noise_k`` times their radial noise) of the run's radius.
+        hole_min_returns: fewest returns (and rows of roll) in one hole's bump.
+        hole_sparse_rings: holes are sought only where neighbouring rings meet the wall at
+            least this many radii apart along the axis (``u^2 / R x beam step``).
+        hole_max_rings: most rings of beams a hole's bump may span.
+        hole_max_roll_span: a bump around more than this much of the circumference (rad) is no
+            side hole.
+        hole_max_fit_rms: largest rms (m) of a hole's far-side fit for the hole to be accepted.
     """
 
     tol_floor: float = 0.002
@@ -101,6 +154,33 @@ class ImprovedConfig:
     hinge_reach: float = 0.15
     hinge_min_snr: float = 4.0
     hinge_min_rise: float = 0.0005
+    pose_no_wall_view: float = 0.01
+    pose_given_margin: float = 0.02
+    blind_min_expected: int = 200
+    blind_max_ahead: float = 0.01
+    blind_confidence: float = 0.5
+    short_wall_view: float = 0.05
+    long_wall_span: float = 0.1
+    long_wall_rms: float = 0.25
+    near_wall: float = 0.03
+    gentle_start_margin: float = 0.01
+    torus_pose_ratio: float = 1.5
+    taper_pose_ratio: float = 1.25
+    taper_pose_poor_support: float = 0.6
+    taper_pose_min_support: float = 0.9
+    short_wall_share_slack: float = 0.02
+    radius_dead_band: float = 0.00025
+    fit_step_tol: float = 1e-6
+    fit_anneal: int = 3
+    fit_cost_tol: float = 1e-4
+    hole_min_step: float = 0.00035
+    hole_noise_k: float = 4.0
+    hole_wall_band: float = 0.002
+    hole_min_returns: int = 6
+    hole_sparse_rings: float = 0.25
+    hole_max_rings: int = 3
+    hole_max_roll_span: float = math.radians(200.0)
+    hole_max_fit_rms: float = 0.002
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -152,6 +232,33 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "hinge_reach": (float, 0.0, True, 10.0, "a number in [0, 10] m"),
     "hinge_min_snr": (float, 0.0, True, math.inf, "a finite number >= 0"),
     "hinge_min_rise": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "pose_no_wall_view": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "pose_given_margin": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "blind_min_expected": (int, 1, True, math.inf, "an integer >= 1"),
+    "blind_max_ahead": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "blind_confidence": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "short_wall_view": (float, 0.0, True, 10.0, "a number in [0, 10] m"),
+    "long_wall_span": (float, 0.0, True, 10.0, "a number in [0, 10] m"),
+    "long_wall_rms": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "near_wall": (float, 0.0, True, 10.0, "a number in [0, 10] m"),
+    "gentle_start_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "torus_pose_ratio": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "taper_pose_ratio": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "taper_pose_poor_support": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "taper_pose_min_support": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "short_wall_share_slack": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "radius_dead_band": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "fit_step_tol": (float, 0.0, False, 1.0, "a number in (0, 1] (m, rad)"),
+    "fit_anneal": (int, 1, True, math.inf, "an integer >= 1"),
+    "fit_cost_tol": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "hole_min_step": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "hole_noise_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "hole_wall_band": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "hole_min_returns": (int, 1, True, math.inf, "an integer >= 1"),
+    "hole_sparse_rings": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "hole_max_rings": (int, 1, True, math.inf, "an integer >= 1"),
+    "hole_max_roll_span": (float, 0.0, True, 2.0 * math.pi, "a number in [0, 2 pi] rad"),
+    "hole_max_fit_rms": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
 }
 
 

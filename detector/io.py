@@ -43,12 +43,12 @@ import os
 import shutil
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from detector.atomic import atomic_open, atomic_write_text
 from detector.scan import SCAN_ARRAYS, Scan, ScanReadError
@@ -181,7 +181,7 @@ def _mount(mount: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
 
 
 # ------------------------------------------------------------------------ sweeps
-def sweep_cuts(angles: Sequence[float], servo_range: float | None = None) -> list[slice]:
+def sweep_cuts(angles: ArrayLike, servo_range: float | None = None) -> list[slice]:
     """Split a sequence of servo angles (rad) into sweeps: a new sweep starts where the servo
     reverses (or jumps back) or, with ``servo_range`` (rad), where the angles since the start
     of the sweep would span more than it. Where the servo dwells at its turning point (the
@@ -213,9 +213,9 @@ def sweep_cuts(angles: Sequence[float], servo_range: float | None = None) -> lis
 
 def scan_from_laserscans(
     messages: Sequence[Any],
-    plane_angles: Sequence[float],
+    plane_angles: Sequence[float] | NDArray[np.float64],
     *,
-    timestamps: Sequence[float] | None = None,
+    timestamps: ArrayLike | None = None,
     positions: Any = None,
     rotations: Any = None,
     true_positions: Any = None,
@@ -262,7 +262,7 @@ def scan_from_laserscans(
                 f"angle_increment {float(m.angle_increment):g} and {len(m.ranges)} ranges; "
                 f"expected the first one's {key[0]:g}, {key[1]:g} and {key[2]}"
             )
-    beams = key[0] + key[1] * np.arange(n_b)
+    beams = key[0] + key[1] * np.arange(n_b, dtype=np.float64)
     keep = np.ones(n_b, dtype=bool) if fov is None else np.abs(beams) <= 0.5 * fov + 1e-9
     if not keep.any():
         raise ScanReadError(f"{source}: no beam lies within the field of view {fov!r} rad")
@@ -327,7 +327,7 @@ def _restore_float64(
     if isinstance(fov, (int, float)) and isinstance(step, (int, float)) and step > 0:
         n = int(round(fov / step)) + (0 if fov >= 2 * math.pi - 1e-9 else 1)
         if n == beams.size:
-            exact = -0.5 * (n - 1) * step + step * np.arange(n)
+            exact = -0.5 * (n - 1) * step + step * np.arange(n, dtype=np.float64)
             if np.all(np.abs(exact - beams) <= 1e-6):
                 beams = exact
     res = spec.get("range_resolution")
@@ -446,14 +446,9 @@ def _read_npz(p: Path) -> list[Scan]:
         ) from e
 
 
-def _read_csv(
-    p: Path,
-    *,
-    spec: Mapping[str, Any] | None,
-    fov: float | None,
-    servo_range: float | None,
-    min_planes: int,
-) -> list[Scan]:
+def _csv_lines(p: Path, spec: Mapping[str, Any] | None) -> tuple[dict[str, Any], list[str]]:
+    """The spec (a ``# spec:`` comment's, under the given ``spec``) and the non-comment,
+    non-blank lines of the CSV file ``p``."""
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
@@ -471,6 +466,13 @@ def _read_csv(
             continue
         if line.strip():
             lines.append(line)
+    return spec_d, lines
+
+
+def _csv_columns(p: Path, lines: list[str]) -> dict[str, NDArray[np.float64]]:
+    """The known columns of the CSV ``lines`` as arrays (one value per row), checked: the
+    required columns present, every cell a number, the plane, beam, time and pose columns
+    finite."""
     try:
         rows = list(csv.reader(lines))
     except csv.Error as e:
@@ -484,7 +486,6 @@ def _read_csv(
             f"{p}: missing column(s) {need}; expected {','.join(CSV_COLUMNS)} (sweep optional)"
             f"[,{','.join(CSV_POSE_COLUMNS)}], got {header}"
         )
-    has_pose = all(c in header for c in CSV_POSE_COLUMNS)
     cols = [c for c in (*CSV_COLUMNS, *CSV_POSE_COLUMNS) if c in header]
     idx = {c: header.index(c) for c in cols}
     data = np.empty((len(rows) - 1, len(cols)))
@@ -500,41 +501,70 @@ def _read_csv(
     if data.shape[0] == 0:
         raise ScanReadError(f"{p}: no data rows")
     col = {c: data[:, j] for j, c in enumerate(cols)}
+    has_pose = all(c in col for c in CSV_POSE_COLUMNS)
     for c in ("plane_angle", "beam_angle", "time", *(CSV_POSE_COLUMNS if has_pose else ())):
         bad = ~np.isfinite(col[c])
         if bad.any():
-            n = int(np.argmax(bad))
-            raise ScanReadError(f"{p}: row {n + 2}, column {c!r}: expected a finite number")
-    sweep = col.get("sweep", np.zeros(data.shape[0]))
+            n_bad = int(np.argmax(bad))
+            raise ScanReadError(f"{p}: row {n_bad + 2}, column {c!r}: expected a finite number")
+    return col
+
+
+def _csv_planes(
+    p: Path, col: Mapping[str, NDArray[np.float64]], sweep: NDArray[np.float64]
+) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """The first row of each plane (a run of rows with the same sweep, plane angle and time)
+    and the beam angles every plane must share."""
     key = np.stack([sweep, col["plane_angle"], col["time"]], axis=1)
     new_plane = np.r_[True, np.any(key[1:] != key[:-1], axis=1)]
     starts = np.flatnonzero(new_plane)
-    ends = np.r_[starts[1:], data.shape[0]]
+    ends = np.r_[starts[1:], sweep.size]
     n_b = int(ends[0] - starts[0])
     beams = col["beam_angle"][starts[0] : ends[0]]
-    for s, e in zip(starts, ends, strict=True):
-        if e - s != n_b or not np.array_equal(col["beam_angle"][s:e], beams):
+    for s, stop in zip(starts, ends, strict=True):
+        if stop - s != n_b or not np.array_equal(col["beam_angle"][s:stop], beams):
             raise ScanReadError(
-                f"{p}: the plane starting at row {s + 2} has {e - s} beams; expected the same "
-                f"{n_b} beam angles as the first plane"
+                f"{p}: the plane starting at row {s + 2} has {stop - s} beams; expected the "
+                f"same {n_b} beam angles as the first plane"
             )
-    ranges = col["range"].reshape(-1, n_b)
+    return starts, beams
+
+
+def _csv_poses(
+    col: Mapping[str, NDArray[np.float64]], starts: NDArray[np.intp]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per plane: sensor position (m) and rotation (world from sensor); the identity without
+    the pose columns."""
+    if not all(c in col for c in CSV_POSE_COLUMNS):
+        return np.zeros((starts.size, 3)), np.tile(np.eye(3), (starts.size, 1, 1))
+    pos = np.stack([col[c][starts] for c in ("x", "y", "z")], axis=1)
+    quat = np.stack([col[c][starts] for c in ("qw", "qx", "qy", "qz")], axis=1)
+    return pos, np.array([quat_to_matrix(q) for q in quat])
+
+
+def _read_csv(
+    p: Path,
+    *,
+    spec: Mapping[str, Any] | None,
+    fov: float | None,
+    servo_range: float | None,
+    min_planes: int,
+) -> list[Scan]:
+    spec_d, lines = _csv_lines(p, spec)
+    col = _csv_columns(p, lines)
+    sweep = col.get("sweep", np.zeros(col["range"].size))
+    starts, beams = _csv_planes(p, col, sweep)
+    ranges = col["range"].reshape(-1, beams.size)
     plane_sweep = sweep[starts]
     plane_angle = col["plane_angle"][starts]
     times = col["time"][starts]
-    if has_pose:
-        pos = np.stack([col[c][starts] for c in ("x", "y", "z")], axis=1)
-        quat = np.stack([col[c][starts] for c in ("qw", "qx", "qy", "qz")], axis=1)
-        rot = np.array([quat_to_matrix(q) for q in quat])
-    else:
-        pos = np.zeros((starts.size, 3))
-        rot = np.tile(np.eye(3), (starts.size, 1, 1))
+    pos, rot = _csv_poses(col, starts)
     if "sweep" in col:
         bounds = np.flatnonzero(np.r_[True, plane_sweep[1:] != plane_sweep[:-1], True])
         groups = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
     else:
         groups = sweep_cuts(plane_angle, servo_range)
-    keep = np.ones(n_b, dtype=bool) if fov is None else np.abs(beams) <= 0.5 * fov + 1e-9
+    keep = np.ones(beams.size, dtype=bool) if fov is None else np.abs(beams) <= 0.5 * fov + 1e-9
     out = []
     for g in groups:
         if g.stop - g.start < min_planes and len(groups) > 1:
@@ -590,6 +620,166 @@ def _pick_topic(
     return None
 
 
+@dataclass
+class _BagChoice:
+    """The topics :func:`_read_bag` reads (``None``: absent)."""
+
+    scan: str
+    servo: str
+    odom: str | None
+    truth: str | None
+    spec: str | None
+    clamp: str | None
+
+    def wanted(self) -> set[str]:
+        return {
+            t
+            for t in (self.scan, self.servo, self.odom, self.truth, self.spec, self.clamp)
+            if t is not None
+        }
+
+
+@dataclass
+class _BagRecords:
+    """What :func:`_read_bag` collects from the messages, each list as ``(time s, ...)``."""
+
+    scans: list[tuple[float, Any]] = field(default_factory=list)
+    servo: list[tuple[float, float]] = field(default_factory=list)
+    odom: list[tuple[float, NDArray, NDArray]] = field(default_factory=list)
+    truth: list[tuple[float, NDArray, NDArray]] = field(default_factory=list)
+    clamp: list[tuple[float, float]] = field(default_factory=list)
+    spec: dict[str, Any] = field(default_factory=dict)
+
+
+def _bag_choice(
+    p: Path,
+    topics: Mapping[str, Any],
+    scan_topic: str | None,
+    servo_topic: str | None,
+    odom_topic: str | None,
+    truth_topic: str | None,
+) -> _BagChoice:
+    """The topics to read: asked for (checked) or found by type (see :func:`read_scans`)."""
+    s_topic = _pick_topic(p, topics, (LASERSCAN,), scan_topic, "scan")
+    if s_topic is None:
+        raise ScanReadError(f"{p}: no {LASERSCAN} topic; the bag has {_describe(topics)}")
+    v_topic = _pick_topic(p, topics, SERVO_TYPES, servo_topic, "servo")
+    if v_topic is None:
+        raise ScanReadError(
+            f"{p}: no servo angle topic ({' or '.join(SERVO_TYPES)}, radians); the bag "
+            f"has {_describe(topics)}"
+        )
+    o_topic = _pick_topic(p, topics, (ODOMETRY, TFMESSAGE), odom_topic, "odom")
+    t_topic = truth_topic
+    if t_topic is None and DEFAULT_TOPICS["truth"] in topics:
+        t_topic = DEFAULT_TOPICS["truth"]
+    if t_topic is not None:
+        t_topic = _pick_topic(p, topics, (ODOMETRY,), t_topic, "truth")
+    if o_topic == t_topic:
+        o_topic = _pick_topic(
+            p, {k: v for k, v in topics.items() if k != t_topic}, (ODOMETRY,), None, "odom"
+        )
+
+    def optional(name: str, msgtype: str) -> str | None:
+        topic = DEFAULT_TOPICS[name]
+        return topic if topic in topics and topics[topic].msgtype == msgtype else None
+
+    return _BagChoice(
+        s_topic, v_topic, o_topic, t_topic, optional("spec", STRING), optional("clamp", FLOAT64)
+    )
+
+
+def _bag_record(
+    p: Path,
+    ch: _BagChoice,
+    rec: _BagRecords,
+    topic: str,
+    msg: Any,
+    t_bag: float,
+    servo_joint: str | None,
+    tf_child: str | None,
+) -> None:
+    """File one deserialised message of ``topic`` (received at ``t_bag``, s) into ``rec``."""
+    if topic == ch.scan:
+        st = _stamp(msg.header.stamp)
+        rec.scans.append((st if st > 0.0 else t_bag, msg))
+    elif topic == ch.servo:
+        rec.servo.append(_servo_value(p, ch.servo, msg, t_bag, servo_joint))
+    elif topic == ch.clamp:
+        rec.clamp.append((t_bag, float(msg.data)))
+    elif topic == ch.spec:
+        try:
+            rec.spec = dict(json.loads(msg.data))
+        except (json.JSONDecodeError, TypeError, ValueError) as e:
+            raise ScanReadError(
+                f"{p}: topic {ch.spec!r}: expected the sensor spec as a JSON object, got "
+                f"{msg.data[:80]!r}"
+            ) from e
+    elif topic in (ch.odom, ch.truth):
+        pose = _pose_of(msg, t_bag, tf_child)
+        if pose is not None:
+            (rec.odom if topic == ch.odom else rec.truth).append(pose)
+
+
+def _bag_records(
+    p: Path,
+    *,
+    scan_topic: str | None,
+    servo_topic: str | None,
+    servo_joint: str | None,
+    odom_topic: str | None,
+    truth_topic: str | None,
+    tf_child: str | None,
+) -> tuple[_BagChoice, _BagRecords]:
+    """The chosen topics of the bag ``p`` and their messages."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC if p.suffix == ".bag" else Stores.ROS2_HUMBLE)
+    rec = _BagRecords()
+    try:
+        with AnyReader([p], default_typestore=store) as reader:
+            ch = _bag_choice(p, reader.topics, scan_topic, servo_topic, odom_topic, truth_topic)
+            wanted = ch.wanted()
+            conns = [c for c in reader.connections if c.topic in wanted]
+            for conn, t_bag, raw in reader.messages(connections=conns):
+                msg = reader.deserialize(raw, conn.msgtype)
+                _bag_record(p, ch, rec, conn.topic, msg, 1e-9 * t_bag, servo_joint, tf_child)
+    except ScanReadError:
+        raise
+    except Exception as e:  # (rosbags, sqlite3, mcap, struct: any broken bag, named)
+        raise ScanReadError(f"{p}: cannot be read as a ROS bag ({type(e).__name__}: {e})") from e
+    if not rec.scans:
+        raise ScanReadError(f"{p}: topic {ch.scan!r} holds no LaserScan messages")
+    if not rec.servo:
+        raise ScanReadError(f"{p}: topic {ch.servo!r} holds no servo angles")
+    return ch, rec
+
+
+def _plane_angles(
+    p: Path, ch: _BagChoice, rec: _BagRecords
+) -> tuple[list[tuple[float, Any]], NDArray[np.float64], NDArray[np.float64]]:
+    """The LaserScans within the servo readings' time span, in time order, with their times
+    (s) and servo angles (rad, interpolated at each scan's time)."""
+    scans_raw = sorted(rec.scans, key=lambda x: x[0])
+    servo = sorted(rec.servo)
+    sv_t = np.array([t for t, _ in servo])
+    sv_a = np.array([a for _, a in servo])
+    # a LaserScan outside the servo readings' time span has no known plane: it is dropped
+    scans_raw = [(t, m) for t, m in scans_raw if sv_t[0] <= t <= sv_t[-1]]
+    if not scans_raw:
+        raise ScanReadError(
+            f"{p}: no LaserScan on {ch.scan!r} lies within the servo readings on {ch.servo!r} "
+            f"({sv_t[0]:.3f} to {sv_t[-1]:.3f} s); expected both recorded together"
+        )
+    t_scan = np.array([t for t, _ in scans_raw])
+    angles = np.interp(t_scan, sv_t, sv_a)
+    # (a servo reading at a scan's own stamp is its angle exactly; np.interp may round it)
+    at = np.clip(np.searchsorted(sv_t, t_scan), 0, sv_t.size - 1)
+    angles = np.where(sv_t[at] == t_scan, sv_a[at], angles)
+    return scans_raw, t_scan, angles
+
+
 def _read_bag(
     p: Path,
     *,
@@ -605,97 +795,21 @@ def _read_bag(
     servo_range: float | None,
     min_planes: int,
 ) -> list[Scan]:
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
-
     mount_p, mount_r = _mount(mount)
-    store = get_typestore(Stores.ROS1_NOETIC if p.suffix == ".bag" else Stores.ROS2_HUMBLE)
-    scans_raw: list[tuple[float, Any]] = []
-    servo: list[tuple[float, float]] = []
-    odom: list[tuple[float, NDArray, NDArray]] = []
-    truth: list[tuple[float, NDArray, NDArray]] = []
-    bag_spec: dict[str, Any] = {}
-    clamp: list[tuple[float, float]] = []
-    try:
-        with AnyReader([p], default_typestore=store) as reader:
-            topics = reader.topics
-            s_topic = _pick_topic(p, topics, (LASERSCAN,), scan_topic, "scan")
-            if s_topic is None:
-                raise ScanReadError(f"{p}: no {LASERSCAN} topic; the bag has {_describe(topics)}")
-            v_topic = _pick_topic(p, topics, SERVO_TYPES, servo_topic, "servo")
-            if v_topic is None:
-                raise ScanReadError(
-                    f"{p}: no servo angle topic ({' or '.join(SERVO_TYPES)}, radians); the bag "
-                    f"has {_describe(topics)}"
-                )
-            o_topic = _pick_topic(p, topics, (ODOMETRY, TFMESSAGE), odom_topic, "odom")
-            t_topic = truth_topic
-            if t_topic is None and DEFAULT_TOPICS["truth"] in topics:
-                t_topic = DEFAULT_TOPICS["truth"]
-            if t_topic is not None:
-                t_topic = _pick_topic(p, topics, (ODOMETRY,), t_topic, "truth")
-            if o_topic == t_topic:
-                o_topic = _pick_topic(
-                    p, {k: v for k, v in topics.items() if k != t_topic}, (ODOMETRY,), None, "odom"
-                )
-            spec_topic = DEFAULT_TOPICS["spec"]
-            if spec_topic not in topics or topics[spec_topic].msgtype != STRING:
-                spec_topic = None
-            c_topic = DEFAULT_TOPICS["clamp"]
-            if c_topic not in topics or topics[c_topic].msgtype != FLOAT64:
-                c_topic = None
-            wanted = {s_topic, v_topic, o_topic, t_topic, spec_topic, c_topic} - {None}
-            conns = [c for c in reader.connections if c.topic in wanted]
-            for conn, t_bag, raw in reader.messages(connections=conns):
-                msg = reader.deserialize(raw, conn.msgtype)
-                tb = 1e-9 * t_bag
-                if conn.topic == s_topic:
-                    st = _stamp(msg.header.stamp)
-                    scans_raw.append((st if st > 0.0 else tb, msg))
-                elif conn.topic == v_topic:
-                    servo.append(_servo_value(p, v_topic, msg, tb, servo_joint))
-                elif conn.topic == c_topic:
-                    clamp.append((tb, float(msg.data)))
-                elif conn.topic == spec_topic:
-                    try:
-                        bag_spec = dict(json.loads(msg.data))
-                    except (json.JSONDecodeError, TypeError, ValueError) as e:
-                        raise ScanReadError(
-                            f"{p}: topic {spec_topic!r}: expected the sensor spec as a JSON "
-                            f"object, got {msg.data[:80]!r}"
-                        ) from e
-                elif conn.topic in (o_topic, t_topic):
-                    pose = _pose_of(msg, tb, tf_child)
-                    if pose is not None:
-                        (odom if conn.topic == o_topic else truth).append(pose)
-    except ScanReadError:
-        raise
-    except Exception as e:  # (rosbags, sqlite3, mcap, struct: any broken bag, named)
-        raise ScanReadError(f"{p}: cannot be read as a ROS bag ({type(e).__name__}: {e})") from e
-    if not scans_raw:
-        raise ScanReadError(f"{p}: topic {s_topic!r} holds no LaserScan messages")
-    if not servo:
-        raise ScanReadError(f"{p}: topic {v_topic!r} holds no servo angles")
-    scans_raw.sort(key=lambda x: x[0])
-    servo.sort()
-    sv_t = np.array([t for t, _ in servo])
-    sv_a = np.array([a for _, a in servo])
-    # a LaserScan outside the servo readings' time span has no known plane: it is dropped
-    scans_raw = [(t, m) for t, m in scans_raw if sv_t[0] <= t <= sv_t[-1]]
-    if not scans_raw:
-        raise ScanReadError(
-            f"{p}: no LaserScan on {s_topic!r} lies within the servo readings on {v_topic!r} "
-            f"({sv_t[0]:.3f} to {sv_t[-1]:.3f} s); expected both recorded together"
-        )
-    t_scan = np.array([t for t, _ in scans_raw])
-    angles = np.interp(t_scan, sv_t, sv_a)
-    # (a servo reading at a scan's own stamp is its angle exactly; np.interp may round it)
-    at = np.clip(np.searchsorted(sv_t, t_scan), 0, sv_t.size - 1)
-    angles = np.where(sv_t[at] == t_scan, sv_a[at], angles)
-    believed = _poses_at(t_scan, odom, mount_p, mount_r)
-    true = _poses_at(t_scan, truth, np.zeros(3), np.eye(3)) if truth else believed
+    ch, rec = _bag_records(
+        p,
+        scan_topic=scan_topic,
+        servo_topic=servo_topic,
+        servo_joint=servo_joint,
+        odom_topic=odom_topic,
+        truth_topic=truth_topic,
+        tf_child=tf_child,
+    )
+    scans_raw, t_scan, angles = _plane_angles(p, ch, rec)
+    believed = _poses_at(t_scan, rec.odom, mount_p, mount_r)
+    true = _poses_at(t_scan, rec.truth, np.zeros(3), np.eye(3)) if rec.truth else believed
     out = []
-    clamp.sort()
+    clamp = sorted(rec.clamp)
     cuts = sweep_cuts(angles, servo_range)
     for g in cuts:
         if g.stop - g.start < min_planes and len(cuts) > 1:
@@ -714,10 +828,10 @@ def _read_bag(
                 rotations=believed[1][g],
                 true_positions=true[0][g],
                 true_rotations=true[1][g],
-                spec={**bag_spec, **dict(spec or {})},
+                spec={**rec.spec, **dict(spec or {})},
                 fov=fov,
-                metadata={"topics": [s_topic, v_topic, o_topic, t_topic], **extra},
-                source=f"{p} topic {s_topic!r}",
+                metadata={"topics": [ch.scan, ch.servo, ch.odom, ch.truth], **extra},
+                source=f"{p} topic {ch.scan!r}",
             )
         )
     return out

@@ -14,8 +14,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.fit_kernels import MODEL_TORUS, torus_distance
+from detector.improved_config import ImprovedConfig
 from detector.outgoing import BranchFit
-from detector.pipe_cloud import ANNEAL, COST_TOL, STEP_TOL, even_subsample, partial_percentile
+from detector.pipe_cloud import even_subsample, partial_percentile
 from detector.robust import robust_fit, tukey_cost
 
 
@@ -48,6 +49,7 @@ def fit_torus(
     c0: float,
     c_fin: float,
     noise: float,
+    cfg: ImprovedConfig,
     p_fit: NDArray | None = None,
 ) -> tuple[NDArray, float, int, float] | None:
     """Long-radius bend fit to the returns ``p`` from two bend-radius starts (the second is
@@ -88,9 +90,9 @@ def fit_torus(
             lower=lower,
             upper=upper,
             c_final=c_fin,
-            step_tol=STEP_TOL,
-            anneal=ANNEAL,
-            cost_tol=COST_TOL,
+            step_tol=cfg.fit_step_tol,
+            anneal=cfg.fit_anneal,
+            cost_tol=cfg.fit_cost_tol,
         )
         rms = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1e-9)))
         sup = int((w > 0.1).sum())
@@ -129,8 +131,8 @@ def fit_torus(
             prior_mean=x,
             lower=lower,
             upper=upper,
-            step_tol=STEP_TOL,
-            cost_tol=COST_TOL,
+            step_tol=cfg.fit_step_tol,
+            cost_tol=cfg.fit_cost_tol,
         )
         if spread_cost(x2) < spread_cost(x):
             x = x2
@@ -162,6 +164,8 @@ def spread_along_axis(
             sharing -= 1
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
     picked = [
-        order[s0 + even_subsample(np.arange(c), k)] for s0, c, k in zip(starts, counts, take) if k
+        order[s0 + even_subsample(np.arange(c), int(k))]
+        for s0, c, k in zip(starts, counts, take)
+        if k
     ]
     return idx[np.sort(np.concatenate(picked))]

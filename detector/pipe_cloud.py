@@ -22,14 +22,6 @@ from detector.robust import mad_sigma, tukey_weights
 from detector.scan import Scan, radial_noise
 from detector.transforms import SensorInPipe
 
-#: Fits stop when no parameter moves by more than this (metres, radians): far below the
-#: accuracy that matters, and most fits then end in a few iterations.
-STEP_TOL = 1e-6
-#: Fits shrink their robust cut-off over this many iterations, then run to convergence.
-ANNEAL = 3
-#: ... or once a step lowers the robust cost by less than this fraction.
-COST_TOL = 1e-4
-
 
 @dataclass
 class PipeCloud:
@@ -222,7 +214,7 @@ def prepare_cloud(
 
 
 @njit(cache=True)
-def _gather_returns(valid, ranges, src, missing, dirs, bias):  # type: ignore[no-untyped-def]
+def _gather_returns(valid, ranges, src, missing, dirs, bias):
     """The valid returns of the grid cells in raster order: their cells, scan indices, ranges
     less ``bias`` (clamped at 0 m, as :func:`detector.scan.corrected_ranges`) and sensor-frame
     points ``(3, n)``; ``missing``: cells without a beam."""
@@ -255,7 +247,7 @@ def _gather_returns(valid, ranges, src, missing, dirs, bias):  # type: ignore[no
 
 
 @njit(cache=True)
-def _crop(cell, ranges, local, trig, k_cols, horizon):  # type: ignore[no-untyped-def]
+def _crop(cell, ranges, local, trig, k_cols, horizon):
     """The returns nearer than ``horizon`` along the sensor's axis, with their cells on the
     grid cropped to the beam-angle columns that hold returns, their ranges, points ``(3, n)``
     and ``|sin|, |cos|`` of their beam angles ``(2, n)``; and the cropped grid's width."""
@@ -320,7 +312,7 @@ def classify_returns(
 
 
 @njit(cache=True)
-def _classify_kernel(cell, g, k, r_v, sigma_v, u_v, big_r, floor, noise_k, slope, lift):  # type: ignore[no-untyped-def]
+def _classify_kernel(cell, g, k, r_v, sigma_v, u_v, big_r, floor, noise_k, slope, lift):
     tol = np.full((g, k), floor + noise_k * 0.0 + slope * 0.0)
     wall = np.zeros((g, k), dtype=np.bool_)
     beyond = np.zeros((g, k), dtype=np.bool_)
@@ -411,7 +403,7 @@ def azimuth_uniformity(p: NDArray, bins: int = 12) -> float:
     phi = np.arctan2(p[:, 2], p[:, 1])
     k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
     cnt = np.bincount(k, minlength=bins)
-    med = float(partial_percentile(cnt, 50.0))
+    med = float(partial_percentile(cnt.astype(np.float64), 50.0))
     return float(cnt.min()) / med if med > 0 else 0.0
 
 

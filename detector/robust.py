@@ -216,7 +216,7 @@ def robust_gauss_newton(
                 step_ok = True
                 break
             lam *= 10.0
-        if not step_ok:
+        if not step_ok or dx is None:
             break
         if float(np.abs(dx).max()) < step_tol:
             break

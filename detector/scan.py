@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.atomic import atomic_open
+from detector.validation import fail
 
 #: The arrays of a scan, as :meth:`Scan.save` stores them (the npz's keys besides the
 #: format version, the spec and the metadata).
@@ -136,7 +137,7 @@ class Scan:
     def __post_init__(self) -> None:
         r = np.asarray(self.ranges, dtype=float)
         if r.ndim != 2:
-            raise ValueError(f"Scan.ranges must be (planes, beams), got shape {r.shape}")
+            raise fail("ranges.shape", r.shape, "(planes, beams)", "not 2-D", where="Scan")
         p, b = r.shape
         shapes = {
             "valid": (p, b),
@@ -151,10 +152,16 @@ class Scan:
         for name, shape in shapes.items():
             arr = np.asarray(getattr(self, name), dtype=bool if name == "valid" else float)
             if arr.shape != shape:
-                raise ValueError(f"Scan.{name} must have shape {shape}, got {arr.shape}")
+                raise fail(f"{name}.shape", arr.shape, str(shape), "wrong shape", where="Scan")
             if name != "valid" and not np.all(np.isfinite(arr)):
                 k = _first(~np.isfinite(arr))
-                raise ValueError(f"Scan.{name} must be finite, got {float(arr[k])} at index {k}")
+                raise fail(
+                    f"{name}[{', '.join(map(str, k))}]",
+                    float(arr[k]),
+                    "finite numbers",
+                    "not finite",
+                    where="Scan",
+                )
             object.__setattr__(self, name, arr)
         _check_spec(self.spec)
         for name in ("beam_angles", "plane_angles"):
@@ -162,9 +169,12 @@ class Scan:
             bad = np.abs(arr) > ANGLE_LIMIT
             if np.any(bad):
                 k = _first(bad)
-                raise ValueError(
-                    f"Scan.{name} must be angles in [-2 pi, 2 pi] rad, got {float(arr[k])} at "
-                    f"index {k}"
+                raise fail(
+                    f"{name}[{k[0]}]",
+                    float(arr[k]),
+                    "angles in [-2 pi, 2 pi] (rad)",
+                    "out of range",
+                    where="Scan",
                 )
         for name in ("rotations", "nominal_rotations"):
             _check_rotations(name, getattr(self, name))
@@ -352,10 +362,13 @@ def _check_rotations(name: str, rot: NDArray[np.float64]) -> None:
     bad = (ortho > ROTATION_TOL) | (np.abs(det - 1.0) > ROTATION_TOL)
     if np.any(bad):
         k = int(np.argmax(bad))
-        raise ValueError(
-            f"Scan.{name}[{k}] must be a proper rotation matrix (R^T R = I and det R = +1 "
-            f"within {ROTATION_TOL:g}), got max |R^T R - I| = {float(ortho[k]):.3g} and "
-            f"det R = {float(det[k]):.6g}"
+        raise fail(
+            f"{name}[{k}]",
+            rot[k].tolist(),
+            f"a proper rotation matrix (R^T R = I and det R = +1 within {ROTATION_TOL:g})",
+            f"not a rotation (max |R^T R - I| = {float(ortho[k]):.3g}, "
+            f"det R = {float(det[k]):.6g})",
+            where="Scan",
         )
 
 
@@ -364,39 +377,46 @@ def _first(mask: NDArray[np.bool_]) -> tuple[int, ...]:
     return tuple(int(i) for i in np.unravel_index(int(np.argmax(mask)), mask.shape))
 
 
+def _spec_number_problem(value: Any, rule: str) -> str | None:
+    """What is wrong with ``value`` as a :data:`SPEC_NUMBERS` entry of ``rule`` (``">= 0"``,
+    ``"finite"`` or ``"> 0"``, where inf is allowed), or ``None``."""
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        return "not a number"
+    v = float(value)
+    if math.isnan(v) or (math.isinf(v) and rule != "> 0"):
+        return "not finite"
+    if (rule == ">= 0" and v < 0.0) or (rule == "> 0" and v <= 0.0):
+        return "out of range"
+    return None
+
+
 def _check_spec(spec: Any) -> None:
     """Reject a ``Scan.spec`` that is not a dictionary, or whose entries in
     :data:`SPEC_NUMBERS` are not numbers in their allowed range."""
     if spec is None:
         return
     if not isinstance(spec, Mapping):
-        raise ValueError(f"Scan.spec must be a dict (a LidarSpec as a dict), got {spec!r}")
-    for key, (unit, allowed) in SPEC_NUMBERS.items():
+        raise fail("spec", spec, "a dict (a LidarSpec as a dict)", "not a dict", where="Scan")
+    for key, (unit, rule) in SPEC_NUMBERS.items():
         if key not in spec:
             continue
-        value = spec[key]
-        ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
-        if ok:
-            v = float(value)
-            if allowed == ">= 0":
-                ok = math.isfinite(v) and v >= 0.0
-            elif allowed == "finite":
-                ok = math.isfinite(v)
-            else:
-                ok = v > 0.0  # (inf allowed, NaN not)
-        if not ok:
-            u = f" {unit}" if unit else ""
-            what = {
+        problem = _spec_number_problem(spec[key], rule)
+        if problem is not None:
+            u = f" ({unit})" if unit else ""
+            allowed = {
                 ">= 0": f"a finite number >= 0{u}",
-                "finite": f"a finite number ({unit})",
-                "> 0": f"a number > 0{u} (inf: unlimited)",
-            }[allowed]
-            raise ValueError(f"Scan.spec[{key!r}] must be {what}, got {value!r}")
+                "finite": f"a finite number{u}",
+                "> 0": f"a number > 0{u}, inf: unlimited",
+            }[rule]
+            raise fail(f"spec[{key!r}]", spec[key], allowed, problem, where="Scan")
     if "min_range" in spec and "max_range" in spec:
         if not float(spec["min_range"]) < float(spec["max_range"]):
-            raise ValueError(
-                f"Scan.spec['min_range'] must be < Scan.spec['max_range'], got min_range "
-                f"{spec['min_range']!r} and max_range {spec['max_range']!r} m"
+            raise fail(
+                "spec['min_range']",
+                spec["min_range"],
+                f"below spec['max_range'] = {spec['max_range']!r} (m)",
+                "not below max_range",
+                where="Scan",
             )
 
 

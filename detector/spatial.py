@@ -64,7 +64,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.detection import Detection
-from detector.ellipse import fit_ellipse
+from detector.ellipse import Ellipse, fit_ellipse
 from detector.grid import build_grid, dilate, label_regions
 from detector.options import StructureOption, option_order
 from detector.scan import Scan, corrected_ranges, radial_noise, spec_value
@@ -96,7 +96,7 @@ def _ellipse_3d(points: NDArray[np.float64]) -> dict[str, Any] | None:
     e1 = e1 / np.linalg.norm(e1)
     e2 = np.cross(normal, e1)
     fit = fit_ellipse(q @ e1, q @ e2)
-    if not fit.ok:
+    if not isinstance(fit, Ellipse):  # (an EllipseFitFailure)
         return None
     centre = c + fit.centre[0] * e1 + fit.centre[1] * e2
     return {

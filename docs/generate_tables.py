@@ -1,13 +1,14 @@
 """The README's reference tables, rendered from the code so that they cannot drift.
 
-Owns the generated parts of ``README.md``: the environments' observation (named from
-:data:`pipe_env.envs.OPTION_FEATURES` and the observation space's own bounds), actions, keyword
-options (from the constructors' signatures and defaults), reward terms, and the ``pipenav``
+Owns the generated parts of ``README.md``: the environments' observation (the columns, bounds
+and meanings of :data:`pipe_env.envs.observations.OPTION_COLUMNS` and the observation type's
+space), actions, keyword options (the fields and defaults of the config classes in
+:mod:`pipe_env.envs.config`), reward terms, and the ``pipenav``
 commands (from the CLI's argparse parser). Each table sits in the README between
 ``<!-- begin generated: NAME -->`` and ``<!-- end generated: NAME -->``.
 
-Every name in the code needs a description here: a feature, an argument or a command without
-one raises ``KeyError`` naming it, so a new one cannot go undocumented.
+Every name in the code needs a description (an options column carries its own): an argument or
+a command without one raises ``KeyError`` naming it, so a new one cannot go undocumented.
 
 Usage (from the repository root)::
 
@@ -19,7 +20,6 @@ Usage (from the repository root)::
 from __future__ import annotations
 
 import argparse
-import inspect
 import re
 import sys
 from collections.abc import Callable
@@ -31,24 +31,6 @@ if str(ROOT) not in sys.path:
 
 README = ROOT / "README.md"
 
-#: One line per column of the ``options`` table (keys: ``OPTION_FEATURES``).
-FEATURE_DOCS: dict[str, str] = {
-    "valid": "1 if the action mask allows this row",
-    "straight": "kind one-hot: straight on (no structure ahead)",
-    "reducer": "kind one-hot: a diameter change",
-    "closure": "kind one-hot: an end wall or obstacle",
-    "bend": "kind one-hot: a bend (one way on)",
-    "junction": "kind one-hot: a junction (two or more ways on)",
-    "back_out": "1 on the back-out row",
-    "distance": "from the sensor to the structure's reference point along the pipe, m",
-    "diameter": "inner diameter of the outgoing pipe, m (0 for a closure)",
-    "cos_direction": "cosine of the outgoing axis' roll about the incoming one (0 = left)",
-    "sin_direction": "sine of that roll (pi/2 = up)",
-    "angle": "deflection of the outgoing axis from straight on, rad",
-    "confidence": "the detector's confidence in this way",
-    "taken": "times the robot's odometry log says it took this way from here (/3, capped)",
-    "goal_alignment": "cosine between the way's outgoing axis and the direction to the goal",
-}
 
 #: The other observation keys.
 OBSERVATION_DOCS: dict[str, str] = {
@@ -134,23 +116,24 @@ def envs_table() -> str:
 
 
 def observation_table() -> str:
-    """The observation keys and the options table's columns, with shapes and bounds."""
+    """The observation keys and the options table's columns, with shapes, bounds and meanings
+    (from the observation type, :mod:`pipe_env.envs.observations`)."""
     import numpy as np
+    from gymnasium.spaces import Box
 
-    from pipe_env.envs import K_OPTIONS, OPTION_FEATURES, PipeNavEnv
+    from pipe_env.envs.actions import K_OPTIONS
+    from pipe_env.envs.observations import OPTION_COLUMNS, DecisionObservation
 
-    space = PipeNavEnv(scan_image=True).observation_space
+    space = DecisionObservation(scan_image=True).space()
     lines = [_row("key", "shape", "meaning"), _row("---", "---", "---")]
     for key, sub in space.spaces.items():
-        lines.append(_row(f"`{key}`", str(tuple(sub.shape)), OBSERVATION_DOCS[key]))
+        lines.append(_row(f"`{key}`", str(tuple(sub.shape or ())), OBSERVATION_DOCS[key]))
     lines += ["", _row("column", "name", "range", "meaning"), _row("---", "---", "---", "---")]
     opt = space["options"]
-    for i, name in enumerate(OPTION_FEATURES):
+    assert isinstance(opt, Box)
+    for i, col in enumerate(OPTION_COLUMNS):
         lo, hi = float(np.min(opt.low[:, i])), float(np.max(opt.high[:, i]))
-        lines.append(_row(str(i), f"`{name}`", f"[{lo:.3g}, {hi:.3g}]", FEATURE_DOCS[name]))
-    unknown = set(FEATURE_DOCS) - set(OPTION_FEATURES)
-    if unknown:
-        raise KeyError(f"FEATURE_DOCS describes columns the code does not have: {sorted(unknown)}")
+        lines.append(_row(str(i), f"`{col.name}`", f"[{lo:.3g}, {hi:.3g}]", col.meaning))
     lines += [
         "",
         f"Actions: `Discrete({K_OPTIONS})`. Rows 0-{K_OPTIONS - 2} are the detected ways on "
@@ -161,14 +144,18 @@ def observation_table() -> str:
 
 
 def _constructor_options() -> list[tuple[str, object, str]]:
-    from pipe_env.envs.env import PipeExploreEnv, PipeNavEnv, _DecisionEnv
+    """(argument, default, env) of ``gymnasium.make``: the fields of the envs' config classes
+    (shared ones first, then PipeNav's, then PipeExplore's)."""
+    import dataclasses
+
+    from pipe_env.envs.config import EnvConfig, ExploreConfig, NavConfig
 
     seen: list[tuple[str, object, str]] = []
-    for cls, where in ((_DecisionEnv, "both"), (PipeNavEnv, "PipeNav"), (PipeExploreEnv, "")):
-        for p in inspect.signature(cls.__init__).parameters.values():
-            if p.name == "self" or p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
-                continue
-            seen.append((p.name, p.default, where))
+    shared = {f.name for f in dataclasses.fields(EnvConfig)}
+    for cls, where in ((EnvConfig, "both"), (NavConfig, "PipeNav"), (ExploreConfig, "")):
+        for f in dataclasses.fields(cls):
+            if cls is EnvConfig or f.name not in shared:
+                seen.append((f.name, f.default, where))
     return seen
 
 
@@ -270,7 +257,11 @@ def render_readme(text: str) -> str:
         if not pattern.search(text):
             raise KeyError(f"README.md has no generated section {name!r}")
         table = make()
-        text = pattern.sub(lambda m, t=table: m.group(1) + t + "\n" + m.group(2), text)
+
+        def put(m: re.Match[str], table: str = table) -> str:
+            return m.group(1) + table + "\n" + m.group(2)
+
+        text = pattern.sub(put, text)
     return text
 
 

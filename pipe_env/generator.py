@@ -13,21 +13,24 @@ All randomness comes from the ``rng`` passed in: the same seed gives the same ne
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field, fields
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from detector.geometry import Pose, frame_from_forward, segment_distance
+from detector.validation import check_bool, check_choice, check_int, check_number, fail
 from pipe_env.fittings import build_fitting
-from pipe_env.network import (
+from pipe_env.network import PipeNetwork
+from pipe_env.network_elements import (
+    BEND_ANGLE_RANGE,
     BEND_RADIUS_RANGE,
     NETWORK_DIAMETER_RANGE,
     WALL_CLEARANCE,
     Fitting,
-    PipeNetwork,
     Run,
 )
 from pipe_env.robot_limits import ROBOT_DIAMETER_RANGE
@@ -49,12 +52,20 @@ class NetworkGenerationError(RuntimeError):
     """The generator could not place a valid network within its retry budget."""
 
 
+#: The angle fields that took degrees before they took radians: old name -> new name.
+DEPRECATED_DEGREE_FIELDS: dict[str, str] = {
+    "bend_angle_range": "bend_deflection_range",
+    "bend_angle_step": "bend_deflection_step",
+    "roll_step": "roll_angle_step",
+}
+
+
 @dataclass(frozen=True)
 class NetworkConfig:
-    """Parameters of :func:`generate_network`. Lengths in metres, angles in degrees.
+    """Parameters of :func:`generate_network`. Lengths in metres, angles in radians.
 
     Attributes:
-        n_fittings: fittings to place, not counting the end caps (>= 1).
+        n_fittings: fittings to place, not counting the end caps (1-200).
         kind_weights: relative frequency of each kind in ``KIND_CHOICES``.
         diameter_range: inner diameters drawn from this range, m.
         branch_same_diameter: probability that a junction branch keeps the main diameter.
@@ -64,15 +75,18 @@ class NetworkConfig:
         run_length_range: straight pipe length between fittings, m.
         first_run_length: straight pipe from the entry cap to the first fitting, m.
         start_offset: distance of the start pose from the entry cap, m.
-        bend_angle_range: bend deflections, deg (within 30-90).
-        bend_angle_step: snap bend deflections to multiples of this, deg (0: continuous).
-        roll_step: in 3D, snap roll directions to multiples of this, deg (0: continuous).
+        bend_deflection_range: bend deflections, rad (within pi/6 to pi/2, 30-90 deg).
+        bend_deflection_step: snap bend deflections to multiples of this, rad (0: continuous).
+        roll_angle_step: in 3D, snap roll directions to multiples of this, rad (0: continuous).
         bend_radius_range: long-bend radius, in diameters (within 1-3).
         taper_length_range: reducer taper length, m.
         min_diameter_change: smallest diameter change at a reducer, m.
         n_goals: goals to place (each before a reachable closure).
         max_extent: largest side of the box holding all fitting centres, m (None: unbounded).
         max_retries: whole-network attempts before giving up.
+
+    Deprecated (for one version): ``bend_angle_range``, ``bend_angle_step`` and ``roll_step``
+    in degrees are accepted with a ``DeprecationWarning`` and converted to the fields above.
     """
 
     n_fittings: int = 8
@@ -85,133 +99,184 @@ class NetworkConfig:
     run_length_range: tuple[float, float] = (0.4, 1.0)
     first_run_length: float = 1.2
     start_offset: float = 0.5
-    bend_angle_range: tuple[float, float] = (30.0, 90.0)
-    bend_angle_step: float = 15.0
-    roll_step: float = 45.0
-    bend_radius_range: tuple[float, float] = (1.0, 3.0)
+    bend_deflection_range: tuple[float, float] = BEND_ANGLE_RANGE
+    bend_deflection_step: float = math.radians(15.0)
+    roll_angle_step: float = math.radians(45.0)
+    bend_radius_range: tuple[float, float] = BEND_RADIUS_RANGE
     taper_length_range: tuple[float, float] = (0.05, 0.2)
     min_diameter_change: float = 0.008
     n_goals: int = 1
     max_extent: float | None = None
     max_retries: int = 50
+    # deprecated degree fields (see the class docstring); not stored
+    bend_angle_range: InitVar[tuple[float, float] | None] = None
+    bend_angle_step: InitVar[float | None] = None
+    roll_step: InitVar[float | None] = None
 
-    def __post_init__(self) -> None:
-        def bad(name: str, value: Any, allowed: str) -> ValueError:
-            return ValueError(f"NetworkConfig.{name} = {value!r} is invalid; allowed: {allowed}")
+    def __post_init__(
+        self,
+        bend_angle_range: tuple[float, float] | None,
+        bend_angle_step: float | None,
+        roll_step: float | None,
+    ) -> None:
+        old = {"bend_angle_range": bend_angle_range, "bend_angle_step": bend_angle_step}
+        old["roll_step"] = roll_step
+        for name, value in old.items():
+            if value is not None:
+                self._take_degrees(name, value)
+        _check_counts(self)
+        _check_pairs(self)
+        _check_kind_weights(self)
+        _check_lengths(self)
 
-        def is_int(v: Any) -> bool:
-            return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
-
-        def is_num(v: Any) -> bool:
-            return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
-
-        if not is_int(self.n_fittings) or not 1 <= self.n_fittings <= 200:
-            raise bad("n_fittings", self.n_fittings, "an integer in [1, 200]")
-        for name in ("planar", "allow_loops"):
-            if not isinstance(getattr(self, name), bool):
-                raise bad(name, getattr(self, name), "true or false")
-        for name in ("n_goals", "max_retries"):
-            if not is_int(getattr(self, name)):
-                raise bad(name, getattr(self, name), "an integer")
-        for name in (
-            "diameter_range",
-            "run_length_range",
-            "bend_angle_range",
-            "bend_radius_range",
-            "taper_length_range",
-        ):
-            v = getattr(self, name)
-            if not (isinstance(v, (tuple, list)) and len(v) == 2 and all(is_num(x) for x in v)):
-                raise bad(name, v, "two numbers (lo, hi)")
-            object.__setattr__(self, name, (float(v[0]), float(v[1])))
-        for name in (
-            "branch_same_diameter",
-            "loop_probability",
-            "first_run_length",
-            "start_offset",
-            "bend_angle_step",
-            "roll_step",
-            "min_diameter_change",
-        ):
-            if not is_num(getattr(self, name)):
-                raise bad(name, getattr(self, name), "a number")
-        if self.max_extent is not None and not is_num(self.max_extent):
-            raise bad("max_extent", self.max_extent, "None or a number (m)")
-        if not isinstance(self.kind_weights, Mapping) or not all(
-            is_num(w) for w in dict(self.kind_weights).values()
-        ):
-            raise bad("kind_weights", self.kind_weights, f"a mapping of {KIND_CHOICES} to numbers")
-        weights = dict(self.kind_weights)
-        unknown = sorted(set(weights) - set(KIND_CHOICES))
-        if unknown:
-            raise bad("kind_weights", unknown, f"keys from {KIND_CHOICES}")
-        if (
-            any((not math.isfinite(w)) or w < 0 for w in weights.values())
-            or sum(w for k, w in weights.items() if k != "closure") <= 0
-        ):
-            raise bad("kind_weights", weights, "non-negative weights, some non-closure kind > 0")
-        object.__setattr__(self, "kind_weights", weights)
-        lo, hi = NETWORK_DIAMETER_RANGE
-        d0, d1 = self.diameter_range
-        if not lo <= d0 <= d1 <= hi:
-            raise bad("diameter_range", self.diameter_range, f"lo <= hi within [{lo}, {hi}] m")
-        if not 0.0 <= self.branch_same_diameter <= 1.0:
-            raise bad("branch_same_diameter", self.branch_same_diameter, "[0, 1]")
-        if not 0.0 <= self.loop_probability <= 1.0:
-            raise bad("loop_probability", self.loop_probability, "[0, 1]")
-        r0, r1 = self.run_length_range
-        if not 0.05 <= r0 <= r1 <= 20.0:
-            raise bad("run_length_range", self.run_length_range, "0.05 <= lo <= hi <= 20 m")
-        if not 0.1 <= self.start_offset < self.first_run_length <= 20.0:
-            raise bad(
-                "first_run_length/start_offset",
-                (self.first_run_length, self.start_offset),
-                "0.1 <= start_offset < first_run_length <= 20 m",
+    def _take_degrees(self, old: str, value: Any) -> None:
+        """Set the radian field from the deprecated degree field ``old``, warning once."""
+        new = DEPRECATED_DEGREE_FIELDS[old]
+        if getattr(self, new) != _FIELD_DEFAULTS[new]:
+            raise fail(
+                f"NetworkConfig.{old}",
+                value,
+                f"{new} (radians) alone; {old} (degrees) is deprecated",
+                f"given with {new}",
             )
-        a0, a1 = self.bend_angle_range
-        if not 30.0 <= a0 <= a1 <= 90.0:
-            raise bad("bend_angle_range", self.bend_angle_range, "30 <= lo <= hi <= 90 deg")
-        if not 0.0 <= self.bend_angle_step <= 60.0:
-            raise bad("bend_angle_step", self.bend_angle_step, "[0, 60] deg")
-        if not 0.0 <= self.roll_step <= 180.0:
-            raise bad("roll_step", self.roll_step, "[0, 180] deg")
-        b0, b1 = self.bend_radius_range
-        if not BEND_RADIUS_RANGE[0] <= b0 <= b1 <= BEND_RADIUS_RANGE[1]:
-            raise bad("bend_radius_range", self.bend_radius_range, "1 <= lo <= hi <= 3 D")
-        t0, t1 = self.taper_length_range
-        if not 0.005 <= t0 <= t1 <= 1.0:
-            raise bad("taper_length_range", self.taper_length_range, "0.005 <= lo <= hi <= 1 m")
-        if not 0.001 <= self.min_diameter_change <= max(d1 - d0, 0.001):
-            raise bad(
-                "min_diameter_change",
-                self.min_diameter_change,
-                f"[0.001, {max(d1 - d0, 0.001):.3f}] m (the width of diameter_range)",
-            )
-        if not 0 <= self.n_goals <= 10:
-            raise bad("n_goals", self.n_goals, "[0, 10]")
-        if self.max_extent is not None and not (
-            math.isfinite(self.max_extent) and self.first_run_length < self.max_extent <= 1000.0
-        ):
-            raise bad("max_extent", self.max_extent, "None or (first_run_length, 1000] m")
-        if not 1 <= self.max_retries <= 10_000:
-            raise bad("max_retries", self.max_retries, "[1, 10000]")
+        warnings.warn(
+            f"NetworkConfig.{old} (degrees) is deprecated and will be removed; use {new} "
+            "(radians) instead",
+            DeprecationWarning,
+            stacklevel=4,
+        )
+        name = f"NetworkConfig.{old}"
+        if new == "bend_deflection_range":
+            low, high, _ = _PAIR_LIMITS[new]
+            limits = (round(math.degrees(low), 6), round(math.degrees(high), 6))
+            lo, hi = _pair(name, value, "deg", limits)
+            object.__setattr__(self, new, (math.radians(lo), math.radians(hi)))
+        else:
+            low, high, _ = _NUMBER_LIMITS[new]
+            number = check_number(name, value, math.degrees(low), math.degrees(high), "deg")
+            object.__setattr__(self, new, math.radians(number))
 
     def to_dict(self) -> dict[str, Any]:
+        """The config as plain values (the radian fields; ``from_dict`` reads it back)."""
         out: dict[str, Any] = {}
-        for k in self.__dataclass_fields__:
-            v = getattr(self, k)
-            out[k] = dict(v) if isinstance(v, Mapping) else (list(v) if isinstance(v, tuple) else v)
+        for f in fields(self):
+            v = getattr(self, f.name)
+            out[f.name] = (
+                dict(v) if isinstance(v, Mapping) else (list(v) if isinstance(v, tuple) else v)
+            )
         return out
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> NetworkConfig:
-        unknown = sorted(set(d) - set(cls.__dataclass_fields__))
+        """A config from its :meth:`to_dict` form; the deprecated degree keys are accepted."""
+        if not isinstance(d, Mapping):
+            raise fail("NetworkConfig", d, "a mapping of NetworkConfig fields", "not a mapping")
+        allowed = [f.name for f in fields(cls)] + list(DEPRECATED_DEGREE_FIELDS)
+        unknown = sorted(str(k) for k in d if k not in allowed)
         if unknown:
-            raise ValueError(
-                f"NetworkConfig has no keys {unknown}; allowed: {sorted(cls.__dataclass_fields__)}"
-            )
-        kw = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
+            raise fail(f"NetworkConfig.{unknown[0]}", d[unknown[0]], ", ".join(allowed), "no key")
+        kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
         return cls(**kw)
+
+
+_FIELD_DEFAULTS: dict[str, Any] = {
+    "bend_deflection_range": BEND_ANGLE_RANGE,
+    "bend_deflection_step": math.radians(15.0),
+    "roll_angle_step": math.radians(45.0),
+}
+#: (low, high, unit) of each pair field ``(lo, hi)``; bend deflections allow 1e-9 rad slack
+#: so that ``math.pi / 6`` and ``math.radians(30)`` both pass.
+_PAIR_LIMITS: dict[str, tuple[float, float, str]] = {
+    "diameter_range": (*NETWORK_DIAMETER_RANGE, "m"),
+    "run_length_range": (0.05, 20.0, "m"),
+    "bend_deflection_range": (BEND_ANGLE_RANGE[0] - 1e-9, BEND_ANGLE_RANGE[1] + 1e-9, "rad"),
+    "bend_radius_range": (*BEND_RADIUS_RANGE, "D"),
+    "taper_length_range": (0.005, 1.0, "m"),
+}
+#: (low, high, unit) of each number field.
+_NUMBER_LIMITS: dict[str, tuple[float, float, str]] = {
+    "branch_same_diameter": (0.0, 1.0, ""),
+    "loop_probability": (0.0, 1.0, ""),
+    "first_run_length": (0.1, 20.0, "m"),
+    "start_offset": (0.1, 20.0, "m"),
+    "bend_deflection_step": (0.0, math.radians(60.0), "rad"),
+    "roll_angle_step": (0.0, math.pi, "rad"),
+}
+_INT_LIMITS: dict[str, tuple[int, int]] = {
+    "n_fittings": (1, 200),
+    "n_goals": (0, 10),
+    "max_retries": (1, 10_000),
+}
+
+
+def _pair(name: str, value: Any, unit: str, limits: tuple[float, float] | None = None) -> Any:
+    """``value`` as ``(lo, hi)`` floats with lo <= hi, each within ``limits`` if given."""
+    low, high = limits if limits is not None else (None, None)
+    allowed = f"two numbers lo <= hi ({unit})"
+    if limits is not None:
+        allowed = f"two numbers lo <= hi within {low:g} to {high:g} ({unit})"
+    if not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise fail(name, value, allowed, "not two numbers")
+    lo = check_number(f"{name}[0]", value[0], low, high, unit)
+    hi = check_number(f"{name}[1]", value[1], low, high, unit)
+    if lo > hi:
+        raise fail(name, value, allowed, "lo above hi")
+    return (lo, hi)
+
+
+def _check_counts(cfg: NetworkConfig) -> None:
+    for name, (lo, hi) in _INT_LIMITS.items():
+        check_int(f"NetworkConfig.{name}", getattr(cfg, name), lo, hi)
+    for name in ("planar", "allow_loops"):
+        check_bool(f"NetworkConfig.{name}", getattr(cfg, name))
+
+
+def _check_pairs(cfg: NetworkConfig) -> None:
+    for name, (lo, hi, unit) in _PAIR_LIMITS.items():
+        value = _pair(f"NetworkConfig.{name}", getattr(cfg, name), unit, (lo, hi))
+        object.__setattr__(cfg, name, value)
+
+
+def _check_kind_weights(cfg: NetworkConfig) -> None:
+    name = "NetworkConfig.kind_weights"
+    allowed = f"a mapping of {', '.join(KIND_CHOICES)} to weights >= 0, some non-closure > 0"
+    if not isinstance(cfg.kind_weights, Mapping):
+        raise fail(name, cfg.kind_weights, allowed, "not a mapping")
+    weights = dict(cfg.kind_weights)
+    for kind, w in weights.items():
+        check_choice(f"{name} key", kind, KIND_CHOICES)
+        weights[kind] = check_number(f"{name}[{kind!r}]", w, low=0.0)
+    if sum(w for k, w in weights.items() if k != "closure") <= 0:
+        raise fail(name, weights, allowed, "no non-closure kind has weight")
+    object.__setattr__(cfg, "kind_weights", weights)
+
+
+def _check_lengths(cfg: NetworkConfig) -> None:
+    for name, (lo, hi, unit) in _NUMBER_LIMITS.items():
+        value = check_number(f"NetworkConfig.{name}", getattr(cfg, name), lo, hi, unit)
+        object.__setattr__(cfg, name, value)
+    if cfg.start_offset >= cfg.first_run_length:
+        raise fail(
+            "NetworkConfig.start_offset",
+            cfg.start_offset,
+            f"below first_run_length = {cfg.first_run_length:g} m",
+            "the start would lie beyond the first run",
+        )
+    d0, d1 = cfg.diameter_range
+    width = max(d1 - d0, 0.001)
+    check_number("NetworkConfig.min_diameter_change", cfg.min_diameter_change, 0.001, width, "m")
+    if cfg.max_extent is not None:
+        extent = check_number(
+            "NetworkConfig.max_extent", cfg.max_extent, cfg.first_run_length, 1000.0, "m", True
+        )
+        object.__setattr__(cfg, "max_extent", extent)
+
+
+def _degrees(angle: float) -> float:
+    """``angle`` (rad) in degrees, snapped to 1e-9 deg. The generator samples angles on the
+    degree grid it always used, so that a seed gives the same network, bit for bit, as when
+    the config took degrees (``radians(30)`` and ``pi / 6`` both give exactly 30.0)."""
+    return round(math.degrees(angle), 9)
 
 
 class _PlacementFailed(Exception):
@@ -254,7 +319,8 @@ class _Builder:
 
     def _add_fitting(self, kind: str, pos: NDArray, **params: Any) -> str:
         nid = self._node_id()
-        self.fittings.append(Fitting(nid, kind, tuple(float(v) for v in pos), **params))
+        position = (float(pos[0]), float(pos[1]), float(pos[2]))
+        self.fittings.append(Fitting(nid, kind, position, **params))
         return nid
 
     def _add_run(self, a: str, b: str, pa: NDArray, pb: NDArray, diameter: float) -> None:
@@ -285,15 +351,15 @@ class _Builder:
     def _roll(self) -> float:
         if self.cfg.planar:
             return float(self.rng.choice([0.0, math.pi]))
-        step = self.cfg.roll_step
+        step = _degrees(self.cfg.roll_angle_step)
         if step > 0:
             n = max(int(round(360.0 / step)), 1)
             return math.radians(step) * int(self.rng.integers(n))
         return float(self.rng.uniform(-math.pi, math.pi))
 
     def _bend_angle(self) -> float:
-        a0, a1 = self.cfg.bend_angle_range
-        step = self.cfg.bend_angle_step
+        a0, a1 = (_degrees(a) for a in self.cfg.bend_deflection_range)
+        step = _degrees(self.cfg.bend_deflection_step)
         if step > 0:
             choices = np.arange(math.ceil(a0 / step) * step, a1 + 1e-9, step)
             if len(choices):
@@ -508,7 +574,7 @@ class _Builder:
         if self.cfg.n_goals == 0:
             return []
         assert net.start_pose is not None
-        candidates = []
+        candidates: list[tuple[float, float, float]] = []
         unseen = decision_free_closures(net)
         for f in net.fittings[1:]:
             if f.kind != "closure" or f.id in unseen:
@@ -520,7 +586,7 @@ class _Builder:
             point = g.centre + inward * back
             r = route(net, net.start_pose, point)
             if r is not None:
-                candidates.append(tuple(float(v) for v in point))
+                candidates.append((float(point[0]), float(point[1]), float(point[2])))
         if len(candidates) < self.cfg.n_goals:
             raise _PlacementFailed(
                 "too few reachable goals (a goal must need a decision: the closure that the "
@@ -540,9 +606,9 @@ def decision_free_closures(net: PipeNetwork) -> set[str]:
     if run_id is None or run_id not in net.run_by_id:
         return set()
     run = net.run_by_id[run_id]
+    start = net.start_pose
     ahead = max(
-        (run.a, run.b),
-        key=lambda f: float((net.position(f) - net.start_pose.position) @ net.start_pose.forward),
+        (run.a, run.b), key=lambda f: float((net.position(f) - start.position) @ start.forward)
     )
     seen: set[str] = set()
     while ahead not in seen:
@@ -564,7 +630,7 @@ def generate_network(config: NetworkConfig, rng: np.random.Generator) -> PipeNet
     :class:`NetworkGenerationError` naming the configuration to relax.
     """
     if not isinstance(rng, np.random.Generator):
-        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+        raise fail("rng", rng, "a numpy.random.Generator", f"a {type(rng).__name__}")
     last = ""
     for _ in range(config.max_retries):
         try:

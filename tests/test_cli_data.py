@@ -100,8 +100,7 @@ def test_export_stl_is_watertight_and_mjcf_loads(tmp_path, capsys):
 @pytest.mark.parametrize("seed", range(8))
 def test_generated_networks_export_watertight(tmp_path, seed):
     from pipe_env.export import export_mesh
-    from pipe_env.generator import NetworkConfig
-    from pipe_env.network import generate_network
+    from pipe_env.generator import NetworkConfig, generate_network
 
     net = generate_network(NetworkConfig.from_dict({"n_fittings": 8}), np.random.default_rng(seed))
     path = export_mesh(net, tmp_path / "w.stl")

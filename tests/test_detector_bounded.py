@@ -84,10 +84,10 @@ def test_rotations_must_be_rotations():
     r = np.full((3, 5), 0.5)
     rot = np.tile(np.eye(3), (3, 1, 1))
     rot[1] = np.diag([1.0, 1.0, 1.1])
-    with pytest.raises(ValueError, match=r"Scan\.rotations\[1\] must be a proper rotation.*1\.1"):
+    with pytest.raises(ValueError, match=r"Scan: rotations\[1\] = .*not a rotation .*det R = 1\.1"):
         Scan(**_args(r, rotations=rot))
     rot[1] = np.diag([1.0, 1.0, -1.0])  # a reflection
-    with pytest.raises(ValueError, match=r"Scan\.nominal_rotations\[1\] .*det R = -1"):
+    with pytest.raises(ValueError, match=r"Scan: nominal_rotations\[1\] = .*det R = -1"):
         Scan(**_args(r, nominal_rotations=rot))
     rot[1] = np.eye(3) + 1e-9  # within the tolerance
     assert Scan(**_args(r, rotations=rot)).n_valid == r.size
@@ -95,25 +95,29 @@ def test_rotations_must_be_rotations():
 
 def test_angles_in_range_and_limits_ordered():
     r = np.full((3, 5), 0.5)
-    with pytest.raises(ValueError, match=r"Scan\.plane_angles must be angles in .*got 100\.0"):
+    with pytest.raises(
+        ValueError, match=r"Scan: plane_angles\[1\] = 100\.0: out of range; allowed: angles in"
+    ):
         Scan(**_args(r, plane_angles=np.array([0.0, 100.0, 0.2])))
-    with pytest.raises(ValueError, match=r"Scan\.beam_angles must be finite"):
+    with pytest.raises(ValueError, match=r"Scan: beam_angles\[1\] = nan: not finite"):
         Scan(**_args(r, beam_angles=np.array([0.0, math.nan, 0.1, 0.2, 0.3])))
-    with pytest.raises(ValueError, match=r"min_range'\] must be < .*min_range 2\.0 and max_range"):
+    with pytest.raises(ValueError, match=r"Scan: spec\['min_range'\] = 2\.0: not below max_range"):
         Scan(**_args(r, spec={"min_range": 2.0, "max_range": 1.0}))
 
 
 @pytest.mark.parametrize(
     "spec, diameter, allowed",
     [
-        ({}, 0.005, r"\[0\.01, 2\] m"),
-        ({"max_range": 0.3}, 0.8, r"\[0\.01, 0\.6\] m \(the sensor's max_range is 0\.3 m\)"),
-        ({}, 1e300, r"\[0\.01, 2\] m"),
+        ({}, 0.005, r"0\.01 to 2 \(m\)"),
+        ({"max_range": 0.3}, 0.8, r"0\.01 to 0\.6 \(m; the sensor's max_range is 0\.3 m\)"),
+        ({}, 1e300, r"0\.01 to 2 \(m\)"),
     ],
 )
 def test_implausible_clamped_diameter_is_an_error(spec, diameter, allowed):
     scan = Scan(**_args(np.full((3, 5), 0.2), spec=spec))
-    with pytest.raises(ValueError, match=rf"clamped_diameter must be in {allowed}"):
+    with pytest.raises(
+        ValueError, match=rf"clamped_diameter = .*: out of range; allowed: {allowed}"
+    ):
         detect(scan, diameter)
 
 

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("detector", "pipe_env", "primitives", "agents")
 LAYER_NAMES = ("detector", "pipe_env simulation", "primitives", "pipe_env.envs", "agents")
 #: Cycles still to be taken apart (the network model calls its I/O and generator modules).
-KNOWN_CYCLES: list[list[str]] = [["pipe_env.generator", "pipe_env.network", "pipe_env.network_io"]]
+KNOWN_CYCLES: list[list[str]] = []
 
 
 def layer_of(module: str) -> int:

@@ -81,20 +81,60 @@ _DELETE = object()
 @pytest.mark.parametrize(
     ("path", "value", "message"),
     [
-        ("runs.3.b", "nowhere", r"run 'r3': end b='nowhere' is not a fitting.*dangling"),
-        ("runs.0.diameter", 0.3, r"run 'r0': diameter 0.3 m is outside the allowed range"),
-        ("runs.3.diameter", 0.12, r"branch 'r3' diameter 0.12 m exceeds"),
-        ("fittings.1.kind", "tee", r"fitting 'b' \(tee\) has 2 runs; a tee joins exactly 3"),
-        ("fittings.1.kind", "elbow", r"kind 'elbow' is unknown; allowed"),
-        ("fittings.1.style", "curly", r"style 'curly' is not one of"),
-        ("fittings.1.position", [1.5, 0, 0.6], r"deflection .* is outside the allowed range"),
-        ("fittings.4.position", [1.58, 1.0, 0], r"is 0.0800 m between fitting centres .*too short"),
-        ("fittings.4.position", [2.5, 1.3, 0], r"branch 'r3' is at .* deg to the run through"),
-        ("version", 2, r"version: got 2; allowed: 1 \(this pipenav reads version 1\)"),
-        ("colour", "red", r"colour: unknown key; allowed:"),
-        ("start.position", [0.6, 0.2, 0], r"start_pose position .* inside the bore"),
-        ("goals", [[5, 5, 5]], r"goals\[0\] .* inside the bore"),
-        ("fittings.0.position", [0, "x", 0], r"fittings\[0\].position\[1\]: got 'x'; allowed"),
+        ("runs.3.b", "nowhere", r"^runs\[3\] \(id 'r3'\).b = 'nowhere': not a fitting .*dangling"),
+        (
+            "runs.0.diameter",
+            0.3,
+            r"^runs\[0\] \(id 'r0'\).diameter = 0.3: out of range; allowed: 0.02 to 0.25 \(m\)",
+        ),
+        (
+            "runs.3.diameter",
+            0.12,
+            r"^runs\[3\] \(id 'r3'\).diameter = 0.12: branch wider than the run through",
+        ),
+        (
+            "fittings.1.kind",
+            "tee",
+            r"^fittings\[1\] \(id 'b'\).kind = 'tee': joined by 2 run.*a tee joins exactly 3",
+        ),
+        (
+            "fittings.1.kind",
+            "elbow",
+            r"^fittings\[1\] \(id 'b'\).kind = 'elbow': unknown; allowed: bend, closure",
+        ),
+        (
+            "fittings.1.style",
+            "curly",
+            r"^fittings\[1\] \(id 'b'\).style = 'curly': unknown; allowed: mitre, long",
+        ),
+        (
+            "fittings.1.position",
+            [1.5, 0, 0.6],
+            r"^fittings\[1\] \(id 'b'\).position = .*: deflection 101.02 deg out of range",
+        ),
+        (
+            "fittings.4.position",
+            [1.58, 1.0, 0],
+            r"^runs\[3\] \(id 'r3'\) = 0.08: too short for its fittings",
+        ),
+        (
+            "fittings.4.position",
+            [2.5, 1.3, 0],
+            r"^runs\[3\] \(id 'r3'\).b = 'e2': branch at 73.30 deg to the run through",
+        ),
+        ("version", 2, r"^version = 2: unsupported; allowed: 1 \(this pipenav reads version 1\)"),
+        ("colour", "red", r"^colour = 'red': unknown key; allowed:"),
+        (
+            "start.position",
+            [0.6, 0.2, 0],
+            r"^start.position = .*from the nearest centreline; allowed: inside the bore",
+        ),
+        ("goals", [[5, 5, 5]], r"^goals\[0\] = \[5.0, 5.0, 5.0\]: .*; allowed: inside the bore"),
+        (
+            "fittings.0.position",
+            [0, "x", 0],
+            r"^fittings\[0\] \(id 'in'\).position = \[0, 'x', 0\]: not a list of numbers",
+        ),
     ],
 )
 def test_validation_errors_name_element_value_and_range(
@@ -107,7 +147,10 @@ def test_validation_errors_name_element_value_and_range(
 def test_long_bend_radius_out_of_range() -> None:
     d = hand_written()
     d["fittings"][1].update(style="long", bend_radius=0.5)
-    with pytest.raises(ValueError, match=r"bend_radius 0.5 m is 5.00 D; allowed \[1.0, 3.0\] D"):
+    with pytest.raises(
+        ValueError,
+        match=r"^fittings\[1\] \(id 'b'\).bend_radius = 0.5: 5.00 D, out of range; allowed: 1 to 3",
+    ):
         PipeNetwork.from_dict(d)
 
 
@@ -125,14 +168,16 @@ def test_intersecting_runs_are_rejected() -> None:
         {"id": "s2", "a": "t2", "b": "x2", "diameter": 0.1},
         {"id": "s3", "a": "t2", "b": "x3", "diameter": 0.1},
     ]
-    with pytest.raises(ValueError, match=r"runs 'r0' .* and 's3' .* intersect"):
+    with pytest.raises(
+        ValueError, match=r"^runs\[0\] \(id 'r0'\) = .*: intersects runs\[6\] \(id 's3'\)"
+    ):
         PipeNetwork.from_dict(d)
 
 
 def test_missing_and_unknown_element_keys() -> None:
-    with pytest.raises(ValueError, match=r"runs\[0\].diameter: missing"):
+    with pytest.raises(ValueError, match=r"^runs\[0\].diameter = None: missing"):
         PipeNetwork.from_dict(broken("runs.0.diameter", _DELETE))
-    with pytest.raises(ValueError, match=r"fittings\[1\].radius: unknown key"):
+    with pytest.raises(ValueError, match=r"^fittings\[1\].radius = 3: unknown key"):
         PipeNetwork.from_dict(broken("fittings.1.radius", 3))
 
 
@@ -140,14 +185,21 @@ def test_reducer_rules() -> None:
     net = layouts.reducer(0.1, 0.06, 0.1)
     d = net.to_dict()
     d["fittings"][1]["taper_length"] = 0.001
-    with pytest.raises(ValueError, match=r"taper_length 0.001 m is outside"):
+    with pytest.raises(
+        ValueError, match=r"^fittings\[1\] \(id 's'\).taper_length = 0.001: out of range"
+    ):
         PipeNetwork.from_dict(d)
     d["fittings"][1]["taper_length"] = 0.01
-    with pytest.raises(ValueError, match=r"taper half-angle"):
+    with pytest.raises(
+        ValueError,
+        match=r"^fittings\[1\] \(id 's'\).taper_length = 0.01: taper half-angle 63.4 deg",
+    ):
         PipeNetwork.from_dict(d)
     d = net.to_dict()
     d["runs"][1]["diameter"] = 0.1
-    with pytest.raises(ValueError, match=r"joins equal diameters"):
+    with pytest.raises(
+        ValueError, match=r"^runs\[1\] \(id '.*'\).diameter = 0.1: joins equal diameters"
+    ):
         PipeNetwork.from_dict(d)
 
 
@@ -183,22 +235,25 @@ def test_cross_needs_one_diameter_per_run_through() -> None:
     net = layouts.cross_junction(0.1, 0.08)
     d = net.to_dict()
     d["runs"][3]["diameter"] = 0.07  # one side branch narrower than its opposite
-    with pytest.raises(ValueError, match=r"run through .* must keep one diameter"):
+    with pytest.raises(
+        ValueError,
+        match=r"^runs\[3\] \(id 'r_out2'\).diameter = 0.07: differs from run 'r_out1' on the run",
+    ):
         PipeNetwork.from_dict(d)
 
 
 def test_from_dict_type_errors_are_named() -> None:
     d = hand_written()
     d["goals"] = 5
-    with pytest.raises(ValueError, match=r"goals: got 5; allowed: a list"):
+    with pytest.raises(ValueError, match=r"^goals = 5: not a list; allowed: a list"):
         PipeNetwork.from_dict(d)
     d = hand_written()
     d["fittings"][1].update(style="long", bend_radius="x")
     with pytest.raises(
-        ValueError, match=r"fittings\[1\].bend_radius: got 'x'; allowed: a finite number"
+        ValueError, match=r"^fittings\[1\] \(id 'b'\).bend_radius = 'x': not a number"
     ):
         PipeNetwork.from_dict(d)
-    with pytest.raises(ValueError, match=r"at least one run"):
+    with pytest.raises(ValueError, match=r"^runs = \[\]: empty; allowed: at least one run"):
         PipeNetwork.from_dict({"version": 1, "fittings": [], "runs": []})
 
 
@@ -212,3 +267,28 @@ def test_edge_positions_inside_a_long_bend_round_trip() -> None:
         ep = edge_position(net, net.centreline.nearest(p))
         q, _ = edge_path(net, ep.run_id).point_tangent(ep.s)
         assert np.linalg.norm(q - p) < 1e-9, frac
+
+
+def test_load_names_the_file_and_the_element_by_path_and_id(tmp_path) -> None:
+    import pickle
+
+    from pipe_env.network_io import NetworkSpecError
+
+    path = tmp_path / "net.yaml"
+    path.write_text(json.dumps(broken("runs.0.diameter", 0.3)))  # JSON is YAML too
+    with pytest.raises(NetworkSpecError) as err:
+        PipeNetwork.load(path)
+    message = str(err.value)
+    assert message.startswith(f"{path}: runs[0] (id 'r0').diameter = 0.3: out of range")
+    assert err.value.field == "runs[0] (id 'r0').diameter" and err.value.where == str(path)
+    again = pickle.loads(pickle.dumps(err.value))
+    assert type(again) is NetworkSpecError and str(again) == message
+
+
+def test_validate_names_fittings_by_path_and_id() -> None:
+    net = PipeNetwork.from_dict(broken("fittings.1.style", "curly"), validate=False)
+    with pytest.raises(ValueError, match=r"^fittings\[1\] \(id 'b'\).style = 'curly': unknown"):
+        net.validate()
+    far = net.with_goals([[5000.0, 0, 0]])
+    with pytest.raises(ValueError, match=r"^goals\[0\] = \[5000.0, 0.0, 0.0\]: outside the"):
+        far.validate()

@@ -1,5 +1,6 @@
-"""The Gymnasium environments and what only they need: the two plants (fast and full), the
-fast fidelity's sensing error models, the fidelity names, the way log and the wrappers.
+"""The Gymnasium environments and what only they need: their config, observation and action
+types, tasks and network sources, the oracle accessor, the two plants (fast and full), the fast
+fidelity's sensing error models, the fidelity names, the way log and the wrappers.
 
 This package sits above :mod:`primitives` (the full plant runs primitive sequences) and below
 :mod:`agents`. The environments' public names are re-exported here; import a submodule for the
@@ -8,6 +9,7 @@ rest (``pipe_env.envs.plant`` for the plant interface).
 
 from __future__ import annotations
 
+from pipe_env.envs.config import EnvConfig, ExploreConfig, NavConfig
 from pipe_env.envs.env import (
     GOAL_CLIP,
     K_OPTIONS,
@@ -19,9 +21,15 @@ from pipe_env.envs.env import (
     reachable_runs,
 )
 from pipe_env.envs.fidelity import FIDELITIES, Fidelity
+from pipe_env.envs.oracle import Oracle, oracle_of
 
 __all__ = [
     "FIDELITIES",
+    "EnvConfig",
+    "ExploreConfig",
+    "NavConfig",
+    "Oracle",
+    "oracle_of",
     "GOAL_CLIP",
     "K_OPTIONS",
     "OPTION_FEATURES",
