@@ -13,6 +13,7 @@ import tracemalloc
 import weakref
 
 import numpy as np
+import pytest
 
 from pipe_env import layouts
 from pipe_env.envs.plant_full import PhysicalPlant
@@ -58,6 +59,8 @@ def test_closing_a_plant_releases_its_world_and_reset_builds_it_again() -> None:
     gc.collect()
     assert world() is None and executor() is None
     assert plant.detection_log == [] and plant.last_scan is None
+    with pytest.raises(RuntimeError, match="closed"):
+        plant.pose()
     plant.reset(np.random.default_rng(1))
     dec, out = plant.advance(None)
     assert dec is not None and out.status != "jammed"

@@ -210,7 +210,13 @@ class PhysicalPlant:
         self._decision_diameter = self._start_diameter
 
     def pose(self) -> Pose:
-        """True sensor pose of the robot."""
+        """True sensor pose of the robot.
+
+        Raises:
+            RuntimeError: the plant is closed (:meth:`reset` builds it again).
+        """
+        if self.robot is None:
+            raise RuntimeError("PhysicalPlant: the plant is closed; reset() builds it again")
         return self.robot.sensor_pose()
 
     def odometry_pose(self) -> Pose:
