@@ -208,7 +208,7 @@ def _scenarios_run(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 
     from agents.scenario_runner import RunInterrupted, run_and_report, tasks_of
-    from agents.scenarios import discover_with_errors
+    from agents.scenarios import ResultStatus, discover_with_errors
 
     found, broken = discover_with_errors(args.glob, args.dir)
     if not found and not broken:
@@ -222,12 +222,12 @@ def _scenarios_run(args: argparse.Namespace) -> int:
     seeds = args.seed if args.seed else None
     total = len(tasks_of(found, seeds)) + len(broken)
     marks = {
-        "passed": "[green]PASS[/green]",
-        "failed": "[red]FAIL[/red]",
-        "error": "[red]ERROR[/red]",
-        "expected_failure": "[yellow]XFAIL[/yellow]",
-        "unexpected_pass": "[yellow]XPASS[/yellow]",
-        "not_run": "[dim]NOT RUN[/dim]",
+        ResultStatus.PASSED: "[green]PASS[/green]",
+        ResultStatus.FAILED: "[red]FAIL[/red]",
+        ResultStatus.ERROR: "[red]ERROR[/red]",
+        ResultStatus.EXPECTED_FAILURE: "[yellow]XFAIL[/yellow]",
+        ResultStatus.UNEXPECTED_PASS: "[yellow]XPASS[/yellow]",
+        ResultStatus.NOT_RUN: "[dim]NOT RUN[/dim]",
     }
     interrupted = False
     with Progress(
@@ -263,12 +263,12 @@ def _scenarios_run(args: argparse.Namespace) -> int:
             results, interrupted = exc.results, True
     failed = [r for r in results if r.counts_as_failure(args.strict)]
     statuses = [r.status for r in results]
-    line = f"{statuses.count('passed')} passed, {len(failed)} failed"
+    line = f"{statuses.count(ResultStatus.PASSED)} passed, {len(failed)} failed"
     for status, label in (
-        ("error", "errors"),
-        ("expected_failure", "expected failures"),
-        ("unexpected_pass", "unexpected passes"),
-        ("not_run", "not run"),
+        (ResultStatus.ERROR, "errors"),
+        (ResultStatus.EXPECTED_FAILURE, "expected failures"),
+        (ResultStatus.UNEXPECTED_PASS, "unexpected passes"),
+        (ResultStatus.NOT_RUN, "not run"),
     ):
         if status in statuses:
             line += f", {statuses.count(status)} {label}"

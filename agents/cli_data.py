@@ -423,6 +423,24 @@ def _export(args: argparse.Namespace) -> int:
 
 
 # ---------------------------------------------------------------------------- parsers
+def add_detector_options(p: argparse.ArgumentParser, json_what: str | None = None) -> None:
+    """Add ``--method`` (the detector method) and, if ``json_what`` says what is written,
+    ``--json`` (a JSON file to write it to) to ``p``."""
+    from detector.api import METHODS
+    from detector.vocab import Method
+
+    p.add_argument(
+        "--method",
+        default=Method.IMPROVED.value,
+        choices=sorted(METHODS),
+        help="detector method (default: %(default)s)",
+    )
+    if json_what is not None:
+        p.add_argument(
+            "--json", default=None, help=f"write {json_what} as JSON here (default: none)"
+        )
+
+
 def add_commands(sub: Any) -> None:
     """Register ``detect``, ``record`` and ``export`` on the ``pipenav`` subparsers."""
     from pipe_env.layouts import LAYOUTS
@@ -437,17 +455,7 @@ def add_commands(sub: Any) -> None:
         help="inner diameter of the pipe the robot is clamped in, m (default: the recorded "
         "/clamped_diameter)",
     )
-    de.add_argument(
-        "--method",
-        default="improved",
-        choices=["improved", "thesis"],
-        help="detector method (default: %(default)s)",
-    )
-    de.add_argument(
-        "--json",
-        default=None,
-        help="write every sweep's detection and the fusion as JSON here (default: none)",
-    )
+    add_detector_options(de, json_what="every sweep's detection and the fusion")
     de.add_argument(
         "--plot", default=None, help="write a PNG of the last sweep here (default: none)"
     )
@@ -505,12 +513,7 @@ def add_commands(sub: Any) -> None:
     re_.add_argument(
         "--seed", type=int, default=0, help="seed of the sensor noise (default: %(default)s)"
     )
-    re_.add_argument(
-        "--method",
-        default="improved",
-        choices=["improved", "thesis"],
-        help="detector method (default: %(default)s)",
-    )
+    add_detector_options(re_)
     re_.add_argument(
         "--scan-interval",
         type=float,

@@ -21,6 +21,7 @@ import numpy as np
 import pipe_env  # noqa: F401  (registers the environment ids)
 from agents.scripted import make_agent
 from detector.atomic import atomic_write_text
+from pipe_env.envs import PipeNavEnv
 from pipe_env.generator import NetworkConfig
 from pipe_env.network import PipeNetwork
 from pipe_env.network_io import finite_json
@@ -77,29 +78,36 @@ def run_episode(
             on_decision(len(choices))
     wall = time.perf_counter() - t0
     base = env.unwrapped
+    # narrows the types: after an episode the environment has its network and plant
+    if not isinstance(base, PipeNavEnv) or base.plant is None or base.network is None:
+        raise RuntimeError(f"pipenav/PipeNav-v0 made {type(base).__name__} without a network")
+    plant, driven = base.plant, base.network
     files = []
     render_skipped = None
     if render and out is not None:
         from pipe_env.rendering import RenderingUnavailable, save_image
 
         try:
-            save_image(env.render(), str(Path(out) / "render.png"))
+            frame = env.render()
+            if not isinstance(frame, np.ndarray):  # rgb_array mode returns one image
+                raise RuntimeError(f"render() returned {type(frame).__name__}, not an image")
+            save_image(frame, str(Path(out) / "render.png"))
             files.append("render.png")
         except RenderingUnavailable as exc:  # no OpenGL here: the rest of the episode stands
             render_skipped = str(exc)
     log = {
-        "network": base.network.to_dict(),
+        "network": driven.to_dict(),
         "path": np.asarray(base.path).tolist(),
         "decisions": [np.asarray(p).tolist() for p in base.decision_points],
         "choices": choices,
-        "detections": list(base.plant.detection_log),
+        "detections": list(plant.detection_log),
         "summary": {
             "seed": seed,
             "agent": agent,
             "fidelity": fidelity,
             "detector": detector,
             "lidar": lidar,
-            "network": repr(base.network),
+            "network": repr(driven),
             "is_success": bool(info["is_success"]),
             "decisions": int(info["decisions"]),
             "structures": int(info["structures"]),
@@ -109,7 +117,7 @@ def run_episode(
             "sim_time_s": round(float(info["sim_time"]), 1),
             "wall_time_s": round(wall, 2),
             "return": round(float(sum(rewards)), 3),
-            "detections": len(base.plant.detection_log),
+            "detections": len(plant.detection_log),
         },
         "files": files,
         "render_skipped": render_skipped,

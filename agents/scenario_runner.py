@@ -41,6 +41,7 @@ from xml.etree import ElementTree as ET
 
 from agents.scenarios import (
     DEFAULT_TIMEOUT_S,
+    ResultStatus,
     Scenario,
     ScenarioError,
     ScenarioResult,
@@ -167,7 +168,7 @@ def run_tasks(
         if backend == "ray":
             _run_ray(tasks, jobs, limits, finish, ray_address)
         else:
-            _run_local(tasks, jobs, limits, finish)
+            _LocalPool(tasks, jobs, limits, finish).run()
     except KeyboardInterrupt:
         raise RunInterrupted(_with_not_run(tasks, results)) from None
     return _with_not_run(tasks, results)
@@ -237,84 +238,101 @@ class _Worker:
         self.conn.close()
 
 
-def _run_local(
-    tasks: Sequence[tuple[str, int]],
-    jobs: int,
-    limits: Sequence[float],
-    finish: Callable[[int, ScenarioResult], None],
-) -> None:
-    ctx = mp.get_context("spawn")
-    todo = list(range(len(tasks)))[::-1]  # popped from the end: task order
-    workers: list[_Worker] = []
-    try:
-        while todo or any(w.task is not None for w in workers):
-            while len(workers) < min(jobs, len(todo) + sum(w.task is not None for w in workers)):
-                workers.append(_Worker(ctx))
-            for w in workers:
-                if w.ready and w.task is None and todo:
-                    i = todo.pop()
-                    w.give(i, *tasks[i], limits[i])
-            watched = [w for w in workers if w.task is not None or not w.ready]
-            wait_s = max(0.0, min(w.deadline for w in watched) - time.monotonic())
-            ready = set(
-                mp_connection.wait(
-                    [w.conn for w in watched] + [w.process.sentinel for w in watched],
-                    timeout=wait_s,
-                )
-            )
-            for w in watched:
-                i = w.task
-                if w.conn in ready or w.process.sentinel in ready:
-                    try:
-                        if not w.conn.poll():
-                            raise EOFError
-                        message = w.conn.recv()
-                    except (EOFError, OSError):  # the worker died
-                        w.process.join(timeout=5.0)
-                        code = w.process.exitcode
-                        w.stop(force=True)
-                        workers.remove(w)
-                        if i is None:  # before it took a task: the next task reports it
-                            if not todo:
-                                continue
-                            i = todo.pop()
-                            why = f"a worker process failed to start (exit code {code})"
-                        else:
-                            why = (
-                                f"the worker process died (exit code {code}) while running "
-                                "this scenario; the other scenarios went on"
-                            )
-                        finish(i, error_result(*tasks[i], why))
-                        continue
-                    if message == _READY:
-                        w.ready, w.deadline = True, math.inf
-                        continue
-                    w.task, w.deadline = None, math.inf
-                    finish(message[0], message[1])
-                elif time.monotonic() >= w.deadline:
-                    w.stop(force=True)
-                    workers.remove(w)
-                    if i is None:
-                        if todo:
-                            i = todo.pop()
-                            finish(
-                                i,
-                                error_result(
-                                    *tasks[i],
-                                    f"a worker process did not start within {WORKER_START_S:g} s",
-                                ),
-                            )
-                        continue
-                    finish(
-                        i,
-                        error_result(
-                            *tasks[i], f"timed out after {limits[i]:g} s (the run was stopped)"
-                        ),
+class _LocalPool:
+    """The local backend: up to ``jobs`` worker processes, each running one task at a time
+    under its deadline. A worker that dies or misses its deadline is replaced, and its task
+    (or, if it never took one, the next task) gets an error result."""
+
+    def __init__(
+        self,
+        tasks: Sequence[tuple[str, int]],
+        jobs: int,
+        limits: Sequence[float],
+        finish: Callable[[int, ScenarioResult], None],
+    ) -> None:
+        self.ctx = mp.get_context("spawn")
+        self.tasks, self.jobs, self.limits, self.finish = tasks, jobs, limits, finish
+        self.todo = list(range(len(tasks)))[::-1]  # popped from the end: task order
+        self.workers: list[_Worker] = []
+
+    def run(self) -> None:
+        """Run every task; on any exception (Ctrl-C) the workers are killed."""
+        try:
+            while self.todo or any(w.task is not None for w in self.workers):
+                self._start_and_assign()
+                watched = [w for w in self.workers if w.task is not None or not w.ready]
+                wait_s = max(0.0, min(w.deadline for w in watched) - time.monotonic())
+                ready = set(
+                    mp_connection.wait(
+                        [w.conn for w in watched] + [w.process.sentinel for w in watched],
+                        timeout=wait_s,
                     )
-    finally:
-        interrupted = sys.exc_info()[0] is not None
-        for w in workers:
-            w.stop(force=interrupted)
+                )
+                for w in watched:
+                    if w.conn in ready or w.process.sentinel in ready:
+                        self._receive(w)
+                    elif time.monotonic() >= w.deadline:
+                        self._overdue(w)
+        finally:
+            interrupted = sys.exc_info()[0] is not None
+            for w in self.workers:
+                w.stop(force=interrupted)
+
+    def _start_and_assign(self) -> None:
+        busy = sum(w.task is not None for w in self.workers)
+        while len(self.workers) < min(self.jobs, len(self.todo) + busy):
+            self.workers.append(_Worker(self.ctx))
+        for w in self.workers:
+            if w.ready and w.task is None and self.todo:
+                i = self.todo.pop()
+                w.give(i, *self.tasks[i], self.limits[i])
+
+    def _drop(self, w: _Worker) -> None:
+        w.stop(force=True)
+        self.workers.remove(w)
+
+    def _fail(self, i: int | None, why: str) -> None:
+        """An error result for task ``i``, or for the next task when the worker had none."""
+        if i is None:
+            if not self.todo:
+                return
+            i = self.todo.pop()
+        self.finish(i, error_result(*self.tasks[i], why))
+
+    def _receive(self, w: _Worker) -> None:
+        """A message from ``w`` (ready, or a result), or its death."""
+        try:
+            if not w.conn.poll():
+                raise EOFError
+            message = w.conn.recv()
+        except (EOFError, OSError):  # the worker died
+            w.process.join(timeout=5.0)
+            code = w.process.exitcode
+            i = w.task
+            self._drop(w)
+            if i is None:  # before it took a task: the next task reports it
+                self._fail(None, f"a worker process failed to start (exit code {code})")
+            else:
+                self._fail(
+                    i,
+                    f"the worker process died (exit code {code}) while running this "
+                    "scenario; the other scenarios went on",
+                )
+            return
+        if message == _READY:
+            w.ready, w.deadline = True, math.inf
+            return
+        w.task, w.deadline = None, math.inf
+        self.finish(message[0], message[1])
+
+    def _overdue(self, w: _Worker) -> None:
+        """``w`` missed its deadline: it did not start in time, or its task timed out."""
+        i = w.task
+        self._drop(w)
+        if i is None:
+            self._fail(None, f"a worker process did not start within {WORKER_START_S:g} s")
+        else:
+            self._fail(i, f"timed out after {self.limits[i]:g} s (the run was stopped)")
 
 
 # -------------------------------------------------------------------------------- ray
@@ -424,12 +442,12 @@ def summary_of(results: Sequence[ScenarioResult], strict: bool = False) -> dict[
     statuses = [r.status for r in results]
     return {
         "total": len(results),
-        "passed": sum(s in ("passed", "unexpected_pass") for s in statuses),
+        "passed": sum(s in (ResultStatus.PASSED, ResultStatus.UNEXPECTED_PASS) for s in statuses),
         "failed": sum(r.counts_as_failure(strict) for r in results),
-        "errors": statuses.count("error"),
-        "expected_failures": statuses.count("expected_failure"),
-        "unexpected_passes": statuses.count("unexpected_pass"),
-        "not_run": statuses.count("not_run"),
+        "errors": statuses.count(ResultStatus.ERROR),
+        "expected_failures": statuses.count(ResultStatus.EXPECTED_FAILURE),
+        "unexpected_passes": statuses.count(ResultStatus.UNEXPECTED_PASS),
+        "not_run": statuses.count(ResultStatus.NOT_RUN),
     }
 
 
@@ -496,21 +514,21 @@ def write_junit(results: Sequence[ScenarioResult], path: str | Path, strict: boo
         status = r.status
         msgs = "; ".join(c.message for c in r.failures)
         detail = "\n".join([c.message for c in r.failures] + [f"replay: {r.replay_command()}"])
-        if status == "not_run":
+        if status == ResultStatus.NOT_RUN:
             ET.SubElement(case, "skipped", message="not run: the suite was interrupted")
-        elif status == "error":
+        elif status == ResultStatus.ERROR:
             err = ET.SubElement(case, "error", message=r.error or "", type="RunError")
             err.text = f"replay: {r.replay_command()}"
-        elif status == "failed" or (status == "expected_failure" and strict):
-            kind = "KnownFailure" if status == "expected_failure" else "CriterionFailed"
+        elif status == ResultStatus.FAILED or (status == ResultStatus.EXPECTED_FAILURE and strict):
+            kind = "KnownFailure" if status == ResultStatus.EXPECTED_FAILURE else "CriterionFailed"
             fail = ET.SubElement(case, "failure", message=msgs, type=kind)
             fail.text = detail
-        elif status == "expected_failure":
+        elif status == ResultStatus.EXPECTED_FAILURE:
             skip = ET.SubElement(
                 case, "skipped", message=f"expected failure (known_failure: {r.known_failure})"
             )
             skip.text = detail
-        elif status == "unexpected_pass":
+        elif status == ResultStatus.UNEXPECTED_PASS:
             note = (
                 f"unexpected pass: the scenario is marked known_failure "
                 f"({r.known_failure}) but passed; remove the note"
@@ -519,8 +537,9 @@ def write_junit(results: Sequence[ScenarioResult], path: str | Path, strict: boo
                 ET.SubElement(case, "failure", message=note, type="UnexpectedPass")
             else:
                 ET.SubElement(case, "system-out").text = note
-    tree = ET.ElementTree(ET.Element("testsuites"))
-    tree.getroot().append(suite)
+    root = ET.Element("testsuites")
+    root.append(suite)
+    tree = ET.ElementTree(root)
     ET.indent(tree)
     with atomic_open(path, "wb") as handle:
         tree.write(handle, encoding="utf-8", xml_declaration=True)

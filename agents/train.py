@@ -9,6 +9,9 @@ only when the run lasted long enough for a validation evaluation), the final mod
 the best model, else the final one, on the held-out networks that neither training nor model
 selection saw; see :mod:`agents.evaluate`).
 
+Every model file (checkpoints, the best and the final model) is written atomically
+(:func:`atomic_maskable_ppo`): a run interrupted while saving leaves the previous file whole.
+
 Every key is checked before any work: the top-level keys, the ``eval`` keys
 (:data:`EVAL_KEYS`) and the ``ppo`` keys (MaskablePPO's own keyword arguments); a mistyped key
 is a ValueError naming it and the allowed ones.
@@ -17,18 +20,23 @@ is a ValueError naming it and the allowed ones.
 from __future__ import annotations
 
 import inspect
+import io
 import json
 import math
+import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
-from detector.atomic import atomic_open, atomic_write_text
+from detector.atomic import atomic_write_bytes, atomic_write_text
 from pipe_env.network_io import finite_json
+
+if TYPE_CHECKING:
+    from sb3_contrib import MaskablePPO
 
 DEFAULT_CONFIG = Path(__file__).with_name("configs") / "maskable_ppo.yaml"
 VEC_ENVS = ("subproc", "dummy")
@@ -116,6 +124,37 @@ class TrainConfig:
             return cls(**data)
         except ValueError as exc:
             raise ValueError(f"{path}: {exc}") from None
+
+
+def model_zip_path(path: str | os.PathLike[str]) -> Path:
+    """The file Stable-Baselines3 writes for ``path``: ``.zip`` is added when it has no
+    suffix."""
+    target = Path(path)
+    return target if target.suffix else Path(f"{target}.zip")
+
+
+def atomic_maskable_ppo() -> type[MaskablePPO]:
+    """MaskablePPO whose :meth:`save` to a path writes atomically (a temporary file in the same
+    folder, fsync'ed, then renamed over the target), so that the checkpoint and evaluation
+    callbacks, which call ``model.save``, never leave a truncated zip. The files are plain
+    MaskablePPO models (``MaskablePPO.load`` reads them). Imports sb3-contrib."""
+    from sb3_contrib import MaskablePPO
+
+    class AtomicMaskablePPO(MaskablePPO):
+        def save(
+            self,
+            path: str | os.PathLike[str] | io.BufferedIOBase,
+            exclude: Iterable[str] | None = None,
+            include: Iterable[str] | None = None,
+        ) -> None:
+            if isinstance(path, io.BufferedIOBase):
+                super().save(path, exclude, include)
+                return
+            buffer = io.BytesIO()
+            super().save(buffer, exclude, include)
+            atomic_write_bytes(model_zip_path(path), buffer.getvalue())
+
+    return AtomicMaskablePPO
 
 
 def make_env_fns(cfg: TrainConfig, pool_seed: int | None = None, n: int | None = None):
@@ -206,7 +245,6 @@ def train(
         on_final_episode: called with (episodes done, total) during that evaluation.
     """
     import torch
-    from sb3_contrib import MaskablePPO
     from sb3_contrib.common.maskable.callbacks import MaskableEvalCallback
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
@@ -224,7 +262,7 @@ def train(
     eval_cfg.update(cfg.eval)
     eval_env = DummyVecEnv(make_env_fns(cfg, pool_seed=int(eval_cfg["pool_seed"]), n=1))
     ppo_kwargs = dict(cfg.ppo)
-    model = MaskablePPO(
+    model = atomic_maskable_ppo()(
         "MultiInputPolicy",
         venv,
         seed=cfg.seed,
@@ -281,8 +319,7 @@ def train(
         if bar is not None:
             bar.close(int(model.num_timesteps))
     wall = time.monotonic() - t0
-    with atomic_open(out / "final_model.zip", "wb") as handle:
-        model.save(handle)
+    model.save(out / "final_model.zip")
     venv.close()
     eval_env.close()
     best = out / "best" / "best_model.zip"

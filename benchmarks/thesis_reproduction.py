@@ -9,9 +9,9 @@ maximum error). Writes ``docs/thesis-reproduction.md``: for every table of the t
 figures, ours with the thesis method and ours with the improved method, with a sentence per row
 on any difference, and a closing list of the rows where we differ and why.
 
-The structures come from the packaged ``thesis_*`` scenario files (``agents/scenarios``); the
-scoring helpers (option matching, angle wrapping, the thesis's requirements) from
-``benchmarks/bench_detection.py``.
+The structures come from the packaged ``thesis_*`` scenario files
+(``agents/scenarios/library``); the scoring helpers (option matching, angle wrapping, the
+thesis's requirements) from ``benchmarks/bench_detection.py``.
 
 Conventions of the figures (people's units): cm and degrees. The standard deviation is the
 sample one (``ddof = 1``); "average error" is the mean of ``|estimate - real|``, "maximum error"

@@ -10,7 +10,6 @@ sweeps, :mod:`detector.spatial`; Algorithm 1 for planes, :mod:`detector.planar`)
 from __future__ import annotations
 
 import math
-import operator
 from typing import Any
 
 import numpy as np
@@ -21,7 +20,7 @@ from detector.planar import detect_planar_thesis
 from detector.planar_improved import detect_planar_improved
 from detector.scan import Scan, spec_value
 from detector.spatial import detect_spatial_thesis
-from detector.validation import fail
+from detector.validation import check_int, fail
 from detector.vocab import Method
 
 #: Methods of :func:`detect`.
@@ -112,21 +111,9 @@ def detect_planar(
         sensor_in_pipe: known sensor pose in the pipe frame; ``None``: centred and aligned.
     """
     d = _check(scan, clamped_diameter)
-    try:
-        if isinstance(plane, (bool, np.bool_)):
-            raise TypeError
-        index = operator.index(plane)
-    except TypeError:
-        raise ValueError(
-            f"plane must be an integer index in [-{scan.n_planes}, {scan.n_planes - 1}], "
-            f"got {plane!r}"
-        ) from None
-    if not -scan.n_planes <= index < scan.n_planes:
-        raise ValueError(
-            f"plane must be in [-{scan.n_planes}, {scan.n_planes - 1}] for a scan of "
-            f"{scan.n_planes} planes, got {plane!r}"
-        )
-    plane = index
+    plane = check_int(
+        "plane", plane, low=-scan.n_planes, high=scan.n_planes - 1, where="detect_planar"
+    )
     if method == Method.THESIS:
         return detect_planar_thesis(scan, d, plane=plane, sensor_in_pipe=sensor_in_pipe, **options)
     if method == Method.IMPROVED:

@@ -126,7 +126,7 @@ def find_ring_holes(
         phi = np.arctan2(xyz[2, rows, cols], xyz[1, rows, cols])
         centre = math.atan2(float(np.sin(phi).sum()), float(np.cos(phi).sum()))
         for c, rs, cs in groups:
-            if abs(wrap_angle(centre - c)) < math.radians(45.0):
+            if abs(wrap_angle(centre - c)) < cfg.hole_merge_roll:
                 rs.append(rows)
                 cs.append(cols)
                 break
@@ -142,7 +142,7 @@ def find_ring_holes(
             continue
         for k, (other, r_o, c_o) in enumerate(fitted):
             if (
-                abs(wrap_angle(hole.roll - other.roll)) < math.radians(45.0)
+                abs(wrap_angle(hole.roll - other.roll)) < cfg.hole_merge_roll
                 and abs(hole.position - other.position) < big_r
             ):
                 rows, cols = np.concatenate([r_o, rows]), np.concatenate([c_o, cols])
@@ -180,15 +180,16 @@ def _accepted(
         return None  # a long opening: the regular detector's
     if n_rows * 2.0 * math.pi / g > cfg.hole_max_roll_span:
         return None  # (almost) all around: a widening, not a side hole
-    return _fit_far_side(xyz[:, rows, cols], big_r, cfg.hole_max_fit_rms)
+    return _fit_far_side(xyz[:, rows, cols], big_r, cfg)
 
 
-def _fit_far_side(p: NDArray[np.float64], big_r: float, max_rms: float) -> RingHole | None:
+def _fit_far_side(p: NDArray[np.float64], big_r: float, cfg: ImprovedConfig) -> RingHole | None:
     """Fit a branch to the far-side returns ``p`` (3, n): a cylinder of radius ``rho`` whose
     axis leaves the run's axis at ``position``, deflected by a standard fitting angle (90 deg
     first, then 45 and 135 deg: the patch a ring sees cannot measure the deflection, only tell
     these apart) towards ``roll``; the deflection with the smallest rms wins, if at most
-    ``max_rms`` (m)."""
+    ``cfg.hole_max_fit_rms`` (m). The fit starts from a branch of ``cfg.hole_start_radius``
+    radii and may turn by ``cfg.hole_roll_reach`` from the returns' roll."""
     u = p[0]
     r = np.hypot(p[1], p[2])
     phi = np.arctan2(p[2], p[1])
@@ -198,7 +199,7 @@ def _fit_far_side(p: NDArray[np.float64], big_r: float, max_rms: float) -> RingH
     best: RingHole | None = None
     for theta in DEFLECTIONS:
         ct, st = math.cos(theta), math.sin(theta)
-        rho0 = 0.8 * big_r
+        rho0 = cfg.hole_start_radius * big_r
         # (the far side lies about rho / sin(theta) past where the axis crosses the wall)
         x_start = float(np.median(u)) - rho0 / st - big_r * ct / st
         x0 = np.array([x_start, rho0, roll0])
@@ -210,8 +211,8 @@ def _fit_far_side(p: NDArray[np.float64], big_r: float, max_rms: float) -> RingH
             d2 = q * q + r * r - along * along
             return np.sqrt(np.maximum(d2, 0.0)) - x[1]
 
-        lower = np.array([x_start - 3.0 * big_r, 0.2 * big_r, roll0 - 0.6])
-        upper = np.array([x_start + 3.0 * big_r, 1.05 * big_r, roll0 + 0.6])
+        lower = np.array([x_start - 3.0 * big_r, 0.2 * big_r, roll0 - cfg.hole_roll_reach])
+        upper = np.array([x_start + 3.0 * big_r, 1.05 * big_r, roll0 + cfg.hole_roll_reach])
         x, res, _ = robust_gauss_newton(
             residual,
             x0,
@@ -226,7 +227,7 @@ def _fit_far_side(p: NDArray[np.float64], big_r: float, max_rms: float) -> RingH
         if not np.all(np.isfinite(x)):
             continue
         rms = float(np.sqrt(np.mean(np.square(res))))
-        if rms > max_rms or (best is not None and rms >= best.rms):
+        if rms > cfg.hole_max_fit_rms or (best is not None and rms >= best.rms):
             continue
         entry = float(np.median(u * big_r / np.maximum(r, 1e-9)))
         best = RingHole(

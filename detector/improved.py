@@ -12,11 +12,12 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    given pose already explains the wall before the structure, only the fit over that whole
    stretch of wall runs (from the given pose), not the first, wider one. A refinement is dropped
    when its cylinder misses its own wall returns by more than their noise explains, and the
-   given pose stands when less than 5 cm of straight wall is in view before the structure and
-   the pose explains it (near the start of a wide bend's arc a cylinder tilted about the nearest
-   wall fits the arc), unless a refined axis explains as many returns and fits 10 cm or more of
-   straight wall to a quarter of the scatter allowed (the given pose is then the misaligned one,
-   its wall drifting off the tolerance a little way ahead). Of candidate poses explaining as
+   given pose stands when less than ``short_wall_view`` of straight wall is in view before the
+   structure and the pose explains it (near the start of a wide bend's arc a cylinder tilted
+   about the nearest wall fits the arc), unless a refined axis explains as many returns and fits
+   ``long_wall_span`` or more of straight wall to ``long_wall_rms`` of the scatter allowed (the
+   given pose is then the misaligned one, its wall drifting off the tolerance a little way
+   ahead). Of candidate poses explaining as
    many wall returns, the one that fits them most closely is kept (a cylinder tilted onto the
    first centimetres of a gentle taper or arc explains no more of them, only more loosely). A
    long bend's arc and a taper leave the wall so gently that the wall a pose was chosen on can
@@ -72,10 +73,10 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    the far end of the arc fix its angle; an even subsample of all returns holds two or three
    of them; the polish refines the bend, the unpolished fit decides whether there is one).
    An arc that starts right ahead fills the view with curved wall, and an axis refined on the
-   nearest wall-like returns is laid into it: when the torus fits the returns 1.5 times as
-   closely under the given pose, the given pose stands (as it does for a reducer fitting 1.25
-   times as closely, and for a turn right ahead found on less than 5 cm of wall that fits as
-   closely with no more ways on).
+   nearest wall-like returns is laid into it: when the torus fits the returns
+   ``torus_pose_ratio`` times as closely under the given pose, the given pose stands (as it
+   does for a reducer fitting ``taper_pose_ratio`` times as closely, and for a turn right ahead
+   found on less than ``short_wall_view`` of wall that fits as closely with no more ways on).
 4. **Straight on.** A junction continues straight when the incoming pipe's wall is seen again
    beyond the structure (more than two diameters past the reference point) around most of the
    circumference; its option has the clamped diameter. Its side branches are no wider than the
@@ -163,6 +164,7 @@ from detector.pipe_cloud import (
 from detector.robust import mad_sigma
 from detector.scan import Scan
 from detector.transforms import SensorInPipe, option_direction
+from detector.validation import check_number
 from detector.vocab import Kind
 
 
@@ -187,9 +189,14 @@ def detect_improved(
             default: ``scan.spec["bias"]`` (0 if absent).
         refine_axis: refine the pipe axis from the wall returns.
     """
-    d_clamped = float(clamped_diameter)
-    if not (math.isfinite(d_clamped) and d_clamped > 0.0):
-        raise ValueError(f"clamped_diameter must be a positive length (m), got {clamped_diameter}")
+    d_clamped = check_number(
+        "clamped_diameter",
+        clamped_diameter,
+        low=0.0,
+        open_low=True,
+        unit="m",
+        where="detect_improved",
+    )
     big_r = 0.5 * d_clamped
     pose0 = SensorInPipe.coerce(sensor_in_pipe)
     bias = float((scan.spec or {}).get("bias", 0.0)) if range_bias is None else float(range_bias)

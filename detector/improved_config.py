@@ -10,6 +10,8 @@ import math
 import numbers
 from dataclasses import dataclass, fields
 
+from detector.validation import fail
+
 
 @dataclass(frozen=True)
 class ImprovedConfig:
@@ -119,6 +121,12 @@ class ImprovedConfig:
         hole_max_roll_span: a bump around more than this much of the circumference (rad) is no
             side hole.
         hole_max_fit_rms: largest rms (m) of a hole's far-side fit for the hole to be accepted.
+        hole_start_radius: a hole's far-side fit starts from a branch of this fraction of the
+            run's radius ...
+        hole_roll_reach: ... and may turn its roll by at most this (rad) from the roll the
+            returns point to.
+        hole_merge_roll: holes (and bumps) this close in roll (rad) on neighbouring rings are
+            one hole.
     """
 
     tol_floor: float = 0.002
@@ -181,6 +189,9 @@ class ImprovedConfig:
     hole_max_rings: int = 3
     hole_max_roll_span: float = math.radians(200.0)
     hole_max_fit_rms: float = 0.002
+    hole_start_radius: float = 0.8
+    hole_roll_reach: float = 0.6
+    hole_merge_roll: float = math.radians(45.0)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -192,7 +203,7 @@ class ImprovedConfig:
                 v = kind(value)
                 ok = math.isfinite(v) and (v >= low if low_included else v > low) and v <= high
             if not ok:
-                raise ValueError(f"ImprovedConfig.{f.name} must be {allowed}, got {value!r}")
+                raise fail(f.name, value, allowed, "out of range or wrong type", "ImprovedConfig")
             object.__setattr__(self, f.name, kind(value))
 
 
@@ -259,6 +270,9 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "hole_max_rings": (int, 1, True, math.inf, "an integer >= 1"),
     "hole_max_roll_span": (float, 0.0, True, 2.0 * math.pi, "a number in [0, 2 pi] rad"),
     "hole_max_fit_rms": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "hole_start_radius": (float, 0.2, True, 1.05, "a number in [0.2, 1.05] (radii)"),
+    "hole_roll_reach": (float, 0.0, True, math.pi, "a number in [0, pi] rad"),
+    "hole_merge_roll": (float, 0.0, True, math.pi, "a number in [0, pi] rad"),
 }
 
 

@@ -17,7 +17,9 @@ size as the diameter, this method fits lines, using the clamped diameter:
    of a turn seen head on (inside returns, nearly parallel) gives the second wall and the
    outgoing diameter; without it the outgoing pipe has the clamped diameter. The outgoing axis
    is the mid-line (or the far wall moved in by the radius); where it crosses the incoming axis
-   is the distance. Two openings, or a pipe that visibly goes on, make a junction.
+   is the distance. Two openings, or a pipe that visibly goes on (returns on the incoming
+   wall's line well beyond the structure, or far ahead near the axis, not on an outgoing
+   pipe's walls), make a junction.
 5. **No opening.** Inside returns on one line across the axis are a closure (end wall) at
    their mean ``u``; otherwise a reducer: the most frequent inner ``|v|`` is the new radius and
    a robust line ``|v|(u)`` through the taper gives where it starts. Beyond returns on both
@@ -46,6 +48,15 @@ from detector.vocab import Kind
 MIN_OPENING_POINTS = 3
 #: Fewest anomalous returns for anything but ``straight``.
 MIN_ANOMALY_POINTS = 4
+#: Standard fitting angles (rad) an outgoing pipe fitted within ``SNAP_WITHIN`` of is tried
+#: held at, and held when the likelihood ratio against the free fit is at most ``SNAP_LR``.
+STANDARD_ANGLES = (math.radians(45.0), math.radians(90.0), math.radians(135.0))
+SNAP_WITHIN = math.radians(25.0)
+SNAP_LR = 10.0
+#: An outgoing pipe fitted less deflected than this (rad) is no opening (the layouts' bends
+#: turn by 30 deg or more; under range noise a few stray returns beyond one wall fit a pipe
+#: leaving at 13-15 deg, whose distance spoiled a tee's).
+MIN_DEFLECTION = math.radians(20.0)
 
 
 def robust_tls_line(
@@ -225,6 +236,7 @@ def _openings(
     dists = []
     confs = []
     gap_diag = []
+    explained = np.zeros(u.shape, dtype=bool)  # returns on an outgoing pipe's walls
     for sgn, m in sides:
         # the outgoing pipe: two walls at +-rho about an axis through (L, 0) deflected by
         # theta towards this side; its returns are the side's beyond returns and the inside
@@ -237,8 +249,8 @@ def _openings(
         if fit is None:
             continue
         big_l, theta, rho, rms, n_sup = fit
-        if not (math.isfinite(big_l) and -0.5 <= big_l <= 3.0):
-            continue
+        if not (math.isfinite(big_l) and -0.5 <= big_l <= 3.0) or theta < MIN_DEFLECTION:
+            continue  # (a few stray returns beyond one wall fit a barely deflected pipe)
         conf = fit_confidence(n_sup, rms, max(tol, 1e-3), n_scale=10.0)
         # roll of the outgoing axis (in the plane, towards this side), in the sensor frame
         _, direction = option_direction(
@@ -247,15 +259,18 @@ def _openings(
         options.append(StructureOption("bend", big_l, 2.0 * rho, direction, theta, conf))
         dists.append(big_l)
         confs.append(conf)
+        explained |= np.abs(_line_res(u, v * sgn, np.array([big_l, theta, rho]))) <= tol
         gap_diag.append({"side": sgn, "rms": rms, "support": n_sup, "rho": rho})
     diag["openings"] = gap_diag
     if not options:
         diag["reason"] = "no opening gave a physical outgoing axis"
         return Detection.straight(confidence=0.1, **diag)
     big_l = float(np.mean(dists))
-    # straight on: the incoming walls seen again well beyond the structure, or a far centre
-    central = np.abs(v) <= 0.2 * big_r
-    far_wall = wall & (u > big_l + 2.0 * big_r)
+    # straight on: the incoming walls seen again well beyond the structure, or a far centre;
+    # returns on an outgoing pipe's walls do not count (under range noise those of a 45 deg
+    # bend's outgoing wall, where it crosses the incoming wall's line, pass for that wall)
+    central = (np.abs(v) <= 0.2 * big_r) & ~explained
+    far_wall = wall & (u > big_l + 2.0 * big_r) & ~explained
     goes_on = bool(far_wall.sum() >= 3) or (
         bool(central.any()) and float(np.max(u[central])) > big_l + 3.0 * big_r
     )
@@ -317,10 +332,46 @@ def _fit_outgoing(
     sigma2 = max(2.0 * cost_fr / n_in, (0.3e-3) ** 2)
     lr = 2.0 * (cost_eq - cost_fr) / sigma2
     x, r, w = (x_fr, r_fr, w_fr) if lr > 12.0 else (x_eq, r_eq, w_eq)
+    x, r, w = _snap_standard(pu, pv, (x, r, w), c_fin, sigma2, lower, upper, free=lr > 12.0)
     rms = float(np.sqrt(np.sum(w * r * r) / max(float(w.sum()), 1e-9)))
     if not np.all(np.isfinite(x)):
         return None
     return float(x[0]), float(x[1]), float(x[2]), rms, int((w > 0.1).sum())
+
+
+def _snap_standard(
+    pu: NDArray,
+    pv: NDArray,
+    fit: tuple[NDArray, NDArray, NDArray],
+    c_fin: float,
+    sigma2: float,
+    lower: NDArray,
+    upper: NDArray,
+    free: bool,
+) -> tuple[NDArray, NDArray, NDArray]:
+    """The outgoing pipe held at the nearest standard fitting angle (45, 90 or 135 deg) when
+    it lies within ``SNAP_WITHIN`` and the returns allow it (likelihood ratio at most
+    ``SNAP_LR``): one plane's returns through a far opening fix the angle loosely (under
+    YDLidar X4 noise a tee's branch 40 cm ahead was fitted 60-120 deg), and the distance
+    moves with it. ``fit``: ``(x, residuals, weights)`` of the free fit, returned when the
+    angle is not held."""
+    x, r, _ = fit
+    std = min(STANDARD_ANGLES, key=lambda a: abs(a - float(x[1])))
+    if abs(std - float(x[1])) > SNAP_WITHIN or abs(std - float(x[1])) < 1e-9:
+        return fit
+    lo, hi = lower.copy(), upper.copy()
+    lo[1] = hi[1] = std
+    if not free:
+        lo[2] = hi[2] = float(x[2])
+    x0 = np.array([float(x[0]), std, float(x[2])])
+    x_s, r_s, w_s = robust_gauss_newton(
+        lambda q: _line_res(pu, pv, q), x0, np.array([1e-5, 1e-5, 1e-5]), c=2.0 * c_fin,
+        iterations=8, lower=lo, upper=hi, c_final=c_fin,
+    )  # fmt: skip
+    if not np.all(np.isfinite(x_s)):
+        return fit
+    lr = 2.0 * (tukey_cost(r_s, c_fin) - tukey_cost(r, c_fin)) / sigma2
+    return (x_s, r_s, w_s) if lr <= SNAP_LR else fit
 
 
 def detect_axisymmetric(

@@ -25,6 +25,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from detector.validation import fail
+
+_WHERE = "SensorInPipe"
+
 
 def polar_to_cartesian(
     ranges: ArrayLike, beam_angles: ArrayLike
@@ -101,15 +105,22 @@ class SensorInPipe:
         p = np.asarray(self.position, dtype=float).reshape(-1)
         r = np.asarray(self.rotation, dtype=float)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise ValueError(f"SensorInPipe.position must be 3 finite numbers, got {p!r}")
+            raise fail(
+                "position", p.tolist(), "three finite numbers (m)", "not 3 finite numbers", _WHERE
+            )
         if r.shape != (3, 3) or not np.all(np.isfinite(r)):
-            raise ValueError(f"SensorInPipe.rotation must be a finite 3x3 matrix, got {r!r}")
+            raise fail(
+                "rotation", r.tolist(), "a finite 3x3 matrix", "not a finite 3x3 matrix", _WHERE
+            )
         ortho = float(np.abs(r.T @ r - _EYE3).max())
         det = _det3(r)
         if ortho > 1e-6 or det < 0:
-            raise ValueError(
-                "SensorInPipe.rotation must be a proper rotation matrix (R^T R = I within 1e-6, "
-                f"det R = +1), got max |R^T R - I| = {ortho:.3g} and det R = {det:.6g}"
+            raise fail(
+                "rotation",
+                r.tolist(),
+                "a proper rotation matrix (R^T R = I within 1e-6, det R = +1)",
+                f"not a rotation (max |R^T R - I| = {ortho:.3g}, det R = {det:.6g})",
+                _WHERE,
             )
         object.__setattr__(self, "position", p)
         object.__setattr__(self, "rotation", r)
@@ -140,9 +151,12 @@ class SensorInPipe:
         try:
             position, rotation = value
         except (TypeError, ValueError) as exc:
-            raise ValueError(
-                "sensor_in_pipe must be a SensorInPipe, an object with .position/.rotation or a "
-                f"(position (3,), rotation (3, 3)) pair, got {type(value).__name__}"
+            raise fail(
+                "sensor_in_pipe",
+                value,
+                "a SensorInPipe, an object with .position/.rotation or a "
+                "(position (3,), rotation (3, 3)) pair",
+                f"a {type(value).__name__}",
             ) from exc
         return cls(np.asarray(position), np.asarray(rotation))
 

@@ -75,7 +75,7 @@ class Piece:
             if self.length < 1e-12:
                 return 0.0
             t = (self.p1 - self.p0) / self.length
-            return clamp((point - self.p0) @ t, 0.0, self.length)
+            return clamp(float((point - self.p0) @ t), 0.0, self.length)
         assert self.arc_centre is not None and self.arc_normal is not None
         u = self.p0 - self.arc_centre
         u /= norm3(u)
@@ -126,18 +126,31 @@ class Centreline:
             d1: float,
             run_id: str | None,
             node_id: str | None,
-            **arc: object,
+            arc_centre: NDArray[np.float64] | None = None,
+            arc_normal: NDArray[np.float64] | None = None,
+            arc_radius: float = 0.0,
+            arc_angle: float = 0.0,
         ) -> None:
-            length = (
-                norm3(p1 - p0)
-                if kind == "line"
-                else float(
-                    arc["arc_radius"] * arc["arc_angle"]  # type: ignore[operator]
+            length = norm3(p1 - p0) if kind == "line" else float(arc_radius * arc_angle)
+            pieces.append(
+                Piece(
+                    len(pieces),
+                    kind,
+                    v0,
+                    v1,
+                    p0,
+                    p1,
+                    length,
+                    d0,
+                    d1,
+                    run_id,
+                    node_id,
+                    arc_centre,
+                    arc_normal,
+                    arc_radius,
+                    arc_angle,
                 )
             )
-            pieces.append(
-                Piece(len(pieces), kind, v0, v1, p0, p1, length, d0, d1, run_id, node_id, **arc)
-            )  # type: ignore[arg-type]
 
         for node_id, g in network.geometry.items():
             if g.kind == "bend" and g.style == "long":

@@ -126,8 +126,13 @@ def _tube_pieces(
     pieces: list[HullPiece] = []
     for j in range(SECTORS):
         corner = valid[:, j : j + 2]  # (2, 2, n+1)
-        cell_all = corner[:, :, :-1].all(axis=(0, 1)) & corner[:, :, 1:].all(axis=(0, 1))
-        cell_any = corner[:, :, :-1].any(axis=(0, 1)) | corner[:, :, 1:].any(axis=(0, 1))
+        # (n,) every / any corner of cell k valid (asarray: reductions type as scalar | array)
+        cell_all = np.asarray(
+            corner[:, :, :-1].all(axis=(0, 1)) & corner[:, :, 1:].all(axis=(0, 1))
+        )
+        cell_any = np.asarray(
+            corner[:, :, :-1].any(axis=(0, 1)) | corner[:, :, 1:].any(axis=(0, 1))
+        )
         k = 0
         while k < n:
             if cell_all[k]:

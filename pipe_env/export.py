@@ -187,6 +187,8 @@ def mesh_report(path: str | Path) -> dict[str, Any]:
     data = Path(path).read_bytes()
     fmt = MESH_FORMATS.get(Path(path).suffix.lower(), "stl")
     loaded = trimesh.load(io.BytesIO(data), file_type=fmt, force="mesh")
+    if not isinstance(loaded, trimesh.Trimesh):  # force="mesh" makes one; narrows the type
+        raise ValueError(f"{path}: not a triangle mesh ({type(loaded).__name__})")
     return {
         "triangles": int(len(loaded.faces)),
         "watertight": bool(loaded.is_watertight),

@@ -158,11 +158,12 @@ def build_fitting(
     elif kind == "bend":
         (_, a0, d0), (_, a1, _d1) = ports
         theta = np.pi - np.arccos(np.clip(a0 @ a1, -1.0, 1.0))
+        half_tan = float(np.tan(theta / 2.0))
         if style == "long":
-            legs = [float(bend_radius or 0.0) * np.tan(theta / 2.0)] * 2
+            legs = [float(bend_radius or 0.0) * half_tan] * 2
         else:
             r = 0.5 * d0
-            legs = [r * np.tan(theta / 2.0) + STUB_FRACTION * d0] * 2
+            legs = [r * half_tan + STUB_FRACTION * d0] * 2
     elif kind in JUNCTION_KINDS:
         for i, (_, ai, di) in enumerate(ports):
             others = [(aj, 0.5 * dj) for j, (_, aj, dj) in enumerate(ports) if j != i]

@@ -42,7 +42,7 @@ def option_angles(
     """
     t = incoming / norm3(incoming)
     o = outgoing / norm3(outgoing)
-    angle = math.acos(clamp(t @ o, -1.0, 1.0))
+    angle = math.acos(clamp(float(t @ o), -1.0, 1.0))
     perp = o - (o @ t) * t
     if norm3(perp) < 1e-9:
         return angle, 0.0

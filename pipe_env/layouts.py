@@ -11,13 +11,14 @@ ground-truth option of a layout reports exactly the parameters it was built with
 from __future__ import annotations
 
 import math
-import numbers
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from detector.geometry import Pose, direction_from_angles
+from detector.validation import check_choice, check_number, fail
 from pipe_env.fittings import build_fitting
 from pipe_env.network import Fitting, PipeNetwork, Run
 
@@ -27,12 +28,7 @@ X = np.array([1.0, 0.0, 0.0])
 
 
 def _check(name: str, value: float, lo: float, hi: float, unit: str) -> None:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(
-            f"layout parameter {name}={value!r} must be a number in [{lo}, {hi}] {unit}"
-        )
-    if not (math.isfinite(value) and lo <= value <= hi):
-        raise ValueError(f"layout parameter {name}={value!r} is outside [{lo}, {hi}] {unit}")
+    check_number(name, value, lo, hi, unit, where="layout")
 
 
 def _assemble(
@@ -307,7 +303,7 @@ def cross_junction(
 
 
 #: Layout builders by name, for configuration files and the CLI.
-LAYOUTS = {
+LAYOUTS: dict[str, Callable[..., PipeNetwork]] = {
     "straight": straight,
     "closure": closure,
     "reducer": reducer,
@@ -321,9 +317,8 @@ LAYOUTS = {
 
 def make_layout(name: str, **params: Any) -> PipeNetwork:
     """Build layout ``name`` with keyword ``params``; errors name the layout and the parameter."""
-    if name not in LAYOUTS:
-        raise ValueError(f"layout {name!r} is unknown; allowed: {sorted(LAYOUTS)}")
+    check_choice("layout", name, sorted(LAYOUTS))
     try:
         return LAYOUTS[name](**params)
     except TypeError as exc:
-        raise ValueError(f"layout {name!r}: {exc}") from exc
+        raise fail("params", params, f"the parameters of {name}", str(exc), "layout") from exc

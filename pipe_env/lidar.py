@@ -56,6 +56,7 @@ from numpy.typing import NDArray
 
 from detector.geometry import Pose
 from detector.scan import Scan, beam_directions
+from detector.validation import check_choice, check_int, check_number, fail
 from pipe_env.world import PipeWorld
 
 MODES = ("stop_and_scan", "continuous")
@@ -101,9 +102,7 @@ class LidarSpec:
     def __post_init__(self) -> None:
         def need(ok: bool, name: str, allowed: str) -> None:
             if not ok:
-                raise ValueError(
-                    f"LidarSpec.{name} = {getattr(self, name)!r} is invalid; allowed: {allowed}"
-                )
+                raise fail(f"LidarSpec.{name}", getattr(self, name), allowed)
 
         need(isinstance(self.name, str) and self.name != "", "name", "a non-empty string")
         for f in fields(self):
@@ -136,7 +135,7 @@ class LidarSpec:
     def beam_angles(self) -> NDArray[np.float64]:
         """(B,) in-plane beam angles, radians, symmetric about forward."""
         half = 0.5 * (self.n_beams - 1) * self.beam_step
-        return -half + self.beam_step * np.arange(self.n_beams)
+        return -half + self.beam_step * np.arange(self.n_beams, dtype=np.float64)
 
     @property
     def is_noiseless(self) -> bool:
@@ -221,7 +220,7 @@ PRESETS: dict[str, LidarSpec] = {
 def get_preset(name: str) -> LidarSpec:
     """The preset called ``name``; raises ValueError listing the presets if unknown."""
     if not isinstance(name, str) or name not in PRESETS:
-        raise ValueError(f"unknown LiDAR preset {name!r}; allowed: {sorted(PRESETS)}")
+        raise fail("preset", name, ", ".join(sorted(PRESETS)), "unknown")
     return PRESETS[name]
 
 
@@ -258,21 +257,18 @@ class RotatingLidar:
         threads: int = 1,
     ) -> None:
         if not isinstance(world, PipeWorld):
-            raise ValueError(f"world must be a PipeWorld, got {type(world).__name__}")
+            raise fail("world", type(world).__name__, "a PipeWorld", "wrong type")
         if isinstance(spec, str):
             spec = get_preset(spec)
         if not isinstance(spec, LidarSpec):
-            raise ValueError(f"spec must be a LidarSpec or a preset name, got {spec!r}")
+            raise fail("spec", spec, "a LidarSpec or a preset name", "wrong type")
         _need_number(servo_step, "servo_step", 0.0, math.pi, "rad", low_open=True)
         _need_number(servo_range, "servo_range", servo_step, 2 * math.pi, "rad")
-        if mode not in MODES:
-            raise ValueError(f"mode = {mode!r} is invalid; allowed: {MODES}")
+        check_choice("mode", mode, MODES)
         _need_number(servo_settle, "servo_settle", 0.0, 10.0, "s")
         _need_number(servo_jitter, "servo_jitter", 0.0, math.radians(10), "rad")
-        if backend not in BACKENDS:
-            raise ValueError(f"backend = {backend!r} is invalid; allowed: {BACKENDS}")
-        if not (isinstance(threads, int) and not isinstance(threads, bool) and 1 <= threads):
-            raise ValueError(f"threads = {threads!r} is invalid; allowed an int >= 1")
+        check_choice("backend", backend, BACKENDS)
+        check_int("threads", threads, low=1)
         self.world = world
         self.spec = spec
         self.servo_step = float(servo_step)
@@ -525,20 +521,15 @@ def _measure(
 def _need_number(
     value: Any, name: str, lo: float, hi: float, unit: str, low_open: bool = False
 ) -> None:
-    ok = isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
-    if ok:
-        ok = (lo < value if low_open else lo <= value) and value <= hi
-    if not ok:
-        bracket = "(" if low_open else "["
-        raise ValueError(f"{name} = {value!r} is invalid; allowed {bracket}{lo:g}, {hi:g}] {unit}")
+    check_number(name, value, lo, hi, unit, open_low=low_open)
 
 
 def _need_rng(rng: Any) -> None:
     if not isinstance(rng, np.random.Generator):
-        raise ValueError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+        raise fail("rng", type(rng).__name__, "a numpy.random.Generator", "wrong type")
 
 
 def _checked(pose: Any, name: str) -> Pose:
     if not isinstance(pose, Pose):
-        raise ValueError(f"{name} must be a detector.geometry.Pose, got {type(pose).__name__}")
+        raise fail(name, type(pose).__name__, "a detector.geometry.Pose", "wrong type")
     return pose

@@ -35,8 +35,8 @@ from numpy.typing import NDArray
 
 #: Columns of the packed piece table: point (axis point or torus centre), unit axis, radius0 or
 #: major radius, slope or minor radius, the two clip planes (normal, offset), bounding sphere.
-FIELDS = ("p", "p", "p", "u", "u", "u", "r", "k", "n0", "n0", "n0", "h0", "n1", "n1", "n1", "h1")
-FIELDS += ("bc", "bc", "bc", "br", "safe0", "safe1")
+FIELDS: tuple[str, ...] = ("p", "p", "p", "u", "u", "u", "r", "k", "n0", "n0", "n0", "h0")
+FIELDS += ("n1", "n1", "n1", "h1", "bc", "bc", "bc", "br", "safe0", "safe1")
 N_FIELDS = len(FIELDS)
 #: Columns of the axial band [safe0, safe1] of a quadric's side wall that no other piece's
 #: bounding sphere reaches (see :func:`axial_safe_bands`).
@@ -495,6 +495,12 @@ def cast_rays(
     Writes ``dist`` (N,) (``inf``: no wall within ``cutoff``; 0: the ray starts outside the
     bore), ``normal`` (N, 3) (outward unit normals if ``want_normals``, else zeros) and
     ``hit_element`` (N,) (-1: none), as :meth:`pipe_env.raycast_analytic.AnalyticBore.cast`.
+
+    The work is done origin by origin, in passes over that origin's rays (the helpers take
+    their arrays once per origin, not once per ray: passing an array costs reference counting):
+    the pieces in reach (:func:`_select_pieces`), the batched first piece
+    (:func:`_first_quadric`), each ray's exit from the union (:func:`_trace_rays`) and the
+    results (:func:`_write_hits`).
     """
     n_rays = dirs.shape[0]
     n_pieces = pieces.shape[0]
@@ -506,40 +512,28 @@ def cast_rays(
     iv_lo = np.empty((n_pieces, 2))
     iv_hi = np.empty((n_pieces, 2))
     iv_code = np.empty((n_pieces, 2), dtype=np.int64)
-    b_lo = np.empty(0)
-    b_hi = np.empty(0)
-    b_code = np.empty(0, dtype=np.int64)
-    b_ok = np.empty(0, dtype=np.bool_)
-    b_done = np.empty(0, dtype=np.bool_)
+    # per ray of one origin: the batched first piece's interval; the rays traced through the
+    # union, their exits' pieces and surface codes
+    n_batch = max(min(per_origin, n_rays), 0)
+    b_lo = np.empty(n_batch)
+    b_hi = np.empty(n_batch)
+    b_code = np.empty(n_batch, dtype=np.int64)
+    b_ok = np.zeros(n_batch, dtype=np.bool_)
+    b_done = np.zeros(n_batch, dtype=np.bool_)
+    traced = np.empty(n_batch, dtype=np.int64)
+    exit_piece = np.empty(n_batch, dtype=np.int64)
+    exit_code = np.empty(n_batch, dtype=np.int64)
+    if not want_normals:
+        normal[:] = 0.0
     for oi in range(origins.shape[0]):
-        ox = origins[oi, 0]
-        oy = origins[oi, 1]
-        oz = origins[oi, 2]
-        _origin_table(pieces, kind, ox, oy, oz, table)
-        n_active = 0
-        n_at = 0
-        first = -1
-        for k in range(n_pieces):
-            rad = math.sqrt(table[k, _RAD2])
-            if math.sqrt(table[k, _BCC]) - rad <= cutoff + SEAM_EPS:
-                active[n_active] = k
-                at_origin[n_active] = table[k, _BCC] <= table[k, _RAD2]
-                if at_origin[n_active]:
-                    n_at += 1
-                    first = k
-                n_active += 1
+        _origin_table(pieces, kind, origins[oi, 0], origins[oi, 1], origins[oi, 2], table)
+        n_active, n_at, first = _select_pieces(table, cutoff, active, at_origin)
         start = oi * per_origin
         stop = min(start + per_origin, n_rays)
         # Usually one piece holds the origin and every ray starts by crossing it: its interval
         # for all the rays at once, in a loop without branches (vectorised, no mispredictions)
         batched = n_at == 1 and kind[first] == QUADRIC and stop > start
         if batched:
-            if len(b_lo) < stop - start:
-                b_lo = np.empty(stop - start)
-                b_hi = np.empty(stop - start)
-                b_code = np.empty(stop - start, dtype=np.int64)
-                b_ok = np.empty(stop - start, dtype=np.bool_)
-                b_done = np.empty(stop - start, dtype=np.bool_)
             _first_quadric(
                 pieces,
                 table,
@@ -557,105 +551,296 @@ def cast_rays(
                 origins[oi],
                 normal,
             )
-        for i in range(start, stop):
-            dx = dirs[i, 0]
-            dy = dirs[i, 1]
-            dz = dirs[i, 2]
-            if batched and b_done[i - start]:  # normal written by _first_quadric
-                dist[i] = b_hi[i - start]
-                hit_element[i] = element[first]
-                if not want_normals:
-                    normal[i, 0] = 0.0
-                    normal[i, 1] = 0.0
-                    normal[i, 2] = 0.0
-                continue
-            if batched and b_ok[i - start]:
-                stamp[first] = i
-                hi = b_hi[i - start]
-                lo = b_lo[i - start]
-                if hi > lo:
-                    n_iv[first] = 1
-                    iv_lo[first, 0] = lo
-                    iv_hi[first, 0] = hi
-                    iv_code[first, 0] = b_code[i - start]
-                else:
-                    n_iv[first] = 0
-            # The exit from the union, extending t from 0. A piece's intervals are computed
-            # once its (inflated) bounding sphere contains the point at t: an interval with
-            # lo <= t + SEAM_EPS < ... and hi > t needs it.
-            t = 0.0
-            last = -1
-            last_code = SIDE
-            while True:
-                new_t = t
-                best = -1
-                best_code = SIDE
-                for j in range(n_active):
-                    k = active[j]
-                    if stamp[k] != i:
-                        if t == 0.0:
-                            if not at_origin[j]:
-                                continue
-                        else:
-                            tc = dx * table[k, 8] + dy * table[k, 9] + dz * table[k, 10]
-                            if t * (t - 2.0 * tc) + table[k, _BCC] > table[k, _RAD2]:
-                                continue
-                            if kind[k] == TORUS:  # and within reach of the torus's tube
-                                du = dx * pieces[k, 3] + dy * pieces[k, 4] + dz * pieces[k, 5]
-                                dc = dx * table[k, 0] + dy * table[k, 1] + dz * table[k, 2]
-                                h = t * du + table[k, _S0]
-                                w2 = t * (t - 2.0 * dc) + table[k, _C]
-                                rho = math.sqrt(max(w2 - h * h, 0.0)) - pieces[k, 6]
-                                reach = pieces[k, 7] + SAFE_MARGIN
-                                if rho * rho + h * h > reach * reach:
-                                    continue
-                        nv, la, ha, ca, lb, hb, cb = _piece_intervals(
-                            pieces, kind, table, k, dx, dy, dz
+        n_traced = _trace_rays(
+            pieces,
+            kind,
+            element,
+            table,
+            active,
+            at_origin,
+            n_active,
+            dirs,
+            start,
+            stop,
+            cutoff,
+            first if batched else -1,
+            b_lo,
+            b_hi,
+            b_code,
+            b_ok,
+            b_done,
+            stamp,
+            n_iv,
+            iv_lo,
+            iv_hi,
+            iv_code,
+            dist,
+            hit_element,
+            traced,
+            exit_piece,
+            exit_code,
+        )
+        _write_hits(
+            pieces,
+            kind,
+            element,
+            origins[oi],
+            dirs,
+            cutoff,
+            want_normals,
+            n_traced,
+            traced,
+            exit_piece,
+            exit_code,
+            dist,
+            normal,
+            hit_element,
+        )
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _select_pieces(
+    table: NDArray[np.float64],
+    cutoff: float,
+    active: NDArray[np.int64],
+    at_origin: NDArray[np.bool_],
+) -> tuple[int, int, int]:
+    """Fill ``active`` with the pieces whose bounding sphere comes within ``cutoff`` of the
+    table's origin (and ``at_origin`` with whether it contains the origin); returns their count,
+    the count of those containing the origin and the last such piece (-1: none)."""
+    n_active = 0
+    n_at = 0
+    first = -1
+    for k in range(table.shape[0]):
+        rad = math.sqrt(table[k, _RAD2])
+        if math.sqrt(table[k, _BCC]) - rad <= cutoff + SEAM_EPS:
+            active[n_active] = k
+            at_origin[n_active] = table[k, _BCC] <= table[k, _RAD2]
+            if at_origin[n_active]:
+                n_at += 1
+                first = k
+            n_active += 1
+    return n_active, n_at, first
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _within_sphere(t: float, tc: float, bcc: float, rad2: float) -> bool:
+    """Whether the point at ``t`` on a ray lies in a piece's (inflated) bounding sphere: ``tc``
+    is the ray's direction . (centre - origin), ``bcc`` and ``rad2`` the squared distance
+    from the origin to the centre and the squared radius."""
+    return not (t * (t - 2.0 * tc) + bcc > rad2)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _within_tube(
+    t: float, du: float, dc: float, s0: float, cc: float, major: float, minor: float
+) -> bool:
+    """Whether the point at ``t`` on a ray lies within reach of a torus's tube: ``du``, ``dc``
+    are the direction . axis and . (centre - origin), ``s0`` and ``cc`` the origin's axial
+    coordinate and squared distance to the centre (:func:`_origin_table`)."""
+    h = t * du + s0
+    w2 = t * (t - 2.0 * dc) + cc
+    rho = math.sqrt(max(w2 - h * h, 0.0)) - major
+    reach = minor + SAFE_MARGIN
+    return not (rho * rho + h * h > reach * reach)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _within_safe_band(s_axial: float, safe0: float, safe1: float) -> bool:
+    """Whether a quadric's side wall at axial coordinate ``s_axial`` is in its safe band."""
+    return safe0 <= s_axial <= safe1
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _trace_rays(
+    pieces: NDArray[np.float64],
+    kind: NDArray[np.int64],
+    element: NDArray[np.int64],
+    table: NDArray[np.float64],
+    active: NDArray[np.int64],
+    at_origin: NDArray[np.bool_],
+    n_active: int,
+    dirs: NDArray[np.float64],
+    start: int,
+    stop: int,
+    cutoff: float,
+    first: int,
+    b_lo: NDArray[np.float64],
+    b_hi: NDArray[np.float64],
+    b_code: NDArray[np.int64],
+    b_ok: NDArray[np.bool_],
+    b_done: NDArray[np.bool_],
+    stamp: NDArray[np.int64],
+    n_iv: NDArray[np.int64],
+    iv_lo: NDArray[np.float64],
+    iv_hi: NDArray[np.float64],
+    iv_code: NDArray[np.int64],
+    dist: NDArray[np.float64],
+    hit_element: NDArray[np.int64],
+    traced: NDArray[np.int64],
+    exit_piece: NDArray[np.int64],
+    exit_code: NDArray[np.int64],
+) -> int:
+    """Each ray's exit from the union, for rays ``start:stop`` of one origin.
+
+    A ray that the batched first piece ``first`` (-1: none) finished gets its ``dist`` and
+    ``hit_element`` (its normal is written, or zeroed, already). The others are traced: their
+    count is returned, their indices are in ``traced``, their exits ``t`` in ``dist`` and the
+    piece and surface whose interval ended there in ``exit_piece``, ``exit_code`` (-1 and SIDE:
+    none), for :func:`_write_hits`.
+
+    ``t`` starts at 0 and extends to the farthest end of the intervals that contain it
+    (``lo <= t + SEAM_EPS``, ``hi > t``) until none does. A piece's intervals (cached per ray
+    in ``stamp``, ``n_iv``, ``iv_*``) are computed once its (inflated) bounding sphere contains
+    the point at ``t``: an interval with ``lo <= t + SEAM_EPS < ...`` and ``hi > t`` needs it.
+    """
+    n_traced = 0
+    for i in range(start, stop):
+        dx = dirs[i, 0]
+        dy = dirs[i, 1]
+        dz = dirs[i, 2]
+        if first >= 0 and b_done[i - start]:  # normal written by _first_quadric
+            dist[i] = b_hi[i - start]
+            hit_element[i] = element[first]
+            continue
+        if first >= 0 and b_ok[i - start]:
+            stamp[first] = i
+            n_iv[first] = 1 if b_hi[i - start] > b_lo[i - start] else 0
+            iv_lo[first, 0] = b_lo[i - start]
+            iv_hi[first, 0] = b_hi[i - start]
+            iv_code[first, 0] = b_code[i - start]
+        t = 0.0
+        last = -1
+        last_code = SIDE
+        while True:
+            new_t = t
+            best = -1
+            best_code = SIDE
+            for j in range(n_active):
+                k = active[j]
+                if stamp[k] != i:
+                    # within the piece's bounding sphere (at t = 0: it holds the origin)?
+                    if not (
+                        at_origin[j]
+                        if t == 0.0
+                        else _within_sphere(
+                            t,
+                            dx * table[k, 8] + dy * table[k, 9] + dz * table[k, 10],
+                            table[k, _BCC],
+                            table[k, _RAD2],
                         )
-                        stamp[k] = i
-                        n_iv[k] = nv
-                        iv_lo[k, 0] = la
-                        iv_hi[k, 0] = ha
-                        iv_code[k, 0] = ca
-                        iv_lo[k, 1] = lb
-                        iv_hi[k, 1] = hb
-                        iv_code[k, 1] = cb
-                    for v in range(n_iv[k]):
-                        hi = iv_hi[k, v]
-                        if hi >= new_t and hi > t and iv_lo[k, v] <= t + SEAM_EPS:
-                            # the farthest end; on a tie the last piece in order (numpy path)
-                            if hi > new_t or k >= best:
-                                new_t = hi
-                                best = k
-                                best_code = iv_code[k, v]
-                if new_t == t:
-                    break
-                t = new_t
-                last = best
-                last_code = best_code
-                if t > cutoff:
-                    break
-                if last_code == SIDE and kind[last] == QUADRIC:
-                    # through the side wall where no other piece reaches: out of the bore
-                    du = dx * pieces[last, 3] + dy * pieces[last, 4] + dz * pieces[last, 5]
-                    s_axial = t * du + table[last, _S0]
-                    if pieces[last, _SAFE0] <= s_axial <= pieces[last, _SAFE1]:
-                        break
-            normal[i, 0] = 0.0
-            normal[i, 1] = 0.0
-            normal[i, 2] = 0.0
+                    ):
+                        continue
+                    if (
+                        t != 0.0
+                        and kind[k] == TORUS
+                        and not _within_tube(
+                            t,
+                            dx * pieces[k, 3] + dy * pieces[k, 4] + dz * pieces[k, 5],
+                            dx * table[k, 0] + dy * table[k, 1] + dz * table[k, 2],
+                            table[k, _S0],
+                            table[k, _C],
+                            pieces[k, 6],
+                            pieces[k, 7],
+                        )
+                    ):
+                        continue
+                    nv, la, ha, ca, lb, hb, cb = _piece_intervals(
+                        pieces, kind, table, k, dx, dy, dz
+                    )
+                    stamp[k] = i
+                    n_iv[k] = nv
+                    iv_lo[k, 0] = la
+                    iv_hi[k, 0] = ha
+                    iv_code[k, 0] = ca
+                    iv_lo[k, 1] = lb
+                    iv_hi[k, 1] = hb
+                    iv_code[k, 1] = cb
+                for v in range(n_iv[k]):
+                    hi = iv_hi[k, v]
+                    if hi >= new_t and hi > t and iv_lo[k, v] <= t + SEAM_EPS:
+                        # the farthest end; on a tie the last piece in order (numpy path)
+                        if hi > new_t or k >= best:
+                            new_t = hi
+                            best = k
+                            best_code = iv_code[k, v]
+            if new_t == t:
+                break
+            t = new_t
+            last = best
+            last_code = best_code
             if t > cutoff:
-                dist[i] = _INF
-                hit_element[i] = -1
-                continue
-            dist[i] = t
-            if t <= 0.0:
-                hit_element[i] = -1
-                continue
-            # the piece and surface whose interval ended at the exit (the last extension)
-            hit_element[i] = element[last]
-            if want_normals:
-                _normal(pieces, kind, last, last_code, ox, oy, oz, dx, dy, dz, t, normal[i])
+                break
+            # through the side wall where no other piece reaches: out of the bore
+            if (
+                last_code == SIDE
+                and kind[last] == QUADRIC
+                and _within_safe_band(
+                    t * (dx * pieces[last, 3] + dy * pieces[last, 4] + dz * pieces[last, 5])
+                    + table[last, _S0],
+                    pieces[last, _SAFE0],
+                    pieces[last, _SAFE1],
+                )
+            ):
+                break
+        dist[i] = t
+        traced[n_traced] = i
+        exit_piece[n_traced] = last
+        exit_code[n_traced] = last_code
+        n_traced += 1
+    return n_traced
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _write_hits(
+    pieces: NDArray[np.float64],
+    kind: NDArray[np.int64],
+    element: NDArray[np.int64],
+    origin: NDArray[np.float64],
+    dirs: NDArray[np.float64],
+    cutoff: float,
+    want_normals: bool,
+    n_traced: int,
+    traced: NDArray[np.int64],
+    exit_piece: NDArray[np.int64],
+    exit_code: NDArray[np.int64],
+    dist: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    hit_element: NDArray[np.int64],
+) -> None:
+    """The results of the rays :func:`_trace_rays` traced, from their exits (the distances are
+    in ``dist`` already): beyond ``cutoff``, no hit; at 0, the ray starts outside the bore;
+    else the piece and surface whose interval ended at the exit."""
+    for n in range(n_traced):
+        i = traced[n]
+        t = dist[i]
+        normal[i, 0] = 0.0
+        normal[i, 1] = 0.0
+        normal[i, 2] = 0.0
+        if t > cutoff:
+            dist[i] = _INF
+            hit_element[i] = -1
+            continue
+        if t <= 0.0:
+            hit_element[i] = -1
+            continue
+        last = exit_piece[n]
+        hit_element[i] = element[last]
+        if want_normals:
+            _normal(
+                pieces,
+                kind,
+                last,
+                exit_code[n],
+                origin[0],
+                origin[1],
+                origin[2],
+                dirs[i, 0],
+                dirs[i, 1],
+                dirs[i, 2],
+                t,
+                normal[i],
+            )
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -110,9 +110,9 @@ def _bore_facing(verts: NDArray, faces: NDArray, bore, geom: mujoco.MjsGeom) -> 
     ok = length > 0
     normal[ok] /= length[ok, None]
     centroid = tri.mean(axis=1)
-    rot = np.zeros(9)
-    mujoco.mju_quat2Mat(rot, np.asarray(geom.quat, dtype=float))
-    rot = rot.reshape(3, 3)
+    rot9 = np.zeros(9)
+    mujoco.mju_quat2Mat(rot9, np.asarray(geom.quat, dtype=float))
+    rot = rot9.reshape(3, 3)
     pos = np.asarray(geom.pos, dtype=float)
     outside = ~bore.contains((centroid + _PROBE * normal) @ rot.T + pos)
     behind = bore.contains((centroid - (WALL + _PROBE) * normal) @ rot.T + pos)

@@ -25,6 +25,7 @@ import os
 import platform
 import subprocess
 import sys
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import mujoco
@@ -316,7 +317,7 @@ class WorldRenderer:
     def render(
         self,
         camera: mujoco.MjvCamera | str = "iso",
-        markers: list[tuple[NDArray[np.float64], float]] = (),
+        markers: Sequence[tuple[NDArray[np.float64], float]] = (),
     ) -> NDArray[np.uint8]:
         """An (height, width, 3) uint8 image of the current state, with optional red sphere
         ``markers`` given as (position m, radius m).

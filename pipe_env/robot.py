@@ -62,6 +62,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.geometry import Pose
+from detector.validation import fail
 from pipe_env.robot_limits import ROBOT_DIAMETER_RANGE
 from pipe_env.world import CONTACT_BIT
 
@@ -118,9 +119,7 @@ class RobotConfig:
     def __post_init__(self) -> None:
         def need(ok: bool, name: str, allowed: str) -> None:
             if not ok:
-                raise ValueError(
-                    f"RobotConfig.{name} = {getattr(self, name)!r} is invalid; allowed: {allowed}"
-                )
+                raise fail(f"RobotConfig.{name}", getattr(self, name), allowed)
 
         def num(v: object) -> bool:
             return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
@@ -243,7 +242,7 @@ class Robot:
 
     def __init__(self, config: RobotConfig | None = None) -> None:
         if config is not None and not isinstance(config, RobotConfig):
-            raise ValueError(f"config must be a RobotConfig, got {type(config).__name__}")
+            raise fail("config", type(config).__name__, "a RobotConfig", "wrong type")
         self.config = config or RobotConfig()
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None

@@ -104,7 +104,7 @@ def turn_angle(network: PipeNetwork, node_id: str, run_in: str, run_out: str) ->
     """Deflection (rad) when entering ``node_id`` by ``run_in`` and leaving by ``run_out``."""
     g = network.geometry[node_id]
     a, b = g.port(run_in).axis, g.port(run_out).axis
-    return float(math.pi - math.acos(clamp(a @ b, -1.0, 1.0)))
+    return float(math.pi - math.acos(clamp(float(a @ b), -1.0, 1.0)))
 
 
 def edge_position(network: PipeNetwork, cp: CentrelinePoint) -> EdgePosition:

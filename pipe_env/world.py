@@ -35,6 +35,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.validation import check_number
 from pipe_env.contact_walls import BoxPanel, HullPiece, fitting_pieces, run_panels
 from pipe_env.meshes import TriangleMesh, fitting_shell, run_shell, to_triangle_mesh
 from pipe_env.network import PipeNetwork
@@ -105,7 +106,7 @@ def network_contact_pieces(
     network: PipeNetwork,
 ) -> list[tuple[str, list[HullPiece], list[BoxPanel]]]:
     """Contact pieces per element: (element id, hull pieces, box panels)."""
-    out = []
+    out: list[tuple[str, list[HullPiece], list[BoxPanel]]] = []
     for r in network.runs:
         if network.straight_length(r.id) <= 1e-6:
             continue
@@ -270,8 +271,7 @@ class NearContacts:
                 f"the world holds {m.npair} predefined pairs; NearContacts needs "
                 f"{CONTACT_PAIR_POOL} (a world built with contact_walls=True)"
             )
-        if not (math.isfinite(reach) and 0.001 <= reach <= 0.1):
-            raise ValueError(f"reach = {reach!r} is invalid; allowed [0.001, 0.1] m")
+        check_number("reach", reach, 0.001, 0.1, "m", where="NearContacts")
         self.world = world
         self.model = m
         self.geoms = np.asarray(geoms, dtype=int)
@@ -305,7 +305,18 @@ class NearContacts:
         self._last: NDArray[np.float64] | None = None
         self._motion = 0.0
         self._pairs: tuple[NDArray[np.int_], NDArray[np.int_]] | None = None
-        self._coarse: tuple[NDArray[np.float64], ...] | None = None
+        # the coarse selection: (geom positions when made, piece indices, their centres,
+        # rotations and half sizes)
+        self._coarse: (
+            tuple[
+                NDArray[np.float64],
+                NDArray[np.intp],
+                NDArray[np.float64],
+                NDArray[np.float64],
+                NDArray[np.float64],
+            ]
+            | None
+        ) = None
         self.n_pairs = 0
         self.selections = 0
         self.fallbacks = 0

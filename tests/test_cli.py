@@ -118,11 +118,11 @@ def test_bad_scenario_file_is_an_error_testcase_naming_file_and_key(tmp_path: Pa
     proc = pipenav("scenarios", "run", "--dir", str(tmp_path))
     assert proc.returncode == 1
     assert "ERROR broken [seed=0]" in proc.stdout
-    assert "broken.yaml: key 'detectr': unknown key; allowed:" in proc.stdout
+    assert "broken.yaml: detectr = 'improved': unknown key; allowed:" in proc.stdout
     assert "Traceback" not in proc.stdout + proc.stderr
     listed = pipenav("scenarios", "list", "--dir", str(tmp_path))
     assert listed.returncode == 2
-    assert "broken.yaml: key 'detectr': unknown key; allowed:" in listed.stdout
+    assert "broken.yaml: detectr = 'improved': unknown key; allowed:" in listed.stdout
 
 
 def test_packaged_scenarios_all_validate() -> None:
@@ -178,12 +178,15 @@ def test_bad_layout_parameters_and_values_are_usage_errors(tmp_path: Path) -> No
     # a broken selected file is an error testcase of the run, not an abort
     assert proc.returncode == 1 and "Traceback" not in proc.stdout + proc.stderr
     assert "ERROR too_wide [seed=0]" in proc.stdout
-    assert "too_wide.yaml: key 'network': layout parameter diameter=0.5 is outside" in proc.stdout
+    assert (
+        "too_wide.yaml: network.params.diameter = 0.5: out of range; allowed: 0.02 to 0.25 (m)"
+        in proc.stdout
+    )
     (tmp_path / "too_wide.yaml").unlink()
     write(tmp_path, "unhashable", {"network": {"layout": [1]}, "sensor": {"preset": ["ideal"]}})
     proc = pipenav("scenarios", "list", "--dir", str(tmp_path))
     assert proc.returncode == 2 and "Traceback" not in proc.stdout + proc.stderr
-    assert "unhashable.yaml: key 'network.layout'" in proc.stdout
+    assert "unhashable.yaml: network.layout = [1]: unknown" in proc.stdout
     bad = pipenav(
         "drive", "--layout", "t_junction", "--params", "{diameter: 1}", "--fidelity", "fast"
     )

@@ -118,11 +118,13 @@ def test_start_pose_and_behind_room() -> None:
 
 
 def test_bad_parameters_are_named() -> None:
-    with pytest.raises(ValueError, match=r"layout parameter angle=0.1 is outside"):
+    with pytest.raises(ValueError, match=r"layout: angle = 0.1: out of range"):
         layouts.mitre_bend(angle=0.1)
     with pytest.raises(ValueError, match=r"entry='side' is not allowed"):
         layouts.t_junction(entry="side")
-    with pytest.raises(ValueError, match=r"layout 'spiral' is unknown"):
+    with pytest.raises(ValueError, match=r"layout = 'spiral': unknown; allowed: closure"):
         layouts.make_layout("spiral")
-    with pytest.raises(ValueError, match=r"layout 'closure'.*unexpected keyword"):
+    with pytest.raises(
+        ValueError, match=r"params = .*unexpected keyword.*allowed: the parameters of closure"
+    ):
         layouts.make_layout("closure", angle=1.0)

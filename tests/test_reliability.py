@@ -225,7 +225,7 @@ def test_over_large_integers_in_a_scenario_are_named_errors(
 
     data = {"network": {"layout": "t_junction", "params": {"diameter": 0.1}}, **extra}
     (tmp_path / "big.yaml").write_text(yaml.safe_dump(data))
-    with pytest.raises(ScenarioError, match=rf"big.yaml: key '{key}"):
+    with pytest.raises(ScenarioError, match=rf"big.yaml: {key}"):
         load_scenario(tmp_path / "big.yaml")
 
 

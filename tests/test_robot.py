@@ -14,11 +14,11 @@ from primitives.sequences import go_straight
 
 
 def test_config_errors_name_field_value_and_range() -> None:
-    with pytest.raises(ValueError, match=r"n_modules = 3 .*\[4, 8\]"):
+    with pytest.raises(ValueError, match=r"RobotConfig.n_modules = 3: .*\[4, 8\]"):
         RobotConfig(n_modules=3)
     with pytest.raises(ValueError, match=r"width = 0.07"):
         RobotConfig(width=0.07)
-    with pytest.raises(ValueError, match=r"jam_steer = 0.0 .*\[1, 180\] deg"):
+    with pytest.raises(ValueError, match=r"RobotConfig.jam_steer = 0.0: .*\[1, 180\] deg"):
         RobotConfig(jam_steer=0.0)
 
 

@@ -12,11 +12,13 @@ from hypothesis import strategies as st
 
 from agents.scenarios import (
     ScenarioError,
+    ScenarioFieldError,
     build_network,
     load_scenario,
     packaged_scenario_dir,
     parse_scenario,
 )
+from detector.validation import ArgumentError
 
 GOOD = (packaged_scenario_dir() / "tee_run_90mm.yaml").read_text()
 
@@ -24,27 +26,45 @@ GOOD = (packaged_scenario_dir() / "tee_run_90mm.yaml").read_text()
 @pytest.mark.parametrize(
     ("mutation", "message"),
     [
-        ({"fidelity": "medium"}, r"key 'fidelity': got 'medium'; allowed: \('full', 'fast'\)"),
+        ({"fidelity": "medium"}, r"fidelity = 'medium': unknown; allowed: full, fast$"),
+        ({"seeds": [-1]}, r"seeds\[0\] = -1: out of range; allowed: an integer 0 to 2\*\*63 - 1$"),
+        ({"criteria": {"max_jamz": 0}}, r"criteria.max_jamz = 0: unknown criterion; allowed: "),
+        ({"criteria": {"max_jams": -1}}, r"criteria.max_jams = -1: out of range; allowed: an "),
+        ({"criteria": {"max_jams": True}}, r"criteria.max_jams = True: not an integer; allowed"),
+        ({"criteria": {"success": 1}}, r"criteria.success = 1: not a boolean; allowed: true"),
         (
-            {"seeds": [-1]},
-            r"key 'seeds': got \[-1\]; allowed: a non-empty list of ints in \[0, 2\*\*63\)",
+            {"criteria": {"max_detection_error": {"angle": 5}}},
+            r"criteria.max_detection_error.angle = 5: unknown field; allowed: angle_deg, ",
         ),
-        ({"criteria": {"max_jamz": 0}}, r"key 'criteria.max_jamz': unknown criterion"),
-        ({"criteria": {"max_jams": -1}}, r"key 'criteria.max_jams': got -1; allowed: int >= 0"),
-        ({"sensor": {"preset": "velodyne"}}, r"key 'sensor.preset': got 'velodyne'; allowed:"),
-        ({"sensor": {"overrides": {"range": 3}}}, r"key 'sensor.overrides.range': unknown field"),
-        ({"network": {"layout": "spiral"}}, r"key 'network.layout': got 'spiral'"),
-        ({"network": {}}, r"key 'network': give exactly one of"),
-        ({"goal": [1, 2]}, r"key 'goal': got \[1, 2\]; allowed: three finite numbers"),
-        ({"agent": "genius"}, r"key 'agent': got 'genius'; allowed:"),
-        ({"extra": 1}, r"key 'extra': unknown key; allowed:"),
+        ({"sensor": {"preset": "velodyne"}}, r"sensor.preset = 'velodyne': unknown; allowed:"),
+        ({"sensor": {"overrides": {"range": 3}}}, r"sensor.overrides.range = 3: unknown key"),
+        (
+            {"sensor": {"misalignment": {"offset": [0, "a", 0]}}},
+            r"sensor.misalignment.offset\[1\] = 'a': not a number; allowed: a finite number",
+        ),
+        ({"network": {"layout": "spiral"}}, r"network.layout = 'spiral': unknown; allowed: "),
+        ({"network": {}}, r"network = \{\}: 0 given; allowed: exactly one of layout, "),
+        (
+            {"network": {"generator": {}, "seed": -2}},
+            r"network.seed = -2: out of range; allowed: an integer 0 to",
+        ),
+        ({"goal": [1, 2]}, r"goal = \[1, 2\]: not such a list; allowed: a list of 3 numbers"),
+        ({"goal": {"way": 1}}, r"goal.distance = None: missing; allowed:"),
+        ({"agent": "genius"}, r"agent = 'genius': unknown; allowed: goal_greedy, "),
+        ({"extra": 1}, r"extra = 1: unknown key; allowed: agent, auto_single, "),
+        ({"timeout_s": 0}, r"timeout_s = 0: out of range; allowed: above 0 to 86400 \(s\)$"),
+        ({"detect": {}}, r"detect = \{\}: not allowed here; allowed: only with mode: detect$"),
     ],
 )
 def test_errors_name_file_key_and_allowed(mutation: dict, message: str) -> None:
     data = yaml.safe_load(GOOD)
     data.update(mutation)
-    with pytest.raises(ScenarioError, match=r"^my_file.yaml: " + message):
+    with pytest.raises(ScenarioFieldError, match=r"^my_file.yaml: " + message) as info:
         parse_scenario(data, "my_file.yaml")
+    # one error type and format for every checked field: the file, the field path, the value
+    assert isinstance(info.value, ArgumentError) and isinstance(info.value, ScenarioError)
+    assert info.value.where == "my_file.yaml"
+    assert str(info.value).startswith(f"my_file.yaml: {info.value.field} = ")
 
 
 def test_yaml_syntax_error_names_line(tmp_path: Path) -> None:

@@ -35,7 +35,7 @@ class RecordVideo(_GymRecordVideo):
     def _capture_frame(self) -> None:
         base = self.env.unwrapped
         if self.env.render_mode == "rgb_array" and getattr(base, "collect_frames", False):
-            frames = base.take_frames()
+            frames = base.take_frames()  # type: ignore[attr-defined]  # DecisionEnv's, checked above
         elif self.env.render_mode == "rgb_array_list":
             frames = self.env.render()
         else:
