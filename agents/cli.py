@@ -386,6 +386,8 @@ def _eval(args: argparse.Namespace) -> int:
             args.episodes,
             env_kwargs=kwargs,
             on_episode=lambda done, total: progress.update(task, completed=done),
+            jobs=args.jobs,
+            backend=args.backend,
         )
     _print(json.dumps(_rounded(result.to_dict()), indent=2))
     if args.json:
@@ -590,6 +592,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="NetworkConfig as JSON (default: the training distribution)",
     )
     ev.add_argument("--json", default=None, help="write the result (full precision) here")
+    ev.add_argument(
+        "--jobs", type=_int_at_least(1), default=1, help="episodes run in parallel (default 1)"
+    )
+    ev.add_argument(
+        "--backend",
+        default="process",
+        choices=("process", "ray"),
+        help="parallel workers: local processes or Ray tasks (with --jobs > 1)",
+    )
     ev.set_defaults(func=_eval)
 
     dr = sub.add_parser("drive", help="operator console: you choose, the robot acts")

@@ -70,7 +70,8 @@ class SequentialNetworks(gym.Wrapper):
         return self.env.reset(seed=episode_seed, options={**(options or {}), "network": network})
 
     def action_masks(self) -> np.ndarray:
-        return self.env.unwrapped.action_masks()
+        base: Any = self.env.unwrapped
+        return np.asarray(base.action_masks())
 
 
 class PolicyAgent:
@@ -138,16 +139,13 @@ def _summarise(agent: str, infos: list[dict[str, Any]], wall: float) -> EvalResu
     )
 
 
-def evaluate(
-    agent: str,
-    n_episodes: int = 200,
-    env_id: str = "pipenav/PipeNav-v0",
-    env_kwargs: dict[str, Any] | None = None,
-    pool_seed: int = EVAL_POOL_SEED,
-    on_episode: Callable[[int, int], None] | None = None,
-) -> EvalResult:
-    """Run ``agent`` (a scripted name or a model .zip path: MaskablePPO or plain PPO) on
-    ``n_episodes`` held-out networks; ``on_episode(done, n_episodes)`` after each episode."""
+#: Parallel evaluation backends: worker processes of this machine, or Ray tasks.
+BACKENDS = ("process", "ray")
+
+
+def _env_setup(env_kwargs: dict[str, Any] | None) -> tuple[NetworkConfig, dict[str, Any]]:
+    """The network config and the remaining env arguments of an evaluation (the held-out
+    pool replaces any pool the arguments name)."""
     kwargs = dict(env_kwargs or {})
     kwargs.pop("network_pool", None)
     kwargs.pop("pool_seed", None)
@@ -155,6 +153,46 @@ def evaluate(
     cfg = (
         NetworkConfig.from_dict(config) if isinstance(config, dict) else (config or NetworkConfig())
     )
+    return cfg, kwargs
+
+
+def _check_agent(agent: str) -> None:
+    if agent in SCRIPTED_AGENTS or (str(agent).endswith(".zip") and Path(agent).exists()):
+        return
+    raise ValueError(
+        f"agent {agent!r} is neither a scripted agent {sorted(SCRIPTED_AGENTS)} "
+        "nor an existing model .zip"
+    )
+
+
+def evaluate(
+    agent: str,
+    n_episodes: int = 200,
+    env_id: str = "pipenav/PipeNav-v0",
+    env_kwargs: dict[str, Any] | None = None,
+    pool_seed: int = EVAL_POOL_SEED,
+    on_episode: Callable[[int, int], None] | None = None,
+    jobs: int = 1,
+    backend: str = "process",
+) -> EvalResult:
+    """Run ``agent`` (a scripted name or a model .zip path: MaskablePPO or plain PPO) on
+    ``n_episodes`` held-out networks; ``on_episode(done, n_episodes)`` after each episode.
+
+    ``jobs`` > 1 runs the episodes in that many worker processes (``backend`` ``"process"``)
+    or Ray tasks (``"ray"``): episode ``i`` is still network ``i`` with seed ``pool_seed + i``,
+    so the figures are those of ``jobs=1`` (the wall time aside)."""
+    _check_agent(agent)
+    if not (isinstance(jobs, int) and not isinstance(jobs, bool) and jobs >= 1):
+        raise ValueError(f"evaluate: jobs = {jobs!r}: not allowed; allowed: an integer >= 1")
+    if backend not in BACKENDS:
+        raise ValueError(f"evaluate: backend = {backend!r}: not allowed; allowed: {BACKENDS}")
+    if jobs > 1 and n_episodes > 1:
+        t0 = time.perf_counter()
+        infos = _evaluate_parallel(
+            agent, n_episodes, env_id, env_kwargs, pool_seed, on_episode, jobs, backend
+        )
+        return _summarise(agent, infos, time.perf_counter() - t0)
+    cfg, kwargs = _env_setup(env_kwargs)
     networks = held_out_networks(cfg, n_episodes, pool_seed)
     env = SequentialNetworks(gym.make(env_id, network_config=cfg, **kwargs), networks, pool_seed)
     t0 = time.perf_counter()
@@ -171,13 +209,8 @@ def evaluate(
             infos.append(info)
             if on_episode:
                 on_episode(len(infos), n_episodes)
-    elif str(agent).endswith(".zip") and Path(agent).exists():
-        infos = _evaluate_policy(agent, env, n_episodes, on_episode)
     else:
-        raise ValueError(
-            f"agent {agent!r} is neither a scripted agent {sorted(SCRIPTED_AGENTS)} "
-            "nor an existing model .zip"
-        )
+        infos = _evaluate_policy(agent, env, n_episodes, on_episode)
     env.close()
     return _summarise(agent, infos, time.perf_counter() - t0)
 
@@ -213,13 +246,16 @@ def _evaluate_policy(
     torch.set_num_threads(1)
     if is_maskable_model(path):
         from sb3_contrib import MaskablePPO
-        from sb3_contrib.common.maskable.evaluation import evaluate_policy
+        from sb3_contrib.common.maskable.evaluation import evaluate_policy as masked_evaluation
 
+        evaluate_policy: Callable[..., Any] = masked_evaluation
         model: Any = MaskablePPO.load(str(path), device="cpu")
         masking: dict[str, Any] = {"use_masking": True}
     else:
         from stable_baselines3 import PPO
-        from stable_baselines3.common.evaluation import evaluate_policy  # type: ignore[no-redef]
+        from stable_baselines3.common.evaluation import evaluate_policy as plain_evaluation
+
+        evaluate_policy = plain_evaluation
 
         model = PPO.load(str(path), device="cpu")
         masking = {}
@@ -242,3 +278,117 @@ def _evaluate_policy(
         **masking,
     )
     return finals[:n_episodes]
+
+
+# ------------------------------------------------------------------ parallel evaluation
+#: Per worker process: (agent, env id, env arguments) -> (env, actor), reused across episodes.
+_WORKER_CACHE: dict[str, tuple[gym.Env, Any]] = {}
+
+
+class _PlainPolicyAgent:
+    """A plain SB3 PPO policy acting without masks (as ``evaluate_policy`` runs it)."""
+
+    def __init__(self, path: str) -> None:
+        import torch
+        from stable_baselines3 import PPO
+
+        torch.set_num_threads(1)
+        self.model = PPO.load(str(path), device="cpu")
+
+    def reset(self) -> None:
+        pass
+
+    def act(self, observation: dict, info: dict[str, Any]) -> int:
+        del info
+        action, _ = self.model.predict(observation, deterministic=True)
+        return int(action)
+
+
+def _worker_env(agent: str, env_id: str, env_kwargs: dict[str, Any] | None) -> tuple[gym.Env, Any]:
+    key = repr((agent, env_id, sorted((env_kwargs or {}).items(), key=lambda kv: kv[0])))
+    hit = _WORKER_CACHE.get(key)
+    if hit is None:
+        for env, _ in _WORKER_CACHE.values():
+            env.close()
+        _WORKER_CACHE.clear()
+        cfg, kwargs = _env_setup(env_kwargs)
+        env = gym.make(env_id, network_config=cfg, **kwargs)
+        actor: Any
+        if agent in SCRIPTED_AGENTS:
+            actor = make_agent(agent, env)
+        elif is_maskable_model(agent):
+            actor = PolicyAgent(agent, env)
+        else:
+            actor = _PlainPolicyAgent(agent)
+        hit = _WORKER_CACHE[key] = (env, actor)
+    return hit
+
+
+def run_held_out_episode(
+    agent: str,
+    index: int,
+    env_id: str = "pipenav/PipeNav-v0",
+    env_kwargs: dict[str, Any] | None = None,
+    pool_seed: int = EVAL_POOL_SEED,
+) -> dict[str, Any]:
+    """Held-out episode ``index`` (network ``index`` of the pool, seed ``pool_seed + index``)
+    of ``agent``; its final info (the worker's env and agent are reused between calls)."""
+    env, actor = _worker_env(agent, env_id, env_kwargs)
+    cfg, _ = _env_setup(env_kwargs)
+    network = pool_network(cfg, pool_seed, index)
+    obs, info = env.reset(seed=pool_seed + index, options={"network": network})
+    actor.reset()
+    done = False
+    while not done:
+        obs, _, term, trunc, info = env.step(actor.act(obs, info))
+        done = term or trunc
+    return {k: v for k, v in info.items() if k != "action_mask"}
+
+
+def _evaluate_parallel(
+    agent: str,
+    n_episodes: int,
+    env_id: str,
+    env_kwargs: dict[str, Any] | None,
+    pool_seed: int,
+    on_episode: Callable[[int, int], None] | None,
+    jobs: int,
+    backend: str,
+) -> list[dict[str, Any]]:
+    """Final infos of episodes 0..n-1 run by ``jobs`` workers, in episode order; progress
+    reported as episodes finish."""
+    args = [(agent, i, env_id, env_kwargs, pool_seed) for i in range(n_episodes)]
+    if backend == "ray":
+        return _evaluate_ray(args, on_episode, jobs)
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    infos: dict[int, dict[str, Any]] = {}
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=min(jobs, n_episodes), mp_context=context) as pool:
+        futures = {pool.submit(run_held_out_episode, *a): a[1] for a in args}
+        for future in as_completed(futures):
+            infos[futures[future]] = future.result()
+            if on_episode:
+                on_episode(len(infos), n_episodes)
+    return [infos[i] for i in range(n_episodes)]
+
+
+def _evaluate_ray(
+    args: list[tuple[Any, ...]], on_episode: Callable[[int, int], None] | None, jobs: int
+) -> list[dict[str, Any]]:
+    """:func:`_evaluate_parallel` on Ray (a local cluster of ``jobs`` CPUs unless one runs)."""
+    import ray
+
+    if not ray.is_initialized():
+        ray.init(num_cpus=jobs, include_dashboard=False, log_to_driver=False)
+    task = ray.remote(num_cpus=1)(run_held_out_episode)
+    pending = {task.remote(*a): a[1] for a in args}
+    infos: dict[int, dict[str, Any]] = {}
+    while pending:
+        ready, _ = ray.wait(list(pending), num_returns=1)
+        for ref in ready:
+            infos[pending.pop(ref)] = ray.get(ref)
+            if on_episode:
+                on_episode(len(infos), len(args))
+    return [infos[i] for i in range(len(args))]

@@ -47,7 +47,7 @@ NETWORK_CONFIG = {"n_fittings": 6, "planar": False, "allow_loops": True}
 
 def run_episode(env: gym.Env, network: Any, seed: int) -> dict[str, Any]:
     """One RoutePlanner episode on ``network``: outcome, timing and the decisions' errors."""
-    base = env.unwrapped
+    base: Any = env.unwrapped
     agent = make_agent("route_planner", env)
     t0 = time.perf_counter()
     obs, info = env.reset(seed=seed, options={"network": network})

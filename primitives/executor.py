@@ -1,6 +1,10 @@
 """The executor: runs primitive sequences on the MuJoCo robot at a fixed control rate.
 
-It owns the robot's drive state (see the drive model in :mod:`pipe_env.robot`):
+It owns the robot's drive state (see the drive model in :mod:`pipe_env.robot`), held in named
+parts: :class:`~primitives.command.DriveCommand` (``Executor.command``: drive target, commanded
+heading, steering, roll, bends), :class:`~primitives.vclamp.VClamp` (``Executor.vclamp``: the
+clamping V's angle and side), :class:`~primitives.path.DrivenPath` (``Executor.path``) and
+:class:`~primitives.telemetry.Telemetry` (``Executor.telemetry``: the current run's rows):
 
 - the drive target of the front module, moved every control tick (``CONTROL_DT``) forward along
   the front's heading, turned by the steering bend, and re-anchored to where the walls let the
@@ -50,6 +54,9 @@ from pipe_env.lidar import LidarSpec, RotatingLidar
 from pipe_env.network import PipeNetwork
 from pipe_env.robot import Robot, RobotConfig, quat_of
 from pipe_env.world import CONTACT_PAIR_POOL, NearContacts, PipeWorld, build_world
+from primitives.command import ANCHOR_POS, ANCHOR_ROT, ANCHOR_ROT_STRAIGHT, DriveCommand
+from primitives.path import DrivenPath
+from primitives.rotations import orthonormal, rx, rz
 from primitives.sequences import Sequence
 from primitives.steps import (
     Bend,
@@ -65,16 +72,14 @@ from primitives.steps import (
     Stop,
     Unclamp,
 )
+from primitives.telemetry import Telemetry
+from primitives.vclamp import CLAMP_SIDE, VClamp
+
+#: Re-exported: the drive command's dead bands and the clamping side.
+__all__ = ["ANCHOR_POS", "ANCHOR_ROT", "ANCHOR_ROT_STRAIGHT", "CLAMP_SIDE", "Executor", "Outcome"]
 
 #: Control period, s (50 Hz).
 CONTROL_DT = 0.02
-#: The drive target follows the front module's lateral offset beyond this, m.
-ANCHOR_POS = 0.003
-#: The drive target follows the front module's heading beyond this, rad.
-ANCHOR_ROT = math.radians(8.0)
-#: Driving straight (no bend set), the drive target follows the front's heading beyond this,
-#: rad: with no steering, the walls set the heading.
-ANCHOR_ROT_STRAIGHT = math.radians(1.0)
 #: V folding/straightening rate, rad/s.
 CLAMP_RATE = math.radians(60.0)
 #: Slow folding rate near the expected wall, rad/s.
@@ -84,8 +89,6 @@ CLAMP_RATE_SLOW = math.radians(12.0)
 CLAMP_SEARCH = 0.008
 #: Once touching, the V is held at the touching diameter plus this, m (the clamping preload).
 CLAMP_PRELOAD = 0.001
-#: The clamping V folds towards -z of the path frame (side 3, see ``_V_SIDES``).
-CLAMP_SIDE = 3
 #: Centring probes at most this many times (a robot against a wall needs two).
 CENTRE_ROUNDS = 3
 #: Centring moves the robot sideways by at most this per control tick, m.
@@ -187,15 +190,15 @@ class Outcome:
             self._savez(handle)
 
     def _savez(self, handle: Any) -> None:
-        np.savez(
-            handle,
-            status=np.array(self.status),
-            reason=np.array(self.reason),
-            travelled=np.array(self.travelled),
-            duration=np.array(self.duration),
-            sequence=np.array(self.sequence),
+        arrays: dict[str, Any] = {
+            "status": np.array(self.status),
+            "reason": np.array(self.reason),
+            "travelled": np.array(self.travelled),
+            "duration": np.array(self.duration),
+            "sequence": np.array(self.sequence),
             **self.telemetry,
-        )
+        }
+        np.savez(handle, **arrays)
 
     def plot(self, path: str | Path | None = None) -> Any:
         """Contact force, lag and joint angles over time (matplotlib figure; saved if ``path``)."""
@@ -279,22 +282,16 @@ class Executor:
         #: called with the simulated time (s) after every control period, or None (video frames)
         self.on_tick: Callable[[float], None] | None = None
         self.odometer = 0.0
-        n = self.config.n_modules
-        c = self.config
         # follower offsets behind the front module's centre along the path, m
-        self._offsets = c.pitch * np.arange(n)
-        self._alpha = 0.0
-        self._vside = CLAMP_SIDE
-        self._hold_heading = False
-        self._kappa = 0.0
-        #: commanded roll of the front half against the rear half, rad
-        self._rho = 0.0
-        self._bend_offsets: dict[int, float] = {}
-        self._cap = 0
-        self._hs = np.zeros(0)
-        self._hp = np.zeros((0, 3))
-        self._hr = np.zeros((0, 3, 3))
-        self._n = 0
+        self._offsets = self.config.pitch * np.arange(self.config.n_modules)
+        #: the parts of the executor's state: the drive command, the clamping V, the driven
+        #: path and the current run's telemetry
+        self.command = DriveCommand()
+        self.vclamp = VClamp(self.config)
+        self.path = DrivenPath()
+        self.telemetry = Telemetry()
+        #: distance moved by the current run (sequence or drive), m
+        self._travelled = 0.0
         #: the robot collides only with the wall pieces near it (``None``: with all of them,
         #: MuJoCo's automatic collisions; the same contacts, slower)
         self.near: NearContacts | None = None
@@ -348,120 +345,47 @@ class Executor:
         # the driven path so far: straight behind the front module
         length = self._offsets[-1] + 1.0
         s = np.linspace(-length, 0.0, int(length / 0.01) + 1)
-        self._n = 0
-        self._cap = 0
-        self._push_many(s, front[None, :] + s[:, None] * rot[:, 0][None, :], rot)
+        self.path.clear()
+        self.path.push_many(s, front[None, :] + s[:, None] * rot[:, 0][None, :], rot)
         self.odometer = 0.0
-        self._alpha = 0.0
-        self._kappa = 0.0
-        self._rho = 0.0
-        self._hold_heading = False
-        self._bend_offsets = {}
-        self._F_pos = front.copy()
-        self._F_rot = rot.copy()
-        self._H_rot = rot.copy()
+        self.vclamp.alpha = 0.0
+        self.command.reset(front, rot)
         self._set_targets()
-        for i, mid in enumerate(self.robot.mocap_ids):
-            del i
-            d.mocap_pos[mid] = d.mocap_pos[mid]
         if self.near is not None:
             mujoco.mj_kinematics(m, d)
             self.near.forget()
             self.near.update(d, force=True)
         mujoco.mj_forward(m, d)
         self._shortfall = DEFAULT_SHORTFALL
-        self._tele = _Telemetry()
+        self.telemetry = Telemetry()
         try:
             self._clamp(float(diameter))
         except _Jam:
             pass
-
-    # ------------------------------------------------------------------ path
-    def _push_many(self, s: NDArray, p: NDArray, r: NDArray) -> None:
-        k = len(s)
-        self._ensure(self._n + k)
-        self._hs[self._n : self._n + k] = s
-        self._hp[self._n : self._n + k] = p
-        self._hr[self._n : self._n + k] = r
-        self._n += k
-
-    def _ensure(self, size: int) -> None:
-        if size <= self._cap:
-            return
-        cap = max(1024, 2 * size)
-        hs, hp, hr = np.zeros(cap), np.zeros((cap, 3)), np.zeros((cap, 3, 3))
-        hs[: self._n], hp[: self._n], hr[: self._n] = (
-            self._hs[: self._n],
-            self._hp[: self._n],
-            self._hr[: self._n],
-        )
-        self._hs, self._hp, self._hr, self._cap = hs, hp, hr, cap
-
-    def _push(self, s: float, p: NDArray, r: NDArray) -> None:
-        self._ensure(self._n + 1)
-        self._hs[self._n] = s
-        self._hp[self._n] = p
-        self._hr[self._n] = r
-        self._n += 1
-
-    def _truncate(self, s: float) -> None:
-        k = int(np.searchsorted(self._hs[: self._n], s, side="right"))
-        self._n = max(k, 1)
-
-    def _path(self, s: float) -> tuple[NDArray, NDArray]:
-        """Pose (position, rotation) of the driven path at odometer ``s``."""
-        hs = self._hs[: self._n]
-        if s <= hs[0]:
-            r = self._hr[0]
-            return self._hp[0] + (s - hs[0]) * r[:, 0], r
-        if s >= hs[-1]:
-            r = self._hr[self._n - 1]
-            return self._hp[self._n - 1] + (s - hs[-1]) * r[:, 0], r
-        k = int(np.searchsorted(hs, s))
-        s0, s1 = hs[k - 1], hs[k]
-        w = (s - s0) / (s1 - s0) if s1 > s0 else 0.0
-        p = (1 - w) * self._hp[k - 1] + w * self._hp[k]
-        return p, self._hr[k if w > 0.5 else k - 1]
 
     # ------------------------------------------------------------------ targets
     def _set_targets(self) -> None:
         """Drive target of the front; follow-the-leader (and V) targets of the followers."""
         d = self.data
         ids = self.robot.mocap_ids
-        d.mocap_pos[ids[0]] = self._F_pos
-        d.mocap_quat[ids[0]] = quat_of(self._F_rot)
-        c = self.config
-        n = c.n_modules
-        j = c.middle_joint  # V apex: joint j, legs of k modules either side
-        k = c.leg_modules
-        a = self._alpha
-        shift = 2.0 * c.leg_length * (1.0 - math.cos(a))
-        n_local, fold_front, fold_rear = _V_SIDES[self._vside]
-        if a > 0.0:
-            rot_front, rot_rear = fold_front(a), fold_rear(a)
+        d.mocap_pos[ids[0]] = self.command.position
+        d.mocap_quat[ids[0]] = quat_of(self.command.rotation)
         # the driven path keeps the rear half's frames; the front half (modules before the roll
         # joint) is rolled by the commanded roll
-        roll_front = _rx(self._rho) if self._rho != 0.0 else None
-        for i in range(1, n):
-            s_i = self.odometer - self._offsets[i]
-            if a > 0.0 and j - k <= i < j + k:
-                s_top = self.odometer - (j - k - 0.5) * c.pitch  # joint at the front of the V
-                p0, r0 = self._path(s_top)
-                x, nv = r0[:, 0], r0 @ n_local  # the apex goes towards nv
-                if i < j:  # front leg, going towards the apex
-                    along = (i - (j - k) + 0.5) * c.pitch
-                    pos = p0 - along * math.cos(a) * x + along * math.sin(a) * nv
-                    rot = r0 @ rot_front
-                else:  # rear leg, coming back
-                    apex = p0 - c.leg_length * (math.cos(a) * x - math.sin(a) * nv)
-                    along = (i - j + 0.5) * c.pitch
-                    pos = apex - along * math.cos(a) * x - along * math.sin(a) * nv
-                    rot = r0 @ rot_rear
+        cmd = self.command
+        roll_front = rx(cmd.roll) if cmd.roll != 0.0 else None
+        front_half = self.config.middle_joint
+        legs = self.vclamp.leg_poses(self.path, self.odometer)
+        shift = self.vclamp.shortening
+        for i in range(1, self.config.n_modules):
+            if i in legs:
+                pos, rot = legs[i]
             else:
-                pos, rot = self._path(s_i + (shift if i >= j + k else 0.0))
-            if roll_front is not None and i < j:
+                s_i = self.odometer - self._offsets[i]
+                pos, rot = self.path.pose(s_i + (shift if self.vclamp.behind(i) else 0.0))
+            if roll_front is not None and i < front_half:
                 rot = rot @ roll_front
-            off = self._bend_offsets.get(i)
+            off = cmd.bend_offsets.get(i)
             if off:
                 rot = rot @ rotation_about([0.0, 0.0, 1.0], off)
             d.mocap_pos[ids[i]] = pos
@@ -496,9 +420,9 @@ class Executor:
             self.on_tick(self.time)
         d = self.data
         front = d.xpos[self.robot.body_ids[0]]
-        diff = self._F_pos - front
+        diff = self.command.position - front
         lag = float(diff @ lag_axis) if lag_axis is not None else float(np.linalg.norm(diff))
-        self._tele.record(self, lag)
+        self.telemetry.record(self.time, self.data, self.robot, lag)
         if not np.all(np.isfinite(d.qpos)):
             raise _Jam("the simulation diverged")
         if lag > self.config.jam_lag:
@@ -518,22 +442,7 @@ class Executor:
     def _anchor(self) -> None:
         """Let the drive target follow the walls' guidance beyond the dead bands."""
         p, r = self._front_pose()
-        x = r[:, 0]
-        diff = self._F_pos - p
-        axial = float(diff @ x)
-        lateral = diff - axial * x
-        n = float(np.linalg.norm(lateral))
-        if n > ANCHOR_POS:
-            lateral *= ANCHOR_POS / n
-        self._F_pos = p + axial * x + lateral
-        # rotation error from actual to commanded; coming out of a turn the commanded heading
-        # is the turn's (open loop), else the walls set it
-        hold = self._hold_heading and self._kappa == 0.0
-        want = self._H_rot if hold else self._F_rot
-        rel = r.T @ want
-        angle, axis = _log(rel)
-        limit = ANCHOR_ROT if self._kappa != 0.0 or hold else ANCHOR_ROT_STRAIGHT
-        self._F_rot = want if angle <= limit else r @ rotation_about(axis, limit)
+        self.command.anchor(p, r)
 
     # ------------------------------------------------------------------ primitives
     def _drive(self, step: Drive) -> None:
@@ -544,11 +453,12 @@ class Executor:
         if axis is not None:
             self._glide(step.distance, step.speed, axis)
             return
-        self._truncate(self.odometer)
+        self.path.truncate(self.odometer)
         p, r = self._front_pose()
         start, heading = p.copy(), r[:, 0].copy()
-        straight = self._kappa == 0.0 and self._alpha > 0.0 and not self._hold_heading
-        self._F_pos, self._F_rot = p.copy(), _orthonormal(self._F_rot)
+        cmd = self.command
+        straight = cmd.curvature == 0.0 and self.vclamp.alpha > 0.0 and not cmd.hold_heading
+        self.command.position, self.command.rotation = p.copy(), orthonormal(self.command.rotation)
         remaining = step.distance
         ds_tick = step.speed * CONTROL_DT
         complying = False
@@ -556,32 +466,32 @@ class Executor:
             ds = min(ds_tick, remaining)
             remaining -= ds
             self._anchor()
-            self._F_pos = self._F_pos + ds * self._F_rot[:, 0]
-            if self._kappa != 0.0:
-                turn = _rz(self._kappa * ds)
-                self._F_rot = self._F_rot @ turn
-                self._H_rot = self._H_rot @ turn
+            self.command.position = self.command.position + ds * self.command.rotation[:, 0]
+            if self.command.curvature != 0.0:
+                turn = rz(self.command.curvature * ds)
+                self.command.rotation = self.command.rotation @ turn
+                self.command.heading = self.command.heading @ turn
             self.odometer += ds
             self._travelled += ds
-            rear_frame = self._F_rot @ _rx(-self._rho) if self._rho != 0.0 else self._F_rot
-            self._push(self.odometer, self._F_pos.copy(), rear_frame.copy())
+            rear_frame = cmd.rotation @ rx(-cmd.roll) if cmd.roll != 0.0 else cmd.rotation
+            self.path.push(self.odometer, self.command.position.copy(), rear_frame.copy())
             self._set_targets()
             try:
-                self._tick(self._F_rot[:, 0])
-                if step.comply and self._kappa == 0.0 and (complying or self._hold_heading):
+                self._tick(self.command.rotation[:, 0])
+                if step.comply and cmd.curvature == 0.0 and (complying or cmd.hold_heading):
                     complying = complying or self._steer_error() > self.config.jam_hold
                     if complying:  # the bend goes on: the walls set the heading
-                        self._hold_heading = False
-                        self._H_rot = self._front_pose()[1]
-                if self._kappa != 0.0 or self._hold_heading:
+                        self.command.hold_heading = False
+                        self.command.heading = self._front_pose()[1]
+                if self.command.curvature != 0.0 or self.command.hold_heading:
                     self._check_steer()
             except _Jam:
                 # the robot is where it stalled: the driven path ends there
                 p, _ = self._front_pose()
-                lag = float((self._F_pos - p) @ self._F_rot[:, 0])
+                lag = float((self.command.position - p) @ self.command.rotation[:, 0])
                 self.odometer -= max(lag, 0.0)
                 self._travelled -= max(lag, 0.0)
-                self._truncate(self.odometer)
+                self.path.truncate(self.odometer)
                 raise
         self._settle(SETTLE_TICKS)
         if straight and step.distance >= 0.01:
@@ -603,13 +513,13 @@ class Executor:
             remaining -= ds
             self.odometer -= ds
             self._travelled += ds
-            self._F_pos, self._F_rot = self._path(self.odometer)
-            self._F_pos = self._F_pos.copy()
-            if self._rho != 0.0:
-                self._F_rot = self._F_rot @ _rx(self._rho)
+            self.command.position, self.command.rotation = self.path.pose(self.odometer)
+            self.command.position = self.command.position.copy()
+            if self.command.roll != 0.0:
+                self.command.rotation = self.command.rotation @ rx(self.command.roll)
             self._set_targets()
             self._tick(None)
-        self._H_rot = self._F_rot.copy()
+        self.command.heading = self.command.rotation.copy()
         self._settle(SETTLE_TICKS)
 
     # ------------------------------------------------------------ kinematic motion
@@ -631,12 +541,12 @@ class Executor:
         if self.physics != "contact" or not math.isfinite(distance):
             return None
         if (
-            self._alpha <= 0.0
-            or self._vside != CLAMP_SIDE
-            or self._kappa != 0.0
-            or self._rho != 0.0
-            or self._hold_heading
-            or any(v != 0.0 for v in self._bend_offsets.values())
+            self.vclamp.alpha <= 0.0
+            or self.vclamp.side != CLAMP_SIDE
+            or self.command.curvature != 0.0
+            or self.command.roll != 0.0
+            or self.command.hold_heading
+            or self.command.bent
         ):
             return None
         from pipe_env.routing import edge_length, leg_length, locate
@@ -679,19 +589,20 @@ class Executor:
         if distance > 0:
             # the robot advances what a physical drive of this length does (see ``_drive``)
             move = (distance - min(self._shortfall, 0.5 * distance)) * axis
-            self._truncate(self.odometer)
-            self._F_rot = _orthonormal(self._F_rot)
+            self.path.truncate(self.odometer)
+            self.command.rotation = orthonormal(self.command.rotation)
             s = self.odometer + distance * np.arange(1, n_ticks + 1) / n_ticks
-            p = self._F_pos[None, :] + ((s - self.odometer) / distance)[:, None] * move[None, :]
-            self._push_many(s, p, np.broadcast_to(self._F_rot, (n_ticks, 3, 3)))
-            self._F_pos = self._F_pos + move
+            frac = (s - self.odometer) / distance
+            p = self.command.position[None, :] + frac[:, None] * move[None, :]
+            self.path.push_many(s, p, np.broadcast_to(self.command.rotation, (n_ticks, 3, 3)))
+            self.command.position = self.command.position + move
             self.odometer += distance
         else:
             self.odometer += distance
-            target, rot = self._path(self.odometer)
-            move = target - self._F_pos
-            self._F_pos, self._F_rot = target.copy(), rot.copy()
-            self._H_rot = self._F_rot.copy()
+            target, rot = self.path.pose(self.odometer)
+            move = target - self.command.position
+            self.command.position, self.command.rotation = target.copy(), rot.copy()
+            self.command.heading = self.command.rotation.copy()
         self._travelled += step
         d.qpos[q : q + 3] += move
         self._set_targets()
@@ -702,7 +613,7 @@ class Executor:
         self.kinematic_ticks += n_ticks
         if self.on_tick is not None:  # (one frame of the glide for videos)
             self.on_tick(self.time)
-        self._tele.record(self, 0.0)
+        self.telemetry.record(self.time, self.data, self.robot, 0.0)
         self._settle(SETTLE_TICKS)
 
     def _settle(self, ticks: int) -> None:
@@ -716,10 +627,10 @@ class Executor:
         n_ticks = max(1, int(math.ceil(abs(total) / (step.rate * CONTROL_DT))))
         inc = total / n_ticks
         for _ in range(n_ticks):
-            rx = _rx(inc)
-            self._F_rot = self._F_rot @ rx
-            self._H_rot = self._H_rot @ rx
-            self._rho += inc
+            turn = rx(inc)
+            self.command.rotation = self.command.rotation @ turn
+            self.command.heading = self.command.heading @ turn
+            self.command.roll += inc
             self._set_targets()
             self._tick(None)
         self._settle(3)
@@ -727,20 +638,20 @@ class Executor:
     def _roll_home(self) -> None:
         """Roll the front half back in line with the rear half (the V needs both halves in
         one plane), e.g. after a turn that jammed while rolled."""
-        if abs(self._rho) > 1e-9:
-            self._roll(Roll(-self._rho))
-            self._rho = 0.0
+        if abs(self.command.roll) > 1e-9:
+            self._roll(Roll(-self.command.roll))
+            self.command.roll = 0.0
 
     def _bend(self, step: Bend) -> None:
         c = self.config
         if step.joint >= c.n_modules:
             raise ValueError(f"Bend.joint = {step.joint} is invalid; allowed: 1..{c.n_modules - 1}")
         if step.joint == 1:
-            if self._kappa != 0.0 and step.angle == 0.0:
-                self._hold_heading = True  # out of the arc: drive on in the turn's heading
-            self._kappa = 2.0 * math.sin(0.5 * step.angle) / c.pitch
+            if self.command.curvature != 0.0 and step.angle == 0.0:
+                self.command.hold_heading = True  # out of the arc: drive on in the turn's heading
+            self.command.curvature = 2.0 * math.sin(0.5 * step.angle) / c.pitch
         else:
-            self._bend_offsets[step.joint] = step.angle
+            self.command.bend_offsets[step.joint] = step.angle
             self._set_targets()
             self._settle(5)
 
@@ -750,14 +661,14 @@ class Executor:
         ``CLAMP_PRELOAD`` (force control: the preload, not the commanded diameter, sets the
         force, so a wrong commanded diameter does not crush the wall)."""
         c = self.config
-        self._hold_heading = False
+        self.command.hold_heading = False
         self._roll_home()
-        if self._vside != CLAMP_SIDE:
+        if self.vclamp.side != CLAMP_SIDE:
             self._unclamp()
-            self._vside = CLAMP_SIDE
+            self.vclamp.side = CLAMP_SIDE
         a_goal = c.clamp_angle(diameter + CLAMP_SEARCH)
         a_fast = c.clamp_angle(diameter - CLAMP_SEARCH)
-        self._alpha = min(self._alpha, a_fast)
+        self.vclamp.alpha = min(self.vclamp.alpha, a_fast)
         touched = False
         for _ in range(400):
             self._set_targets()
@@ -765,55 +676,57 @@ class Executor:
             if self.robot.apex_force(CLAMP_SIDE) >= c.clamp_force:
                 touched = True
                 break
-            if self._alpha >= a_goal:
+            if self.vclamp.alpha >= a_goal:
                 break
-            rate = CLAMP_RATE if self._alpha < a_fast else CLAMP_RATE_SLOW
-            self._alpha = min(self._alpha + rate * CONTROL_DT, a_goal)
+            rate = CLAMP_RATE if self.vclamp.alpha < a_fast else CLAMP_RATE_SLOW
+            self.vclamp.alpha = min(self.vclamp.alpha + rate * CONTROL_DT, a_goal)
         if touched:
-            self._alpha = c.clamp_angle(self.robot.clamped_diameter() + CLAMP_PRELOAD)
+            self.vclamp.alpha = c.clamp_angle(self.robot.clamped_diameter() + CLAMP_PRELOAD)
             self._set_targets()
         self._settle(8)
 
     def _unclamp(self) -> None:
         rate = CLAMP_RATE * CONTROL_DT
-        while self._alpha > 0:
-            self._alpha = max(0.0, self._alpha - rate)
+        while self.vclamp.alpha > 0:
+            self.vclamp.alpha = max(0.0, self.vclamp.alpha - rate)
             self._set_targets()
             self._tick(None)
         self._settle(2)
 
     def _probe(self, side: int, rng: np.random.Generator) -> float | None:
-        """Fold the V towards ``side`` (see :data:`_V_SIDES`) until its apex touches the wall;
-        returns the encoders' distance from the end modules' line to that wall (m), or None
-        if the V folded fully without touching; the V is straightened again."""
+        """Fold the V towards ``side`` (see :data:`primitives.vclamp.V_SIDES`) until its apex
+        touches the wall; returns the encoders' distance from the end modules' line to that
+        wall (m), or None if the V folded fully without touching; the V is straightened
+        again."""
         c = self.config
         self._unclamp()
-        self._vside = side
+        self.vclamp.side = side
         a_max = math.radians(75.0)
         h = None
-        while self._alpha < a_max:
-            self._alpha = min(self._alpha + CLAMP_RATE * CONTROL_DT, a_max)
+        while self.vclamp.alpha < a_max:
+            self.vclamp.alpha = min(self.vclamp.alpha + CLAMP_RATE * CONTROL_DT, a_max)
             self._set_targets()
             self._tick(None)
             if self.robot.apex_force(side) >= c.clamp_force:
                 h = 0.5 * self.robot.clamped_diameter(rng)
                 break
         self._unclamp()
-        self._vside = CLAMP_SIDE
+        self.vclamp.side = CLAMP_SIDE
         return h
 
     def _centre(self, step: Centre, rng: np.random.Generator) -> None:
         """Probe both walls in two planes and move the robot onto the pipe axis; again if the
         robot was so far off that a probe found the wall already touching (saturated)."""
         c = self.config
-        self._hold_heading = False
+        self.command.hold_heading = False
         self._roll_home()
         for _ in range(CENTRE_ROUNDS):
-            h = [self._probe(side, rng) for side in range(4)]
-            if any(v is None for v in h):
+            probes = [self._probe(side, rng) for side in range(4)]
+            h = [float(v) for v in probes if v is not None]
+            if len(h) < len(probes):
                 return  # an opening (a junction, a wider pipe): no axis to centre on
-            hy0, hz0, hy1, hz1 = (float(v) for v in h)  # type: ignore[arg-type]
-            _, r = self._path(self.odometer)
+            hy0, hz0, hy1, hz1 = h
+            _, r = self.path.pose(self.odometer)
             # the ends' line sits off the axis by e; folding towards n the apex meets the wall
             # at R - e.n: side 0 (+y) / 2 (-y) and 1 (+z) / 3 (-z)
             offset = 0.5 * (hy1 - hy0) * r[:, 1] + 0.5 * (hz1 - hz0) * r[:, 2]
@@ -821,7 +734,7 @@ class Executor:
             if dist < step.tolerance:
                 return
             self._shift(-offset / dist * min(dist, step.max_shift))
-            saturated = min(h) <= 0.5 * c.width + 0.002  # type: ignore[type-var]
+            saturated = min(h) <= 0.5 * c.width + 0.002
             if not saturated and dist < 0.003:
                 return
 
@@ -829,15 +742,15 @@ class Executor:
         """Translate the robot (its drive target and the driven path under it) by ``move`` m,
         gradually; the path behind the robot blends back to where it was."""
         c = self.config
-        hs = self._hs[: self._n]
+        hs = self.path.s
         rear = self.odometer - self._offsets[-1] - 0.5 * c.pitch
         w = np.clip((hs - (rear - SHIFT_BLEND)) / SHIFT_BLEND, 0.0, 1.0)
         sel = np.nonzero(w > 0)[0]
         n_ticks = max(1, int(math.ceil(float(np.linalg.norm(move)) / SHIFT_STEP)))
         inc = move / n_ticks
         for _ in range(n_ticks):
-            self._hp[sel] += w[sel, None] * inc[None, :]
-            self._F_pos = self._F_pos + inc
+            self.path.shift(sel, w[sel], inc)
+            self.command.position = self.command.position + inc
             self._set_targets()
             self._tick(None)
         self._settle(5)
@@ -845,12 +758,12 @@ class Executor:
     def _steer_error(self) -> float:
         """Angle between the front's heading and the commanded heading, rad."""
         _, r = self._front_pose()
-        return math.acos(float(np.clip(r[:, 0] @ self._H_rot[:, 0], -1.0, 1.0)))
+        return math.acos(float(np.clip(r[:, 0] @ self.command.heading[:, 0], -1.0, 1.0)))
 
     def _check_steer(self) -> None:
         """Steering: jam if the walls force the front too far off its commanded heading."""
         err = self._steer_error()
-        limit = self.config.jam_steer if self._kappa != 0.0 else self.config.jam_hold
+        limit = self.config.jam_steer if self.command.curvature != 0.0 else self.config.jam_hold
         if err > limit:
             raise _Jam(
                 f"the steering stalled: the walls force the front {math.degrees(err):.0f} deg "
@@ -859,7 +772,7 @@ class Executor:
 
     def _check_heading(self, step: CheckHeading) -> None:
         _, r = self._front_pose()
-        cosang = float(np.clip(r[:, 0] @ self._H_rot[:, 0], -1.0, 1.0))
+        cosang = float(np.clip(r[:, 0] @ self.command.heading[:, 0], -1.0, 1.0))
         err = math.acos(cosang)
         if err > step.tolerance:
             raise _Jam(
@@ -889,15 +802,7 @@ class Executor:
         n = float(np.linalg.norm(d))
         if not (math.isfinite(n) and n > 1e-9):
             raise ValueError(f"direction must be a finite non-zero 3-vector, got {d.tolist()}")
-        d = d / n
-        x = self._F_rot[:, 0]
-        angle = math.acos(max(-1.0, min(1.0, float(x @ d))))
-        axis = np.cross(x, d)
-        if angle < 1e-5 or float(np.linalg.norm(axis)) < 1e-12:
-            return 0.0
-        turn = min(angle, max_angle)
-        self._F_rot = rotation_about(axis, turn) @ self._F_rot
-        return turn
+        return self.command.aim(d / n, max_angle)
 
     def state(self, rng: np.random.Generator | None = None) -> ExecutorState:
         return ExecutorState(
@@ -906,12 +811,13 @@ class Executor:
 
     # ------------------------------------------------------------------ running
     def _begin(self) -> tuple[float, float]:
-        self._tele = _Telemetry()
+        self.telemetry = Telemetry()
         self._travelled = 0.0
         return self.time, self.odometer
 
     def _outcome(self, status: str, reason: str, t0: float, name: str) -> Outcome:
-        return Outcome(status, reason, self._travelled, self.time - t0, self._tele.arrays(), name)
+        tele = self.telemetry.arrays()
+        return Outcome(status, reason, self._travelled, self.time - t0, tele, name)
 
     def run(
         self,
@@ -926,8 +832,8 @@ class Executor:
         rng = rng if rng is not None else np.random.default_rng(0)
         t0, _ = self._begin()
         p, r = self._front_pose()
-        self._H_rot = r.copy()
-        self._hold_heading = False
+        self.command.heading = r.copy()
+        self.command.hold_heading = False
         try:
             for step in sequence.steps:
                 self._do(step, on_scan, rng)
@@ -967,9 +873,9 @@ class Executor:
     def _stop_here(self) -> None:
         """After a jam: hold the targets where the robot is (it stops pushing)."""
         p, r = self._front_pose()
-        self._F_pos, self._F_rot = p, r
-        self._kappa = 0.0
-        self._hold_heading = False
+        self.command.position, self.command.rotation = p, r
+        self.command.curvature = 0.0
+        self.command.hold_heading = False
         d = self.data
         d.mocap_pos[self.robot.mocap_ids[0]] = p
         d.mocap_quat[self.robot.mocap_ids[0]] = quat_of(r)
@@ -1000,7 +906,7 @@ class Executor:
             raise ValueError(f"scan_interval = {scan_interval!r} is invalid; allowed [1 mm, 1 m]")
         rng = rng if rng is not None else np.random.default_rng(0)
         t0, odo0 = self._begin()
-        clamped = self._alpha > 0.0
+        clamped = self.vclamp.alpha > 0.0
         reference = self.robot.clamped_diameter() if clamped else 0.0
         try:
             while True:
@@ -1027,93 +933,3 @@ class Executor:
             return self._outcome("jammed", str(exc), t0, "drive_until")
         except _ScanStop:
             return self._outcome("done", "stopped by a scan", t0, "drive_until")
-
-
-class _Telemetry:
-    def __init__(self) -> None:
-        self.rows: list[tuple] = []
-
-    def record(self, ex: Executor, lag: float) -> None:
-        d = ex.data
-        b = ex.robot.body_ids[0]
-        p = d.xpos[b].copy()
-        q = d.xquat[b].copy()
-        sensor = p + ex.config.lidar_offset * d.xmat[b].reshape(3, 3)[:, 0]
-        self.rows.append(
-            (
-                ex.time,
-                sensor,
-                np.concatenate([p, q]),
-                ex.robot.contact_force(),
-                ex.robot.joint_angles(),
-                lag,
-            )
-        )
-
-    def arrays(self) -> dict[str, NDArray[np.float64]]:
-        if not self.rows:
-            return {}
-        t, s, pose, f, j, lag = zip(*self.rows)
-        return {
-            "times": np.array(t),
-            "sensor_position": np.array(s),
-            "poses": np.array(pose),
-            "contact_force": np.array(f),
-            "joint_angles": np.array(j),
-            "lag": np.array(lag),
-        }
-
-
-def _rx(a: float) -> NDArray[np.float64]:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _ry(a: float) -> NDArray[np.float64]:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def _rz(a: float) -> NDArray[np.float64]:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _log(r: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
-    """Angle (rad) and unit axis of a rotation matrix."""
-    cosang = float(np.clip(0.5 * (np.trace(r) - 1.0), -1.0, 1.0))
-    angle = math.acos(cosang)
-    v = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-    n = float(np.linalg.norm(v))
-    if n < 1e-12:
-        return angle, np.array([1.0, 0.0, 0.0])
-    return angle, v / n
-
-
-def _v_side(n_local: tuple[float, float, float]) -> tuple[NDArray, Callable, Callable]:
-    """Apex direction in the path frame and the legs' rotations (front, rear) for a V folding
-    towards it by half-angle ``a``."""
-    nl = np.array(n_local, dtype=float)
-    k = np.cross([1.0, 0.0, 0.0], nl)
-
-    def front(a: float) -> NDArray[np.float64]:
-        return rotation_about(k, -a)
-
-    def rear(a: float) -> NDArray[np.float64]:
-        return rotation_about(k, a)
-
-    return nl, front, rear
-
-
-#: The V's fold sides (0: +y, 1: +z, 2: -y, 3: -z of the path frame), as the robot's wheels.
-_V_SIDES = {
-    0: _v_side((0.0, 1.0, 0.0)),
-    1: _v_side((0.0, 0.0, 1.0)),
-    2: _v_side((0.0, -1.0, 0.0)),
-    3: (np.array([0.0, 0.0, -1.0]), lambda a: _ry(-a), lambda a: _ry(a)),
-}
-
-
-def _orthonormal(r: NDArray[np.float64]) -> NDArray[np.float64]:
-    u, _, vt = np.linalg.svd(r)
-    return u @ vt

@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import gymnasium as gym
+import pytest
 
 import agents
 from agents.evaluate import (
@@ -57,3 +58,34 @@ def test_scripted_evaluation_is_repeatable_and_sane() -> None:
     b = evaluate("route_planner", n_episodes=5)
     assert a.to_dict() | {"wall_seconds": 0} == b.to_dict() | {"wall_seconds": 0}
     assert a.episodes == 5 and a.success_rate >= 0.8 and a.decisions_per_episode >= 1.0
+
+
+def test_parallel_evaluation_gives_the_sequential_figures() -> None:
+    """Two episodes in two worker processes: the same networks and seeds as one process."""
+    sequential = evaluate("route_planner", n_episodes=2)
+    done: list[int] = []
+    parallel = evaluate(
+        "route_planner", n_episodes=2, jobs=2, on_episode=lambda d, n: done.append(d)
+    )
+    assert parallel.to_dict() | {"wall_seconds": 0} == sequential.to_dict() | {"wall_seconds": 0}
+    assert done == [1, 2]
+
+
+def test_bad_parallel_arguments_name_the_field() -> None:
+    with pytest.raises(ValueError, match="jobs = 0"):
+        evaluate("route_planner", n_episodes=2, jobs=0)
+    with pytest.raises(ValueError, match="backend = 'threads'"):
+        evaluate("route_planner", n_episodes=2, jobs=2, backend="threads")
+
+
+@pytest.mark.slow
+def test_parallel_full_fidelity_evaluation_gives_the_sequential_figures() -> None:
+    """The MuJoCo loop in two worker processes: the same outcomes as in one."""
+    kwargs = {
+        "fidelity": "full",
+        "network_config": {"n_fittings": 3, "planar": True, "allow_loops": False},
+        "max_episode_steps": 6,
+    }
+    sequential = evaluate("route_planner", n_episodes=2, env_kwargs=kwargs)
+    parallel = evaluate("route_planner", n_episodes=2, env_kwargs=kwargs, jobs=2)
+    assert parallel.to_dict() | {"wall_seconds": 0} == sequential.to_dict() | {"wall_seconds": 0}

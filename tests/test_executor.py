@@ -137,13 +137,14 @@ def test_aim_turns_the_drive_heading_by_at_most_its_limit() -> None:
     import numpy as np
 
     ex = Executor.for_network(layouts.straight(0.09, 1.0), lidar=None)
-    x0 = ex._F_rot[:, 0].copy()
+    x0 = ex.command.rotation[:, 0].copy()
     want = np.array([math.cos(0.2), math.sin(0.2), 0.0])
-    want = ex._F_rot @ want  # 11.5 deg to the left of the current heading
+    want = ex.command.rotation @ want  # 11.5 deg to the left of the current heading
     turned = ex.aim(want, max_angle=math.radians(4.0))
     assert turned == pytest.approx(math.radians(4.0))
-    assert math.degrees(math.acos(float(ex._F_rot[:, 0] @ x0))) == pytest.approx(4.0, abs=1e-6)
-    assert ex.aim(ex._F_rot[:, 0]) == 0.0
+    heading = ex.command.rotation[:, 0]
+    assert math.degrees(math.acos(float(heading @ x0))) == pytest.approx(4.0, abs=1e-6)
+    assert ex.aim(ex.command.rotation[:, 0]) == 0.0
     with pytest.raises(ValueError, match="direction"):
         ex.aim(np.zeros(3))
 

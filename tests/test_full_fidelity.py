@@ -7,7 +7,7 @@ import math
 import pytest
 
 from pipe_env import layouts
-from pipe_env.envs.plant_full import PhysicalPlant
+from pipe_env.envs.plant_full import PhysicalPlant, SweepSensing
 from pipe_env.routing import EdgePosition, edge_length
 
 
@@ -63,18 +63,13 @@ def test_the_robot_follows_the_axis_its_sweeps_measure(follow: bool, monkeypatch
     dec, _ = plant.advance(None)
     assert plant.execute(dec.options[0]).status == "done"
     errors = []
-    inner = plant._on_scan_factory
+    original = SweepSensing.__call__
 
-    def factory(goal):
-        on_scan, verdict = inner(goal)
+    def call(self, scan, state):
+        errors.append(_axis_error(plant, net))
+        return original(self, scan, state)
 
-        def wrapped(scan, state):
-            errors.append(_axis_error(plant, net))
-            return on_scan(scan, state)
-
-        return wrapped, verdict
-
-    monkeypatch.setattr(plant, "_on_scan_factory", factory)
+    monkeypatch.setattr(SweepSensing, "__call__", call)
     dec, out = plant.advance(None)
     assert out.status != "jammed" and dec is not None and dec.kind == "closure"
     worst_offset = max(e[0] for e in errors)

@@ -142,7 +142,7 @@ class Outcome:
     distance: float = 0.0
     sim_time: float = 0.0
     #: consecutive waypoints of the motion (see ``positions``)
-    path: list[EdgeState] = field(default_factory=list)
+    path: list[EdgeState | NDArray[np.float64]] = field(default_factory=list)
     note: str = ""
 
 

@@ -21,11 +21,18 @@
 With ``detector="ground_truth"`` the robot still drives and turns physically, but the options
 come from the plant drawing at the pose where a real detector would have confirmed them (the
 oracle ablation of the detection).
+
+Sensing while driving is :class:`SweepSensing` (the executor's scan callback: goal, log, axis
+following, cadence, stop/rescan verdicts) over a detector source: :class:`DetectorSource` (the
+detector with the plant's tracker) or :class:`OracleSource` (the plant drawing).
+:meth:`PhysicalPlant.close` releases the MuJoCo world; a closed plant builds it again on
+:meth:`~PhysicalPlant.reset`.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -44,6 +51,7 @@ from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
 from pipe_env.network import PipeNetwork
 from pipe_env.routing import EdgePosition, edge_length, locate
+from pipe_env.world import PipeWorld
 from primitives.steps import SequenceStatus
 
 #: Fewer valid returns than this in a sweep means the sensor cannot see the pipe ahead.
@@ -126,7 +134,7 @@ class PhysicalPlant:
         physics: str = "contact",
         sparse_interval: float = SPARSE_INTERVAL,
     ) -> None:
-        from primitives.executor import PHYSICS_MODES, Executor
+        from primitives.executor import PHYSICS_MODES
 
         if physics not in PHYSICS_MODES:
             raise ValueError(f"physics {physics!r} is unknown; allowed: {PHYSICS_MODES}")
@@ -152,19 +160,35 @@ class PhysicalPlant:
         if misalignment is not None:
             lidar_kwargs["misalignment"] = misalignment
         self.physics = physics
-        self.executor = Executor.for_network(
-            network, robot_config=robot_config, lidar=lidar, physics=physics, **lidar_kwargs
+        #: what proposes the options at every sweep: the detector or the ground-truth oracle
+        self.source: OracleSource | DetectorSource = (
+            OracleSource() if detector == Method.GROUND_TRUTH else DetectorSource(detector)
         )
-        self.world = self.executor.world
+        self._executor_args: dict[str, Any] = {
+            "robot_config": robot_config,
+            "lidar": lidar,
+            "physics": physics,
+            **lidar_kwargs,
+        }
+        self._build()
+        self.reset(np.random.default_rng(0))
+
+    def _build(self) -> None:
+        """Build the MuJoCo world with the robot (clamped at the start pose) and the LiDAR."""
+        from primitives.executor import Executor
+
+        self.executor = Executor.for_network(self.network, **self._executor_args)
+        self.world: PipeWorld | None = self.executor.world
         self.robot = self.executor.robot
         self._started = False
-        self.reset(np.random.default_rng(0))
 
     # ------------------------------------------------------------------ state
     def reset(self, rng: np.random.Generator) -> None:
         """Put the robot back at the network's start pose, clamped, with fresh logs."""
         start = self.network.start_pose
         assert start is not None
+        if self.world is None:  # closed: built again
+            self._build()
         if self._started:  # the executor placed the robot when it was built
             self.executor.place(start, float(self.network.inner_diameter_at(start.position)))
         self._started = True
@@ -178,7 +202,6 @@ class PhysicalPlant:
         self.travelled = 0.0
         self.sim_time = 0.0
         self._odometry_error = np.zeros(3)
-        self._positions: list[NDArray[np.float64]] = [self.pose().position]
         #: junctions passed: (odometer at the decision, node id, clamped diameter there, m);
         #: odometer: forward distance
         self.junctions: list[tuple[float, str, float]] = []
@@ -187,7 +210,13 @@ class PhysicalPlant:
         self._decision_diameter = self._start_diameter
 
     def pose(self) -> Pose:
-        """True sensor pose of the robot."""
+        """True sensor pose of the robot.
+
+        Raises:
+            RuntimeError: the plant is closed (:meth:`reset` builds it again).
+        """
+        if self.robot is None:
+            raise RuntimeError("PhysicalPlant: the plant is closed; reset() builds it again")
         return self.robot.sensor_pose()
 
     def odometry_pose(self) -> Pose:
@@ -306,77 +335,20 @@ class PhysicalPlant:
         ahead = self._goal_ahead(goal)
         return ahead is not None and ahead <= GOAL_TOLERANCE + 0.5 * self.scan_interval
 
-    def _on_scan_factory(self, goal: Any):
-        blind = [0]
-        rescans = [0]
-        verdict: dict[str, Any] = {"why": None, "interval": self.scan_interval}
-        t_start = self.executor.time  # the plant's clock catches up after the motion
+    def _sensing(self, goal: Any) -> SweepSensing:
+        """The scan callback of one drive (or sense in place) towards ``goal``."""
+        return SweepSensing(self, self.source, goal)
 
-        def on_scan(scan: Scan, state: Any) -> str:
-            self.last_scan = scan
-            if self.keep_image:
-                self.scan_image = scan_image(scan)
-            pose = self.pose()
-            now = self.sim_time + (state.time - t_start)
-            node, entry, truth = self._truth(pose)
-            if self._goal_reached(goal):
-                verdict["why"] = "goal"
-                return "stop"
-            verdict["interval"] = self.scan_interval
-            if self.detector == Method.GROUND_TRUTH:
-                self._follow_axis(scan, None, float(state.clamped_diameter))
-                ref = truth[0].distance if truth else math.inf
-                self._cadence(verdict, [ref], goal, blind=False)
-                kind = truth[0].kind if truth else "straight"
-                self.detection_log.append(detection_record(now, node, truth, truth, kind))
-                if ref <= self.trigger_distance + 0.5 * self.scan_interval:
-                    verdict["why"] = "confirmed"
-                    return "stop"
-                return "continue"
-            det = detection.detect(scan, float(state.clamped_diameter), method=self.detector)
-            self._follow_axis(scan, det, float(state.clamped_diameter))
-            track = self.tracker.update(det, scan.nominal_positions[-1], scan.nominal_rotations[-1])
-            self._track_state = track
-            fused = track.detection if track.confirmed else det
-            self.detection_log.append(
-                detection_record(now, node, truth, list(fused.options), fused.kind)
-            )
-            blind[0] = blind[0] + 1 if scan.n_valid < BLIND_RETURNS else 0
-            seen = [o.distance for o in det.options] + [o.distance for o in fused.options]
-            self._cadence(verdict, seen, goal, blind=blind[0] > 0)
-            if blind[0] >= BLIND_SWEEPS:
-                verdict["why"] = "blind"
-                return "stop"
-            window = self.trigger_distance + 0.5 * self.scan_interval
-            if track.confirmed and track.detection.options:
-                nearest = min(o.distance for o in track.detection.options)
-                if nearest <= window:
-                    verdict["why"] = "confirmed"
-                    return "stop"
-            # a structure seen within the trigger distance but not confirmed yet (a short run
-            # after a fitting): sweep again in place rather than drive into it unconfirmed
-            if (
-                det.options
-                and min(o.distance for o in det.options) <= window
-                and rescans[0] < CONFIRM_RESCANS
-            ):
-                rescans[0] += 1
-                return "rescan"
-            rescans[0] = 0
-            return "continue"
-
-        return on_scan, verdict
-
-    def _cadence(self, verdict: dict[str, Any], seen: list[float], goal: Any, blind: bool) -> None:
-        """Choose the next drive's length (``verdict["interval"]``): ``sparse_interval`` while
-        no structure seen (``seen``: distances ahead, m), no goal and no blind sweep lie within
-        ``SPARSE_REACH``; ``scan_interval`` otherwise."""
+    def _cadence(self, seen: list[float], goal: Any, blind: bool) -> float:
+        """The next drive's length, m: ``sparse_interval`` while no structure seen (``seen``:
+        distances ahead, m), no goal and no blind sweep lie within ``SPARSE_REACH``;
+        ``scan_interval`` otherwise."""
         if blind or any(d <= SPARSE_REACH for d in seen):
-            return
+            return self.scan_interval
         ahead = self._goal_ahead(goal)
         if ahead is not None and ahead >= -GOAL_TOLERANCE and ahead <= SPARSE_REACH:
-            return
-        verdict["interval"] = self.sparse_interval
+            return self.scan_interval
+        return self.sparse_interval
 
     def advance(self, goal: Any = None) -> tuple[Decision | None, Outcome]:
         """Drive and scan until a structure is confirmed, the goal is reached, or blind."""
@@ -387,19 +359,19 @@ class PhysicalPlant:
         limit = self._limit
         driven = 0.0
         while True:
-            on_scan, verdict = self._on_scan_factory(goal)
+            sensing = self._sensing(goal)
             leg = min(MAX_DRIVE, max(limit - driven, 0.0))
             outcome = self.executor.drive_until(
-                on_scan,
+                sensing,
                 leg,
                 scan_interval=self.scan_interval,
                 rng=self.rng,
-                next_interval=lambda v=verdict: float(v["interval"]),
+                next_interval=sensing.next_interval,
             )
             self._account(outcome, out)
             self._odometer += abs(float(outcome.travelled))
             driven += abs(float(outcome.travelled))
-            why = verdict["why"]
+            why = sensing.why
             if why is not None or outcome.status != SequenceStatus.DONE or driven >= limit - 1e-6:
                 break
             if abs(float(outcome.travelled)) < 1e-6:
@@ -453,16 +425,16 @@ class PhysicalPlant:
         self.tracker.reset()
         self._track_state = None
         out = Outcome()
-        on_scan, verdict = self._on_scan_factory(None)
+        sensing = self._sensing(None)
         if self.executor.lidar is not None:
             from primitives.sequences import Sequence
             from primitives.steps import Scan as ScanStep
 
             outcome = self.executor.run(
-                Sequence("resense", (ScanStep(),)), on_scan=on_scan, rng=self.rng
+                Sequence("resense", (ScanStep(),)), on_scan=sensing, rng=self.rng
             )
             self._account(outcome, out)
-        self.decision = self._decision(verdict["why"])
+        self.decision = self._decision(sensing.why)
         return self.decision, out
 
     # ---------------------------------------------------------------- executing
@@ -535,4 +507,157 @@ class PhysicalPlant:
         return out
 
     def close(self) -> None:
-        pass
+        """Release the MuJoCo world (model, data, contact pairs, the LiDAR's ray caster) and
+        the episode's logs and last sweep; :meth:`reset` builds the world again if the plant
+        is used after closing."""
+        self.executor = None  # type: ignore[assignment]
+        self.robot = None  # type: ignore[assignment]
+        self.world = None
+        self.tracker.reset()
+        self._track_state = None
+        self.decision = None
+        self.detection_log = []
+        self.last_scan = None
+        self.scan_image = None
+
+
+@dataclass
+class Reading:
+    """What a detector source made of one sweep.
+
+    Attributes:
+        options: the options to log (the fused estimate once confirmed), with their ``kind``.
+        seen: distances (m) of everything seen ahead (for the sweep cadence).
+        confirmed: distance (m) of the nearest confirmed structure's reference point (inf:
+            none).
+        unconfirmed: distance (m) of the nearest structure this sweep sees, confirmed or not
+            (inf: none); one within the trigger distance is swept again before driving on.
+        fit: the sweep's detection with the pipe-frame fit (None: the plant fits one).
+        track: the tracker's state after the sweep (None: no tracker).
+        can_be_blind: True if too few returns make the sweep blind (a real sensor).
+    """
+
+    options: list[StructureOption]
+    kind: str
+    seen: list[float]
+    confirmed: float = math.inf
+    unconfirmed: float = math.inf
+    fit: Any = None
+    track: TrackState | None = None
+    can_be_blind: bool = False
+
+
+class OracleSource:
+    """Options from the plant drawing at the robot's pose (the oracle ablation of detection):
+    a structure counts as confirmed as soon as its reference point is seen."""
+
+    method = Method.GROUND_TRUTH
+
+    def read(
+        self, scan: Scan, clamped_diameter: float, truth: list[StructureOption], tracker: Any
+    ) -> Reading:
+        """The reading of ``scan`` (the drawing's options ``truth`` at its pose)."""
+        del scan, clamped_diameter, tracker
+        ref = truth[0].distance if truth else math.inf
+        kind = truth[0].kind if truth else "straight"
+        return Reading(list(truth), kind, [ref], confirmed=ref)
+
+
+class DetectorSource:
+    """Options from a detector (``"improved"`` or ``"thesis"``) fused over sweeps by the
+    plant's :class:`~detector.fusion.StructureTracker`."""
+
+    def __init__(self, method: str) -> None:
+        self.method = method
+
+    def read(
+        self,
+        scan: Scan,
+        clamped_diameter: float,
+        truth: list[StructureOption],
+        tracker: StructureTracker,
+    ) -> Reading:
+        """The reading of ``scan`` with the clamp reading ``clamped_diameter`` (m)."""
+        del truth
+        det = detection.detect(scan, clamped_diameter, method=self.method)
+        track = tracker.update(det, scan.nominal_positions[-1], scan.nominal_rotations[-1])
+        fused = track.detection if track.confirmed else det
+        confirmed = math.inf
+        if track.confirmed and track.detection.options:
+            confirmed = min(o.distance for o in track.detection.options)
+        return Reading(
+            list(fused.options),
+            fused.kind,
+            [o.distance for o in det.options] + [o.distance for o in fused.options],
+            confirmed=confirmed,
+            unconfirmed=min((o.distance for o in det.options), default=math.inf),
+            fit=det,
+            track=track,
+            can_be_blind=True,
+        )
+
+
+class SweepSensing:
+    """The scan callback of one drive towards a goal (see :meth:`PhysicalPlant.advance`).
+
+    At every sweep: stop at the goal; else read the sweep with the plant's detector source, log
+    it, steer onto the measured pipe axis, choose the next drive's length (``next_interval``),
+    and stop (``why``: ``"blind"`` after ``BLIND_SWEEPS`` blind sweeps, ``"confirmed"`` with a
+    confirmed structure within the trigger distance), sweep again in place (a structure seen
+    within it but not yet confirmed, at most ``CONFIRM_RESCANS`` times) or drive on.
+    """
+
+    def __init__(self, plant: PhysicalPlant, source: OracleSource | DetectorSource, goal: Any):
+        self.plant = plant
+        self.source = source
+        self.goal = goal
+        #: why the drive stopped: ``"goal"``, ``"confirmed"``, ``"blind"`` or None
+        self.why: str | None = None
+        self.interval = plant.scan_interval
+        self.blind = 0
+        self.rescans = 0
+        self.t_start = plant.executor.time  # the plant's clock catches up after the motion
+
+    def next_interval(self) -> float:
+        """The next drive's length, m (the cadence the last sweep chose)."""
+        return float(self.interval)
+
+    def __call__(self, scan: Scan, state: Any) -> str:
+        """The verdict on ``scan`` (``state``: the executor's state at the sweep)."""
+        plant = self.plant
+        plant.last_scan = scan
+        if plant.keep_image:
+            plant.scan_image = scan_image(scan)
+        now = plant.sim_time + (state.time - self.t_start)
+        node, _, truth = plant._truth(plant.pose())
+        if plant._goal_reached(self.goal):
+            self.why = "goal"
+            return "stop"
+        diameter = float(state.clamped_diameter)
+        reading = self.source.read(scan, diameter, truth, plant.tracker)
+        plant._follow_axis(scan, reading.fit, diameter)
+        if reading.track is not None:
+            plant._track_state = reading.track
+        plant.detection_log.append(
+            detection_record(now, node, truth, reading.options, reading.kind)
+        )
+        if reading.can_be_blind:
+            self.blind = self.blind + 1 if scan.n_valid < BLIND_RETURNS else 0
+        self.interval = plant._cadence(reading.seen, self.goal, blind=self.blind > 0)
+        return self._verdict(reading)
+
+    def _verdict(self, reading: Reading) -> str:
+        if self.blind >= BLIND_SWEEPS:
+            self.why = "blind"
+            return "stop"
+        window = self.plant.trigger_distance + 0.5 * self.plant.scan_interval
+        if reading.confirmed <= window:
+            self.why = "confirmed"
+            return "stop"
+        # a structure seen within the trigger distance but not confirmed yet (a short run
+        # after a fitting): sweep again in place rather than drive into it unconfirmed
+        if reading.unconfirmed <= window and self.rescans < CONFIRM_RESCANS:
+            self.rescans += 1
+            return "rescan"
+        self.rescans = 0
+        return "continue"
