@@ -37,7 +37,7 @@ from pipe_env.network import PipeNetwork
 from pipe_env.routing import locate
 from primitives.executor import Executor
 from primitives.sequences import Sequence, go_straight, take_turn
-from primitives.steps import Drive, Scan, Step
+from primitives.steps import Drive, Step, Sweep
 
 #: Largest error tried per field, as a function of the diameter (the first bisection bound).
 SEARCH_MAX: dict[str, Callable[[float], float]] = {
@@ -142,7 +142,7 @@ def with_scans(seq: Sequence) -> Sequence:
             left = s.distance
             while left > 1e-9:
                 piece = min(SCAN_EVERY, left)
-                steps += [Scan(), Drive(piece, s.speed)]
+                steps += [Sweep(), Drive(piece, s.speed)]
                 left -= piece
         else:
             steps.append(s)
@@ -171,7 +171,7 @@ def speed_table(diameter: float) -> None:
         t0 = time.perf_counter()
         out = ex.run(seq)
         wall = time.perf_counter() - t0
-        sweeps = sum(isinstance(s, Scan) for s in seq.steps)
+        sweeps = sum(isinstance(s, Sweep) for s in seq.steps)
         emit(
             f"{name:18s} {'yes' if scan else 'no':9s} {out.status:7s} {out.duration:7.2f} "
             f"{wall:7.2f} {out.duration / wall:9.2f} {sweeps:6d}"

@@ -26,7 +26,7 @@ Outcomes: ``done``; ``jammed`` (front lagging its target by more than ``jam_lag`
 follower off its pose by more than ``jam_tracking``; a heading check failed); ``blocked`` /
 ``dead_end`` (a :class:`~primitives.steps.Halt`: refused before moving). Telemetry (times,
 sensor positions, front poses, contact forces, joint angles, lag) is kept per control tick and
-can be saved (:meth:`Outcome.save`, npz) and plotted (:meth:`Outcome.plot`).
+can be saved (:meth:`SequenceOutcome.save`, npz) and plotted (:meth:`SequenceOutcome.plot`).
 
 Scans are stop-and-scan: the robot stands still, the clock advances by the sweep's duration.
 
@@ -49,7 +49,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.geometry import Pose, rotation_about
-from detector.scan import Scan as ScanData
+from detector.scan import Scan
 from pipe_env.lidar import LidarSpec, RotatingLidar
 from pipe_env.network import PipeNetwork
 from pipe_env.robot import Robot, RobotConfig, quat_of
@@ -66,17 +66,24 @@ from primitives.steps import (
     Drive,
     Halt,
     Roll,
-    Scan,
     SequenceStatus,
     Step,
     Stop,
+    Sweep,
     Unclamp,
 )
 from primitives.telemetry import Telemetry
 from primitives.vclamp import CLAMP_SIDE, VClamp
 
 #: Re-exported: the drive command's dead bands and the clamping side.
-__all__ = ["ANCHOR_POS", "ANCHOR_ROT", "ANCHOR_ROT_STRAIGHT", "CLAMP_SIDE", "Executor", "Outcome"]
+__all__ = [
+    "ANCHOR_POS",
+    "ANCHOR_ROT",
+    "ANCHOR_ROT_STRAIGHT",
+    "CLAMP_SIDE",
+    "Executor",
+    "SequenceOutcome",
+]
 
 #: Control period, s (50 Hz).
 CONTROL_DT = 0.02
@@ -139,7 +146,7 @@ STATUSES: tuple[str, ...] = tuple(s.value for s in SequenceStatus)
 #: before driving, e.g. to confirm a structure seen close ahead.
 SCAN_VERDICTS = ("stop", "continue", "rescan")
 
-OnScan = Callable[[ScanData, "ExecutorState"], str]
+OnScan = Callable[[Scan, "ExecutorState"], str]
 
 
 @dataclass
@@ -160,7 +167,7 @@ class ExecutorState:
 
 
 @dataclass
-class Outcome:
+class SequenceOutcome:
     """What a sequence (or a drive) did. Distances in metres, times in seconds.
 
     Attributes:
@@ -174,7 +181,7 @@ class Outcome:
         sequence: name of the sequence run.
     """
 
-    status: str = "done"
+    status: SequenceStatus = SequenceStatus.DONE
     reason: str = ""
     travelled: float = 0.0
     duration: float = 0.0
@@ -815,16 +822,18 @@ class Executor:
         self._travelled = 0.0
         return self.time, self.odometer
 
-    def _outcome(self, status: str, reason: str, t0: float, name: str) -> Outcome:
+    def _outcome(
+        self, status: SequenceStatus, reason: str, t0: float, name: str
+    ) -> SequenceOutcome:
         tele = self.telemetry.arrays()
-        return Outcome(status, reason, self._travelled, self.time - t0, tele, name)
+        return SequenceOutcome(status, reason, self._travelled, self.time - t0, tele, name)
 
     def run(
         self,
         sequence: Sequence,
         on_scan: OnScan | None = None,
         rng: np.random.Generator | None = None,
-    ) -> Outcome:
+    ) -> SequenceOutcome:
         """Execute ``sequence``; ``on_scan`` is called after each :class:`Scan` step and may
         return ``"stop"`` to end the sequence early (status ``done``)."""
         if not isinstance(sequence, Sequence):
@@ -839,12 +848,12 @@ class Executor:
                 self._do(step, on_scan, rng)
         except _Jam as exc:
             self._stop_here()
-            return self._outcome("jammed", str(exc), t0, sequence.name)
+            return self._outcome(SequenceStatus.JAMMED, str(exc), t0, sequence.name)
         except _Halt as h:
-            return self._outcome(h.status, h.reason, t0, sequence.name)
+            return self._outcome(SequenceStatus(h.status), h.reason, t0, sequence.name)
         except _ScanStop:
-            return self._outcome("done", "stopped by a scan", t0, sequence.name)
-        return self._outcome("done", "", t0, sequence.name)
+            return self._outcome(SequenceStatus.DONE, "stopped by a scan", t0, sequence.name)
+        return self._outcome(SequenceStatus.DONE, "", t0, sequence.name)
 
     def _do(self, step: Step, on_scan: OnScan | None, rng: np.random.Generator) -> None:
         if isinstance(step, Drive):
@@ -861,7 +870,7 @@ class Executor:
             self._unclamp()
         elif isinstance(step, Centre):
             self._centre(step, rng)
-        elif isinstance(step, Scan):
+        elif isinstance(step, Sweep):
             self._scan(on_scan, rng)
         elif isinstance(step, CheckHeading):
             self._check_heading(step)
@@ -890,7 +899,7 @@ class Executor:
         rng: np.random.Generator | None = None,
         speed: float = 0.05,
         next_interval: Callable[[], float] | None = None,
-    ) -> Outcome:
+    ) -> SequenceOutcome:
         """Stop-and-scan forward: sweep, ask ``on_scan``, drive ``scan_interval`` m, repeat,
         until ``on_scan`` says ``"stop"``, ``max_distance`` m are driven, or a jam.
         ``next_interval`` (called after every sweep's verdict) may choose each drive's length
@@ -919,7 +928,9 @@ class Executor:
                         break
                 left = max_distance - (self.odometer - odo0)
                 if left <= 1e-6:
-                    return self._outcome("done", "max distance driven", t0, "drive_until")
+                    return self._outcome(
+                        SequenceStatus.DONE, "max distance driven", t0, "drive_until"
+                    )
                 interval = scan_interval
                 if next_interval is not None:
                     interval = float(next_interval())
@@ -930,6 +941,6 @@ class Executor:
                 self._drive(Drive(min(interval, left), speed))
         except _Jam as exc:
             self._stop_here()
-            return self._outcome("jammed", str(exc), t0, "drive_until")
+            return self._outcome(SequenceStatus.JAMMED, str(exc), t0, "drive_until")
         except _ScanStop:
-            return self._outcome("done", "stopped by a scan", t0, "drive_until")
+            return self._outcome(SequenceStatus.DONE, "stopped by a scan", t0, "drive_until")

@@ -14,7 +14,7 @@ meaning on the robot:
   through the joints, turning towards its +y (rolled) side;
 - :class:`Clamp` / :class:`Unclamp`: fold the V to span ``diameter`` / straighten it;
 - :class:`Centre`: probe both walls in two planes with the V and move onto the pipe axis;
-- :class:`Scan`: stop-and-scan servo sweep of the LiDAR;
+- :class:`Sweep`: stop-and-scan servo sweep of the LiDAR;
 - :class:`CheckHeading`: the turn is complete: the front's heading must be within
   ``tolerance`` of the commanded one (else the bend was blocked: a jam);
 - :class:`Halt`: end the sequence with ``status`` (``blocked`` or ``dead_end``) without moving.
@@ -166,7 +166,7 @@ class Centre(Step):
 
 
 @dataclass(frozen=True)
-class Scan(Step):
+class Sweep(Step):
     """A stop-and-scan servo sweep of the LiDAR (the robot stands still)."""
 
     op: ClassVar[str] = "scan"
@@ -199,7 +199,7 @@ class Halt(Step):
 
 
 STEP_TYPES: dict[str, type[Step]] = {
-    t.op: t for t in (Drive, Stop, Roll, Bend, Clamp, Unclamp, Centre, Scan, CheckHeading, Halt)
+    t.op: t for t in (Drive, Stop, Roll, Bend, Clamp, Unclamp, Centre, Sweep, CheckHeading, Halt)
 }
 
 

@@ -3,8 +3,8 @@
 :class:`Telemetry` records one row per control tick (simulated time, sensor position, front
 pose, contact force, joint angles, the front's lag behind its drive target) into one growing
 float array, and turns it into named arrays for an outcome
-(:class:`primitives.executor.Outcome`). The executor starts a fresh one for every sequence or
-drive and when the robot is placed, so it holds one run's rows at most: a 4 m drive of
+(:class:`primitives.executor.SequenceOutcome`). The executor starts a fresh one for every
+sequence or drive and when the robot is placed, so it holds one run's rows at most: a 4 m drive of
 thousands of ticks is one array (not five small arrays and a tuple per tick, which left the
 allocator's heap fragmented over long soaks).
 """

@@ -19,7 +19,7 @@ from pipe_env import layouts
 from pipe_env.ground_truth import fitting_ahead, option_angles
 from pipe_env.network import PipeNetwork
 from pipe_env.routing import locate
-from primitives.executor import Executor, Outcome
+from primitives.executor import Executor, SequenceOutcome
 from primitives.sequences import for_option, pass_junction, take_turn
 
 DIAMETERS = (0.06, 0.09, 0.12)
@@ -49,7 +49,7 @@ def _ways(net: PipeNetwork, ex: Executor) -> list[tuple[StructureOption, str]]:
 
 def _run(
     net: PipeNetwork, choose: Callable, **errors: float
-) -> tuple[Outcome, str, str, StructureOption]:
+) -> tuple[SequenceOutcome, str, str, StructureOption]:
     """Place the robot at the network's start, run the sequence for the chosen true option
     (with ``errors`` added to its fields); returns the outcome, the run the sensor ends in, the
     run the option leads into and the true option."""

@@ -237,7 +237,7 @@ def test_figures_and_telemetry_are_written_atomically(tmp_path: Path) -> None:
     import matplotlib.pyplot as plt
 
     from pipe_env.plotting import save_figure
-    from primitives.executor import Outcome
+    from primitives.executor import SequenceOutcome
 
     fig, ax = plt.subplots()
     ax.plot([0, 1], [0, 1])
@@ -246,7 +246,7 @@ def test_figures_and_telemetry_are_written_atomically(tmp_path: Path) -> None:
     plt.close(fig)
     assert (tmp_path / "a.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert b"<svg" in (tmp_path / "a.svg").read_bytes()[:400]
-    out = Outcome(telemetry={"times": np.arange(3.0)})
+    out = SequenceOutcome(telemetry={"times": np.arange(3.0)})
     out.save(tmp_path / "run")
     with np.load(tmp_path / "run.npz") as z:
         assert z["status"] == "done" and z["times"].tolist() == [0.0, 1.0, 2.0]

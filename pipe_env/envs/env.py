@@ -60,7 +60,7 @@ from pipe_env.envs.observations import (
     world_way,
 )
 from pipe_env.envs.oracle import Oracle
-from pipe_env.envs.plant import Decision, KinematicPlant, Outcome, Plant, PlantStatus
+from pipe_env.envs.plant import Decision, KinematicPlant, Plant, PlantOutcome, PlantStatus
 from pipe_env.envs.sensing_model import error_model_for
 from pipe_env.envs.sources import draw_network, pool_network
 from pipe_env.envs.tasks import CoverageTask, GoalTask, Task, reachable_runs
@@ -333,7 +333,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         terms.update(self.task.reward_terms(plant, self.success))
         return self._finish_step(terms, events)
 
-    def _after_action(self, outcome: Outcome, events: dict[str, Any]) -> None:
+    def _after_action(self, outcome: PlantOutcome, events: dict[str, Any]) -> None:
         """Update the episode after the chosen way's ``outcome`` (drive on if it was done)."""
         events["outcome"] = outcome.status
         if outcome.note:
@@ -367,7 +367,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         self.decision = None
         events["goal_reached"] = True
 
-    def _record(self, outcome: Outcome) -> None:
+    def _record(self, outcome: PlantOutcome) -> None:
         if self._waypoints and outcome.path and outcome.path[0] is self._waypoints[-1]:
             self._waypoints.extend(outcome.path[1:])
         else:

@@ -5,7 +5,7 @@ An environment step is a decision. The plant answers two calls:
 - :meth:`Plant.advance`: drive forward (sensing) until a structure is confirmed within the
   trigger distance, or the goal is reached; returns a :class:`Decision` (or None at the goal);
 - :meth:`Plant.execute`: carry out the chosen action at the current decision: take one of the
-  detected ways on, or back out to the last junction; returns an :class:`Outcome`.
+  detected ways on, or back out to the last junction; returns an :class:`PlantOutcome`.
 
 Both fidelities implement the typed :class:`Plant` protocol (the environment holds a
 ``Plant``; only its factory knows which). :class:`KinematicPlant` (``fidelity="fast"``, this
@@ -53,7 +53,7 @@ BACK_OUT = "back_out"
 
 
 class PlantStatus(StrEnum):
-    """How a plant's action or drive ended (:attr:`Outcome.status`); not the executor's
+    """How a plant's action or drive ended (:attr:`PlantOutcome.status`); not the executor's
     :class:`primitives.steps.SequenceStatus`, which the full plant maps onto these."""
 
     DONE = "done"
@@ -135,10 +135,10 @@ class Decision:
 
 
 @dataclass
-class Outcome:
+class PlantOutcome:
     """What an action or a drive did. Distances in metres, times in seconds."""
 
-    status: str = "done"  # a PlantStatus value: done | jammed | blocked | goal | back_out
+    status: PlantStatus = PlantStatus.DONE
     distance: float = 0.0
     sim_time: float = 0.0
     #: consecutive waypoints of the motion (see ``positions``)
@@ -176,15 +176,15 @@ class Plant(Protocol):
         """Put the robot at the network's start pose with fresh logs, drawing from ``rng``."""
         ...
 
-    def advance(self, goal: Any = None) -> tuple[Decision | None, Outcome]:
+    def advance(self, goal: Any = None) -> tuple[Decision | None, PlantOutcome]:
         """Drive to the next decision (None and status ``goal`` if the goal comes first)."""
         ...
 
-    def execute(self, choice: StructureOption | str, goal: Any = None) -> Outcome:
+    def execute(self, choice: StructureOption | str, goal: Any = None) -> PlantOutcome:
         """Carry out ``choice`` (an option of the pending decision, or ``BACK_OUT``)."""
         ...
 
-    def resense(self) -> tuple[Decision, Outcome]:
+    def resense(self) -> tuple[Decision, PlantOutcome]:
         """Sense again where the robot stands (after a jam)."""
         ...
 
@@ -344,7 +344,12 @@ class KinematicPlant:
         return EdgeState(st.run_id, clamp(s, 0.0, edge_length(self.network, r.id)), st.towards)
 
     def _record_motion(
-        self, distance: float, out: Outcome, start: EdgeState, end: EdgeState, path: bool = True
+        self,
+        distance: float,
+        out: PlantOutcome,
+        start: EdgeState,
+        end: EdgeState,
+        path: bool = True,
     ) -> None:
         d = abs(distance)
         self.travelled += d
@@ -361,10 +366,10 @@ class KinematicPlant:
     # ------------------------------------------------------------------ driving
     def advance(
         self, goal: NDArray[np.float64] | EdgePosition | None = None
-    ) -> tuple[Decision | None, Outcome]:
+    ) -> tuple[Decision | None, PlantOutcome]:
         """Drive forward to the next decision point, or to ``goal`` (a point, or its edge
         position) if it comes first."""
-        out = Outcome()
+        out = PlantOutcome()
         st = self.state
         node = st.towards
         g = self.network.geometry[node]
@@ -380,7 +385,7 @@ class KinematicPlant:
                 self._record_motion(to_goal, out, st, end)
                 self._forward(end, to_goal)
                 self.state = end
-                out.status = "goal"
+                out.status = PlantStatus.GOAL
                 return None, out
         end = self._move(st, move)
         self._record_motion(move, out, st, end)
@@ -393,7 +398,7 @@ class KinematicPlant:
         self.forward_path.append(end)
         self.forward_odometer.append(self.forward_odometer[-1] + abs(distance))
 
-    def _sense(self, node: str, entry_run: str, out: Outcome) -> Decision:
+    def _sense(self, node: str, entry_run: str, out: PlantOutcome) -> Decision:
         """Sense the structure ahead from the current pose (one fused detection)."""
         pose = self.pose()
         truth = options_at(self.network, node, entry_run, pose)
@@ -404,11 +409,11 @@ class KinematicPlant:
         self.sim_time += self.decision_time
         return Decision(sensed, kind, truth, node, entry_run, pose)
 
-    def resense(self) -> tuple[Decision, Outcome]:
+    def resense(self) -> tuple[Decision, PlantOutcome]:
         """Sense the structure ahead again from where the robot stands (after a jam)."""
         if self.decision is None:
             raise RuntimeError("resense() needs a pending decision")
-        out = Outcome()
+        out = PlantOutcome()
         self.decision = self._sense(self.decision.node_id, self.decision.entry_run, out)
         return self.decision, out
 
@@ -427,7 +432,7 @@ class KinematicPlant:
     # ---------------------------------------------------------------- executing
     def execute(
         self, choice: StructureOption | str, goal: NDArray | EdgePosition | None = None
-    ) -> Outcome:
+    ) -> PlantOutcome:
         """Take the chosen detected way on, or back out (``BACK_OUT``). A jam leaves the robot
         before the structure (it stalled there and backed off) and costs ``jam_time``; a
         ``goal`` just past the fitting on the way taken ends the move there."""
@@ -439,7 +444,7 @@ class KinematicPlant:
 
     def _execute(
         self, choice: StructureOption | str, goal: NDArray | EdgePosition | None
-    ) -> Outcome:
+    ) -> PlantOutcome:
         if self.decision is None:
             raise RuntimeError("execute() needs a decision; call advance() first")
         dec = self.decision
@@ -449,16 +454,19 @@ class KinematicPlant:
                     f"choice must be a StructureOption or {BACK_OUT!r}, got {choice!r}"
                 )
             return self._back_out(dec)
-        out = Outcome()
+        out = PlantOutcome()
         if not drivable(choice):
-            out.status, out.note = "blocked", "refused: outside the robot's range"
+            out.status, out.note = PlantStatus.BLOCKED, "refused: outside the robot's range"
             return out
         k, sep = match_option(choice, dec.truth)
         true = dec.truth[k]
         diameter = self.clamped_diameter
         tol = self.tolerance
         if sep > tol.match:
-            out.status, out.note = "jammed", f"no way on within {math.degrees(sep):.0f} deg"
+            out.status, out.note = (
+                PlantStatus.JAMMED,
+                f"no way on within {math.degrees(sep):.0f} deg",
+            )
             return out
         lim = tol.at(diameter)
         d_err = (choice.distance - true.distance) / max(diameter, 1e-3)
@@ -476,11 +484,14 @@ class KinematicPlant:
         )
         lo, hi = ROBOT_DIAMETER_RANGE
         if not lo <= true.diameter <= hi:
-            out.status, out.note = "jammed", "the pipe is narrower/wider than the robot's range"
+            out.status, out.note = (
+                PlantStatus.JAMMED,
+                "the pipe is narrower/wider than the robot's range",
+            )
             return out
         for key, value, limit in checks:
             if value > limit:
-                out.status, out.note = "jammed", f"{key} error {value:.3f} > {limit:.3f}"
+                out.status, out.note = PlantStatus.JAMMED, f"{key} error {value:.3f} > {limit:.3f}"
                 return out
         node = dec.node_id
         runs = [r for r in self.network.runs_at[node] if r.id != dec.entry_run]
@@ -489,7 +500,7 @@ class KinematicPlant:
         want = _world_vector(true, dec.pose)
         run_out = min(runs, key=lambda r: norm3(g.port(r.id).axis - want))
         if turn_angle(self.network, node, dec.entry_run, run_out.id) > MAX_TURN:
-            out.status, out.note = "jammed", "turn sharper than the robot can take"
+            out.status, out.note = PlantStatus.JAMMED, "turn sharper than the robot can take"
             return out
         if len(runs) > 1 and not (self.junctions and self.junctions[-1][1] == node):
             self.junctions.append((self.state, node, len(self.forward_path) - 1))
@@ -502,7 +513,7 @@ class KinematicPlant:
             from_node = gp.s if run_out.a == node else length - gp.s
             if gp.run_id == run_out.id and 0.0 <= from_node <= past:
                 past = from_node
-                out.status = "goal"
+                out.status = PlantStatus.GOAL
         s_new = past if run_out.a == node else length - past
         entry = self.network.run_by_id[start.run_id]
         at_node = EdgeState(
@@ -516,10 +527,10 @@ class KinematicPlant:
         self.decision = None
         return out
 
-    def _back_out(self, dec: Decision) -> Outcome:
+    def _back_out(self, dec: Decision) -> PlantOutcome:
         """Reverse along the forward path to the last junction passed (to the one before it when
         deciding at that junction again), or to the start."""
-        out = Outcome(status="back_out")
+        out = PlantOutcome(status=PlantStatus.BACK_OUT)
         while self.junctions and self.junctions[-1][1] == dec.node_id:
             self.junctions.pop()
         index = self.junctions[-1][2] if self.junctions else 0

@@ -45,7 +45,14 @@ from detector.options import StructureOption, option_order
 from detector.scan import Scan
 from detector.vocab import Method
 from pipe_env.envs.fidelity import Fidelity
-from pipe_env.envs.plant import BACK_OUT, Decision, Outcome, detection_record, goal_edge_position
+from pipe_env.envs.plant import (
+    BACK_OUT,
+    Decision,
+    PlantOutcome,
+    PlantStatus,
+    detection_record,
+    goal_edge_position,
+)
 from pipe_env.envs.sensing_model import DETECTORS
 from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
@@ -257,7 +264,7 @@ class PhysicalPlant:
     def positions(self, waypoints: list[Any]) -> NDArray[np.float64]:
         return np.array([np.asarray(w, dtype=float) for w in waypoints]).reshape(-1, 3)
 
-    def _account(self, outcome: Any, out: Outcome) -> None:
+    def _account(self, outcome: Any, out: PlantOutcome) -> None:
         """Fold an executor outcome into the plant's clocks and the path."""
         d = abs(float(outcome.travelled))
         self.travelled += d
@@ -350,9 +357,9 @@ class PhysicalPlant:
             return self.scan_interval
         return self.sparse_interval
 
-    def advance(self, goal: Any = None) -> tuple[Decision | None, Outcome]:
+    def advance(self, goal: Any = None) -> tuple[Decision | None, PlantOutcome]:
         """Drive and scan until a structure is confirmed, the goal is reached, or blind."""
-        out = Outcome()
+        out = PlantOutcome()
         # a long straight is normal pipe: the robot drives on in legs of MAX_DRIVE until a
         # structure, a dead end (blind) or the goal stops it, or it jams; the whole network's
         # pipe length bounds the drive (a robot cannot drive further without a structure)
@@ -387,10 +394,10 @@ class PhysicalPlant:
             self._odometer += abs(float(last.travelled))
             why = "goal" if last.status == SequenceStatus.DONE else why
         if why == "goal":
-            out.status = "goal"
+            out.status = PlantStatus.GOAL
             return None, out
         if outcome.status == SequenceStatus.JAMMED:
-            out.status = "jammed"
+            out.status = PlantStatus.JAMMED
             out.note = f"jammed while driving: {outcome.reason}"
         self.decision = self._decision(why)
         return self.decision, out
@@ -418,34 +425,34 @@ class PhysicalPlant:
         options.sort(key=option_order)
         return Decision(options, kind, truth, node, entry, pose)
 
-    def resense(self) -> tuple[Decision, Outcome]:
+    def resense(self) -> tuple[Decision, PlantOutcome]:
         """After a jam: sweep once more where the robot stands and decide on fresh sweeps. The
         fused estimate that jammed is forgotten (a phantom confirmed from a few places would
         otherwise be offered again however the new sweeps disagree)."""
         self.tracker.reset()
         self._track_state = None
-        out = Outcome()
+        out = PlantOutcome()
         sensing = self._sensing(None)
         if self.executor.lidar is not None:
             from primitives.sequences import Sequence
-            from primitives.steps import Scan as ScanStep
+            from primitives.steps import Sweep
 
             outcome = self.executor.run(
-                Sequence("resense", (ScanStep(),)), on_scan=sensing, rng=self.rng
+                Sequence("resense", (Sweep(),)), on_scan=sensing, rng=self.rng
             )
             self._account(outcome, out)
         self.decision = self._decision(sensing.why)
         return self.decision, out
 
     # ---------------------------------------------------------------- executing
-    def execute(self, choice: StructureOption | str, goal: Any = None) -> Outcome:
+    def execute(self, choice: StructureOption | str, goal: Any = None) -> PlantOutcome:
         """Run the sequence of the chosen option, or back out (``BACK_OUT``)."""
         from primitives.sequences import back_out, for_option
 
         if self.decision is None:
             raise RuntimeError("execute() needs a decision; call advance() first")
         dec = self.decision
-        out = Outcome()
+        out = PlantOutcome()
         if isinstance(choice, str):
             if choice != BACK_OUT:
                 raise ValueError(
@@ -469,10 +476,10 @@ class PhysicalPlant:
             )
             self._account(back, out)
             self._odometer -= abs(float(back.travelled))
-            out.status, out.note = "jammed", outcome.reason
+            out.status, out.note = PlantStatus.JAMMED, outcome.reason
             return out
         if status in (SequenceStatus.BLOCKED, SequenceStatus.DEAD_END):
-            out.status, out.note = "blocked", outcome.reason
+            out.status, out.note = PlantStatus.BLOCKED, outcome.reason
             return out
         ways = [r for r in self.network.runs_at[dec.node_id] if r.id != dec.entry_run]
         if len(ways) > 1 and not (self.junctions and self.junctions[-1][1] == dec.node_id):
@@ -481,13 +488,13 @@ class PhysicalPlant:
         self._track_state = None
         self.decision = None
         if self._goal_reached(goal) or self._goal_passed(goal):
-            out.status = "goal"
+            out.status = PlantStatus.GOAL
         return out
 
-    def _back_out(self, dec: Decision) -> Outcome:
+    def _back_out(self, dec: Decision) -> PlantOutcome:
         from primitives.sequences import back_out
 
-        out = Outcome(status="back_out")
+        out = PlantOutcome(status=PlantStatus.BACK_OUT)
         while self.junctions and self.junctions[-1][1] == dec.node_id:
             self.junctions.pop()
         target = self.junctions[-1][0] if self.junctions else 0.0
@@ -500,7 +507,7 @@ class PhysicalPlant:
             if outcome.status != SequenceStatus.DONE:
                 out.note = f"backing out ended {outcome.status}: {outcome.reason}"
                 if outcome.status == SequenceStatus.JAMMED:
-                    out.status = "jammed"
+                    out.status = PlantStatus.JAMMED
         self.tracker.reset()
         self._track_state = None
         self.decision = None

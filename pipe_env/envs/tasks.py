@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from pipe_env.envs.plant import EdgeState, Outcome, Plant, PlantStatus, goal_edge_position
+from pipe_env.envs.plant import EdgeState, Plant, PlantOutcome, PlantStatus, goal_edge_position
 from pipe_env.network import PipeNetwork
 from pipe_env.robot_limits import MAX_TURN
 from pipe_env.routing import (
@@ -56,7 +56,7 @@ class Task:
         """Update after a drive to the next decision; True when the task is done (success)."""
         return False
 
-    def record(self, outcome: Outcome) -> None:
+    def record(self, outcome: PlantOutcome) -> None:
         """Account for an outcome's driven path."""
 
     def reward_terms(self, plant: Plant, success: bool) -> dict[str, float]:
@@ -206,7 +206,7 @@ class CoverageTask(Task):
             else:
                 self._cover(other.id, length - view, length)
 
-    def record(self, outcome: Outcome) -> None:
+    def record(self, outcome: PlantOutcome) -> None:
         if outcome.status == PlantStatus.BACK_OUT:
             return  # reversing over pipe already seen
         net = self.network
