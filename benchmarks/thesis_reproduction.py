@@ -1421,9 +1421,9 @@ def _practical(r: dict[str, Any]) -> str:
         "thesis calls symmetric (figure 5.7); the Y junction along its run with the branch on "
         "the left (the packaged scenario). The counts in brackets are the scans that "
         "identified the structure: the thesis method misses the gap when the YDLidar's "
-        "12 cm minimum range hides its first points or the noise breaks the 57 mm jump; the "
-        "improved planar method's low count on the 45 deg bend is a known weakness under "
-        "this noise (the scenario `thesis_practical_2d_bend45_118mm_ydlidar` records it)."
+        "12 cm minimum range hides its first points or the noise breaks the 57 mm jump. "
+        "Whether a missed structure's information is in the scan at all: "
+        "`benchmarks/planar_information.py`."
     )
     p3 = r["practical-3d"]["rows"]
     rows3 = []
