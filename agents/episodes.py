@@ -21,7 +21,7 @@ import numpy as np
 import pipe_env  # noqa: F401  (registers the environment ids)
 from agents.scripted import make_agent
 from detector.atomic import atomic_write_text
-from pipe_env.envs import PipeNavEnv
+from pipe_env.envs.oracle import oracle_of
 from pipe_env.generator import NetworkConfig
 from pipe_env.network import PipeNetwork
 from pipe_env.network_io import finite_json
@@ -77,11 +77,8 @@ def run_episode(
         if on_decision:
             on_decision(len(choices))
     wall = time.perf_counter() - t0
-    base = env.unwrapped
-    # narrows the types: after an episode the environment has its network and plant
-    if not isinstance(base, PipeNavEnv) or base.plant is None or base.network is None:
-        raise RuntimeError(f"pipenav/PipeNav-v0 made {type(base).__name__} without a network")
-    plant, driven = base.plant, base.network
+    oracle = oracle_of(env)
+    driven = oracle.network
     files = []
     render_skipped = None
     if render and out is not None:
@@ -97,10 +94,10 @@ def run_episode(
             render_skipped = str(exc)
     log = {
         "network": driven.to_dict(),
-        "path": np.asarray(base.path).tolist(),
-        "decisions": [np.asarray(p).tolist() for p in base.decision_points],
+        "path": oracle.driven_path().tolist(),
+        "decisions": [np.asarray(p).tolist() for p in oracle.decision_points],
         "choices": choices,
-        "detections": list(plant.detection_log),
+        "detections": list(oracle.detection_log),
         "summary": {
             "seed": seed,
             "agent": agent,
@@ -117,7 +114,7 @@ def run_episode(
             "sim_time_s": round(float(info["sim_time"]), 1),
             "wall_time_s": round(wall, 2),
             "return": round(float(sum(rewards)), 3),
-            "detections": len(plant.detection_log),
+            "detections": len(oracle.detection_log),
         },
         "files": files,
         "render_skipped": render_skipped,
