@@ -249,7 +249,7 @@ class _ScanStop(Exception):
 
 
 class Executor:
-    """Runs sequences on ``robot`` in ``world``; ``lidar`` scans on :class:`Scan` steps.
+    """Runs sequences on ``robot`` in ``world``; ``lidar`` scans on :class:`Sweep` steps.
 
     Args:
         world: a world built with the robot (``build_world(..., customize=robot.customize)``).
@@ -834,7 +834,7 @@ class Executor:
         on_scan: OnScan | None = None,
         rng: np.random.Generator | None = None,
     ) -> SequenceOutcome:
-        """Execute ``sequence``; ``on_scan`` is called after each :class:`Scan` step and may
+        """Execute ``sequence``; ``on_scan`` is called after each :class:`Sweep` step and may
         return ``"stop"`` to end the sequence early (status ``done``)."""
         if not isinstance(sequence, Sequence):
             raise ValueError(f"sequence must be a Sequence, got {type(sequence).__name__}")

@@ -22,7 +22,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("detector", "pipe_env", "primitives", "agents")
 LAYER_NAMES = ("detector", "pipe_env simulation", "primitives", "pipe_env.envs", "agents")
-#: Cycles still to be taken apart (the network model calls its I/O and generator modules).
+#: Cycles still to be taken apart (none).
 KNOWN_CYCLES: list[list[str]] = []
 
 

@@ -141,12 +141,14 @@ class EnvConfig:
             )
         try:
             return NetworkConfig.from_dict(value)
+        except ArgumentError as exc:
+            field = exc.field.removeprefix("NetworkConfig.")
+            raise fail(
+                f"network_config.{field}", exc.value, exc.allowed, exc.problem, self.env_name
+            ) from None
         except (TypeError, ValueError) as exc:
             raise fail(
-                "network_config",
-                value,
-                f"a valid NetworkConfig dict ({exc})",
-                where=self.env_name,
+                "network_config", value, "a NetworkConfig dict", str(exc), self.env_name
             ) from None
 
     def _lidar(self) -> LidarSpec:

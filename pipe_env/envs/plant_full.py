@@ -517,6 +517,8 @@ class PhysicalPlant:
         """Release the MuJoCo world (model, data, contact pairs, the LiDAR's ray caster) and
         the episode's logs and last sweep; :meth:`reset` builds the world again if the plant
         is used after closing."""
+        if self.executor is not None and self.executor.lidar is not None:
+            self.executor.lidar.close()
         self.executor = None  # type: ignore[assignment]
         self.robot = None  # type: ignore[assignment]
         self.world = None
