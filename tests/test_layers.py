@@ -10,6 +10,9 @@ Layers, lowest first (docs/design.md, "Layers"):
 
 Every ``import`` statement counts, function-level ones included. Imports under
 ``if TYPE_CHECKING:`` never run, so they may form cycles, but they must still point down.
+The one deliberate exception is not an import: ``pipe_env/__init__.py`` registers the
+environment ids with Gymnasium by entry-point *strings* (``"pipe_env.envs:PipeNavEnv"``), which
+Gymnasium imports only when an environment is made.
 """
 
 from __future__ import annotations

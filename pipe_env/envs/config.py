@@ -30,8 +30,8 @@ from detector.validation import (
     check_number,
     fail,
 )
+from detector.vocab import DETECTORS
 from pipe_env.envs.fidelity import FIDELITIES
-from pipe_env.envs.sensing_model import DETECTORS
 from pipe_env.generator import NetworkConfig
 from pipe_env.lidar import PRESETS, LidarSpec
 from pipe_env.network import PipeNetwork
