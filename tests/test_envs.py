@@ -248,7 +248,6 @@ def test_explore_env_rewards_new_coverage_and_finishes() -> None:
 
 BAD_ARGUMENTS = [
     ("PipeNav-v0", "network_config", "big", "a NetworkConfig, its dict or None"),
-    ("PipeNav-v0", "network_config", {"n_fittings": -1}, "n_fittings"),
     ("PipeNav-v0", "pool_seed", "a", "an integer at least 0"),
     ("PipeNav-v0", "pool_seed", -1, "an integer at least 0"),
     ("PipeNav-v0", "max_jams", "x", "an integer at least 1"),
@@ -288,6 +287,15 @@ def test_bad_make_arguments_are_rejected_naming_the_argument(
     assert message.startswith(f"{env}: {name} = {value!r}: "), message
     assert isinstance(err.value, ArgumentError) and err.value.field == name
     assert f"; allowed: {allowed}" in message or allowed in err.value.allowed, message
+
+
+def test_a_bad_network_config_field_is_named_by_its_path() -> None:
+    with pytest.raises(ArgumentError) as err:
+        gym.make("pipenav/PipeNav-v0", network_config={"n_fittings": -1})
+    assert err.value.field == "network_config.n_fittings"
+    assert str(err.value) == (
+        "PipeNav-v0: network_config.n_fittings = -1: out of range; allowed: an integer 1 to 200"
+    )
 
 
 def test_good_make_arguments_are_kept() -> None:
