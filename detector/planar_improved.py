@@ -170,23 +170,12 @@ def _detect(
     tol = tol_floor + noise_k * sig_r
     # --- in-plane offset and tilt from the two walls
     if refine_axis:
-        fits = []
-        for sgn in (1.0, -1.0):
-            m = (np.sign(v) == sgn) & (np.abs(np.abs(v) - big_r) < 0.3 * big_r)
-            if m.sum() >= 6:
-                order = np.argsort(u[m])
-                um, vm = u[m][order], v[m][order]
-                um, vm = um[: max(6, int(0.6 * um.size))], vm[: max(6, int(0.6 * vm.size))]
-                if float(um[-1] - um[0]) > 0.02:
-                    fits.append((sgn, *robust_line(um, vm, 1e-12, 2e-4)))
-        if len(fits) == 2:
-            off = 0.5 * (fits[0][1] + fits[1][1])
-            slope = 0.5 * (fits[0][2] + fits[1][2])
-            if abs(off) < 0.5 * big_r and abs(slope) < math.tan(math.radians(8.0)):
-                ang = math.atan(slope)
-                ca, sa = math.cos(ang), math.sin(ang)
-                u, v = ca * u + sa * (v - off), -sa * u + ca * (v - off)
-                diag.update(plane_offset=off, plane_tilt_deg=math.degrees(ang))
+        frame = _wall_frame(u, v, big_r, float(np.median(tol)))
+        if frame is not None:
+            off, ang = frame
+            ca, sa = math.cos(ang), math.sin(ang)
+            u, v = ca * u + sa * (v - off), -sa * u + ca * (v - off)
+            diag.update(plane_offset=off, plane_tilt_deg=math.degrees(ang))
     a = np.abs(v)
     e = a - big_r
     wall = np.abs(e) <= tol
@@ -208,6 +197,44 @@ def _detect(
     ):
         return _openings(u, v, a, big_r, sides, inside, wall, e_lat, pose, tol_med, diag)
     return detect_axisymmetric(u, a, big_r, inside, beyond, tol_med, diag)
+
+
+def _side_wall(u: NDArray, v: NDArray, sgn: float, big_r: float) -> tuple[float, float, float]:
+    """Robust line ``v = a + b u`` through the nearest wall returns of side ``sgn``:
+    ``(a, b, standard error of b)``; NaNs when the side has too few or too short a wall."""
+    nan = (math.nan, math.nan, math.nan)
+    m = (np.sign(v) == sgn) & (np.abs(np.abs(v) - big_r) < 0.3 * big_r)
+    if m.sum() < 6:
+        return nan
+    order = np.argsort(u[m])
+    keep = max(6, int(0.6 * order.size))
+    um, vm = u[m][order][:keep], v[m][order][:keep]
+    if float(um[-1] - um[0]) <= 0.02:
+        return nan
+    a, b = robust_line(um, vm, 1e-12, 2e-4)
+    s = max(mad_sigma(vm - (a + b * um)), 2e-4)
+    return a, b, s / math.sqrt(max(float(np.sum((um - um.mean()) ** 2)), 1e-12))
+
+
+def _wall_frame(u: NDArray, v: NDArray, big_r: float, tol: float) -> tuple[float, float] | None:
+    """The in-plane sensor offset (m) and tilt (rad) from the two incoming walls, or ``None``
+    when they do not look like one pipe's walls: both lines must be parallel (slopes within
+    three standard errors and 0.5 deg) and no farther apart than the diameter plus the
+    tolerance (a plane through the pipe never sees its walls wider apart). Returns through an
+    opening near the sensor (a tee's branch seen from 15-20 cm, whose far wall lies near the
+    incoming wall's line) otherwise pass for a wall and tilt the frame by 1-3 deg."""
+    a1, b1, s1 = _side_wall(u, v, 1.0, big_r)
+    a2, b2, s2 = _side_wall(u, v, -1.0, big_r)
+    if not all(math.isfinite(x) for x in (a1, b1, s1, a2, b2, s2)):
+        return None
+    if abs(b1 - b2) > 3.0 * math.hypot(s1, s2) + math.tan(math.radians(0.5)):
+        return None
+    if a1 - a2 > 2.0 * big_r + 3.0 * tol:
+        return None
+    off, slope = 0.5 * (a1 + a2), 0.5 * (b1 + b2)
+    if abs(off) >= 0.5 * big_r or abs(slope) >= math.tan(math.radians(8.0)):
+        return None
+    return off, math.atan(slope)
 
 
 def _parallel(u: NDArray, v: NDArray, sides: list) -> bool:
