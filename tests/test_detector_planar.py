@@ -182,3 +182,24 @@ def test_shared_sensor_noise_model():
     assert sigma_r == pytest.approx(expected * s + ranges * 0.001 * c)
     rel = radial_noise({"noise_sigma_rel": 0.01}, ranges, s, c)[0]
     assert rel == pytest.approx(0.01 * ranges)
+
+
+@pytest.mark.parametrize("distance", [0.4, 0.3, 0.2, 0.15])
+def test_improved_planar_tee_under_ydlidar_noise(distance):
+    # the thesis's practical 2D tee (11.8 cm pipe, YDLidar X4): from 30-40 cm the branch shows
+    # 3-8 returns on its far wall, which fit 45, 90 and 135 deg alike; where the incoming
+    # wall ends tells them apart (the branch was fitted 45-135 deg, 5-7 cm off). From 15-20 cm
+    # the branch's far wall lies near the incoming wall's line and tilted the wall frame (read
+    # as a reducer at 15 cm)
+    for seed in range(6):
+        scan, truth, d = scan_layout(
+            "t_junction", distance, sensor="ydlidar_x4", seed=seed, planar=True,
+            diameter=0.118, direction=0.0,
+        )  # fmt: skip
+        det = detect_planar(scan, d, "improved")
+        assert det.kind == "junction", det.describe()
+        assert len(det.options) == len(truth) == 2, det.describe()
+        for o, t in match(det.options, truth):
+            assert abs(o.distance - t.distance) <= 0.02, (seed, o, t)
+            assert abs(o.angle - t.angle) <= math.radians(5.0), (seed, o, t)
+            assert abs(wrap(o.direction - t.direction)) <= math.radians(5.0), (seed, o, t)
