@@ -196,7 +196,39 @@ def _detect(
         len(sides) == 2 and inside.sum() < 0.3 * beyond.sum() and _parallel(u, v, sides)
     ):
         return _openings(u, v, a, big_r, sides, inside, wall, e_lat, pose, tol_med, sig_range, diag)
+    if not sides:
+        side = _face_opening(u, v, beyond, inside, tol)
+        if side is not None:
+            det = _openings(
+                u, v, a, big_r, [side], inside, wall, e_lat, pose, tol_med, sig_range, diag
+            )
+            if det.kind != Kind.STRAIGHT:
+                diag["face_opening"] = True
+                return det
     return detect_axisymmetric(u, a, big_r, inside, beyond, tol_med, diag)
+
+
+def _face_opening(
+    u: NDArray, v: NDArray, beyond: NDArray, inside: NDArray, tol: NDArray
+) -> tuple[float, NDArray] | None:
+    """A side opening too narrow for the count of :data:`MIN_OPENING_POINTS`: beyond returns
+    of one side only, lying on the face seen ahead (inside returns on one line across the
+    axis, within the tolerance). An end wall never returns beyond the wall's line, so such a
+    return is a beam that went through an opening on that side and met the far wall of the
+    turn seen head on (a 60 mm mitre 25-40 cm ahead shows 1-9 of them, 3-5 mm beyond the
+    wall's line). ``(side, mask of its beyond returns)`` or ``None``."""
+    if inside.sum() < MIN_ANOMALY_POINTS:
+        return None
+    face = float(np.median(u[inside]))
+    near = np.abs(u[inside] - face) <= 0.003 + 2.0 * tol[inside]
+    if near.mean() < 0.8:
+        return None
+    on_face = beyond & (np.abs(u - face) <= 0.003 + 2.0 * tol)
+    signs = {float(x) for x in np.sign(v[on_face])}
+    if len(signs) != 1 or np.any(beyond & ~on_face):
+        return None
+    sgn = signs.pop()
+    return sgn, beyond & (np.sign(v) == sgn)
 
 
 def _side_wall(u: NDArray, v: NDArray, sgn: float, big_r: float) -> tuple[float, float, float]:
