@@ -9,7 +9,8 @@ size as the diameter, this method fits lines, using the clamped diameter:
    ``alpha`` in the sensor frame, taken into the pipe frame with the pose).
 2. **Walls.** A robust line is fitted to the wall returns of each side (``|v|`` near the clamped
    radius, before the structure); their mean offset and slope give the in-plane sensor offset
-   and tilt, which are removed (the thesis assumes both zero).
+   and tilt, which are removed (the thesis assumes both zero), when the two lines are parallel
+   and no wider apart than the diameter (else returns through an opening posed as a wall).
 3. **Classes.** Returns are ``wall`` (``| |v| - R | <= tol``), ``beyond`` (farther from the
    axis) or ``inside``; ``tol`` follows the sensor noise model in ``scan.spec``.
 4. **Openings.** A side with enough beyond returns has an outgoing pipe: a robust orthogonal line
@@ -19,7 +20,13 @@ size as the diameter, this method fits lines, using the clamped diameter:
    is the mid-line (or the far wall moved in by the radius); where it crosses the incoming axis
    is the distance. Two openings, or a pipe that visibly goes on (returns on the incoming
    wall's line well beyond the structure, or far ahead near the axis, not on an outgoing
-   pipe's walls), make a junction.
+   pipe's walls), make a junction. Each return's residual is scaled to its own range noise
+   (a wall seen head on takes the whole range error); where the incoming wall ends (between
+   its last return and the first beam through the opening) must match the outgoing pipe's
+   near wall, ``L - R tan(theta / 2)``: with it, every standard angle (45, 90, 135 deg) is
+   tried, since a far opening's few returns fit them alike. A side with too few beyond
+   returns for an opening still is one when they lie on the face seen ahead (an end wall
+   never returns beyond the wall's line).
 5. **No opening.** Inside returns on one line across the axis are a closure (end wall) at
    their mean ``u``; otherwise a reducer: the most frequent inner ``|v|`` is the new radius and
    a robust line ``|v|(u)`` through the taper gives where it starts. Beyond returns on both
