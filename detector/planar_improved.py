@@ -9,7 +9,8 @@ size as the diameter, this method fits lines, using the clamped diameter:
    ``alpha`` in the sensor frame, taken into the pipe frame with the pose).
 2. **Walls.** A robust line is fitted to the wall returns of each side (``|v|`` near the clamped
    radius, before the structure); their mean offset and slope give the in-plane sensor offset
-   and tilt, which are removed (the thesis assumes both zero).
+   and tilt, which are removed (the thesis assumes both zero), when the two lines are parallel
+   and no wider apart than the diameter (else returns through an opening posed as a wall).
 3. **Classes.** Returns are ``wall`` (``| |v| - R | <= tol``), ``beyond`` (farther from the
    axis) or ``inside``; ``tol`` follows the sensor noise model in ``scan.spec``.
 4. **Openings.** A side with enough beyond returns has an outgoing pipe: a robust orthogonal line
@@ -19,7 +20,13 @@ size as the diameter, this method fits lines, using the clamped diameter:
    is the mid-line (or the far wall moved in by the radius); where it crosses the incoming axis
    is the distance. Two openings, or a pipe that visibly goes on (returns on the incoming
    wall's line well beyond the structure, or far ahead near the axis, not on an outgoing
-   pipe's walls), make a junction.
+   pipe's walls), make a junction. Each return's residual is scaled to its own range noise
+   (a wall seen head on takes the whole range error); where the incoming wall ends (between
+   its last return and the first beam through the opening) must match the outgoing pipe's
+   near wall, ``L - R tan(theta / 2)``: with it, every standard angle (45, 90, 135 deg) is
+   tried, since a far opening's few returns fit them alike. A side with too few beyond
+   returns for an opening still is one when they lie on the face seen ahead (an end wall
+   never returns beyond the wall's line).
 5. **No opening.** Inside returns on one line across the axis are a closure (end wall) at
    their mean ``u``; otherwise a reducer: the most frequent inner ``|v|`` is the new radius and
    a robust line ``|v|(u)`` through the taper gives where it starts. Beyond returns on both
@@ -166,27 +173,16 @@ def _detect(
     u = pts[:, 0].copy()
     v = pts @ e_lat
     # per-return radial tolerance from the sensor model
-    _, sig_r = radial_noise(scan.spec, ranges, np.abs(np.sin(beta)), np.abs(np.cos(beta)))
+    sig_range, sig_r = radial_noise(scan.spec, ranges, np.abs(np.sin(beta)), np.abs(np.cos(beta)))
     tol = tol_floor + noise_k * sig_r
     # --- in-plane offset and tilt from the two walls
     if refine_axis:
-        fits = []
-        for sgn in (1.0, -1.0):
-            m = (np.sign(v) == sgn) & (np.abs(np.abs(v) - big_r) < 0.3 * big_r)
-            if m.sum() >= 6:
-                order = np.argsort(u[m])
-                um, vm = u[m][order], v[m][order]
-                um, vm = um[: max(6, int(0.6 * um.size))], vm[: max(6, int(0.6 * vm.size))]
-                if float(um[-1] - um[0]) > 0.02:
-                    fits.append((sgn, *robust_line(um, vm, 1e-12, 2e-4)))
-        if len(fits) == 2:
-            off = 0.5 * (fits[0][1] + fits[1][1])
-            slope = 0.5 * (fits[0][2] + fits[1][2])
-            if abs(off) < 0.5 * big_r and abs(slope) < math.tan(math.radians(8.0)):
-                ang = math.atan(slope)
-                ca, sa = math.cos(ang), math.sin(ang)
-                u, v = ca * u + sa * (v - off), -sa * u + ca * (v - off)
-                diag.update(plane_offset=off, plane_tilt_deg=math.degrees(ang))
+        frame = _wall_frame(u, v, big_r, float(np.median(tol)))
+        if frame is not None:
+            off, ang = frame
+            ca, sa = math.cos(ang), math.sin(ang)
+            u, v = ca * u + sa * (v - off), -sa * u + ca * (v - off)
+            diag.update(plane_offset=off, plane_tilt_deg=math.degrees(ang))
     a = np.abs(v)
     e = a - big_r
     wall = np.abs(e) <= tol
@@ -206,8 +202,78 @@ def _detect(
     if sides and not (
         len(sides) == 2 and inside.sum() < 0.3 * beyond.sum() and _parallel(u, v, sides)
     ):
-        return _openings(u, v, a, big_r, sides, inside, wall, e_lat, pose, tol_med, diag)
+        return _openings(u, v, a, big_r, sides, inside, wall, e_lat, pose, tol_med, sig_range, diag)
+    if not sides:
+        side = _face_opening(u, v, beyond, inside, tol)
+        if side is not None:
+            det = _openings(
+                u, v, a, big_r, [side], inside, wall, e_lat, pose, tol_med, sig_range, diag
+            )
+            if det.kind != Kind.STRAIGHT:
+                diag["face_opening"] = True
+                return det
     return detect_axisymmetric(u, a, big_r, inside, beyond, tol_med, diag)
+
+
+def _face_opening(
+    u: NDArray, v: NDArray, beyond: NDArray, inside: NDArray, tol: NDArray
+) -> tuple[float, NDArray] | None:
+    """A side opening too narrow for the count of :data:`MIN_OPENING_POINTS`: beyond returns
+    of one side only, lying on the face seen ahead (inside returns on one line across the
+    axis, within the tolerance). An end wall never returns beyond the wall's line, so such a
+    return is a beam that went through an opening on that side and met the far wall of the
+    turn seen head on (a 60 mm mitre 25-40 cm ahead shows 1-9 of them, 3-5 mm beyond the
+    wall's line). ``(side, mask of its beyond returns)`` or ``None``."""
+    if inside.sum() < MIN_ANOMALY_POINTS:
+        return None
+    face = float(np.median(u[inside]))
+    near = np.abs(u[inside] - face) <= 0.003 + 2.0 * tol[inside]
+    if near.mean() < 0.8:
+        return None
+    on_face = beyond & (np.abs(u - face) <= 0.003 + 2.0 * tol)
+    signs = {float(x) for x in np.sign(v[on_face])}
+    if len(signs) != 1 or np.any(beyond & ~on_face):
+        return None
+    sgn = signs.pop()
+    return sgn, beyond & (np.sign(v) == sgn)
+
+
+def _side_wall(u: NDArray, v: NDArray, sgn: float, big_r: float) -> tuple[float, float, float]:
+    """Robust line ``v = a + b u`` through the nearest wall returns of side ``sgn``:
+    ``(a, b, standard error of b)``; NaNs when the side has too few or too short a wall."""
+    nan = (math.nan, math.nan, math.nan)
+    m = (np.sign(v) == sgn) & (np.abs(np.abs(v) - big_r) < 0.3 * big_r)
+    if m.sum() < 6:
+        return nan
+    order = np.argsort(u[m])
+    keep = max(6, int(0.6 * order.size))
+    um, vm = u[m][order][:keep], v[m][order][:keep]
+    if float(um[-1] - um[0]) <= 0.02:
+        return nan
+    a, b = robust_line(um, vm, 1e-12, 2e-4)
+    s = max(mad_sigma(vm - (a + b * um)), 2e-4)
+    return a, b, s / math.sqrt(max(float(np.sum((um - um.mean()) ** 2)), 1e-12))
+
+
+def _wall_frame(u: NDArray, v: NDArray, big_r: float, tol: float) -> tuple[float, float] | None:
+    """The in-plane sensor offset (m) and tilt (rad) from the two incoming walls, or ``None``
+    when they do not look like one pipe's walls: both lines must be parallel (slopes within
+    three standard errors and 0.5 deg) and no farther apart than the diameter plus the
+    tolerance (a plane through the pipe never sees its walls wider apart). Returns through an
+    opening near the sensor (a tee's branch seen from 15-20 cm, whose far wall lies near the
+    incoming wall's line) otherwise pass for a wall and tilt the frame by 1-3 deg."""
+    a1, b1, s1 = _side_wall(u, v, 1.0, big_r)
+    a2, b2, s2 = _side_wall(u, v, -1.0, big_r)
+    if not all(math.isfinite(x) for x in (a1, b1, s1, a2, b2, s2)):
+        return None
+    if abs(b1 - b2) > 3.0 * math.hypot(s1, s2) + math.tan(math.radians(0.5)):
+        return None
+    if a1 - a2 > 2.0 * big_r + 3.0 * tol:
+        return None
+    off, slope = 0.5 * (a1 + a2), 0.5 * (b1 + b2)
+    if abs(off) >= 0.5 * big_r or abs(slope) >= math.tan(math.radians(8.0)):
+        return None
+    return off, math.atan(slope)
 
 
 def _parallel(u: NDArray, v: NDArray, sides: list) -> bool:
@@ -230,6 +296,7 @@ def _openings(
     e_lat: NDArray,
     pose: SensorInPipe,
     tol: float,
+    sig_range: NDArray,
     diag: dict[str, Any],
 ) -> Detection:
     options: list[StructureOption] = []
@@ -245,7 +312,12 @@ def _openings(
         u0 = float(np.percentile(uc, 2))
         sel = m | (inside & (u >= u0))
         pu, pv = u[sel], v[sel] * sgn
-        fit = _fit_outgoing(pu, pv, big_r, u0, tol)
+        corner = _corner(u[wall & (np.sign(v) == sgn) & (u < u0)], u0, tol)
+        # a return's error lies along its beam: across a wall seen head on it is the whole
+        # range noise (4.6 mm at 46 cm for the YDLidar X4), not the small radial tolerance;
+        # its residual is scaled so that three of its sigmas meet the robust cut-off
+        scale = np.minimum(1.0, max(tol, 0.0015) / np.maximum(3.0 * sig_range[sel], 1e-12))
+        fit = _fit_outgoing(pu, pv, big_r, u0, tol, corner, scale)
         if fit is None:
             continue
         big_l, theta, rho, rms, n_sup = fit
@@ -291,13 +363,48 @@ def _line_res(pu: NDArray, pv: NDArray, x: NDArray) -> NDArray:
     return np.abs(qu * math.sin(x[1]) - pv * math.cos(x[1])) - x[2]
 
 
+def _corner(u_wall: NDArray, u0: float, tol: float) -> tuple[float, float] | None:
+    """Where the turn-side incoming wall ends, ``(u, sigma)`` in metres, or ``None`` when no
+    wall return precedes the opening: between the last wall return before the opening and
+    ``u0``, where the first beam through it crossed the wall's line (uniform between the two,
+    plus the tolerance for the returns' own noise)."""
+    if u_wall.size == 0:
+        return None
+    last = float(np.max(u_wall))
+    gap = max(u0 - last, 0.0)
+    return 0.5 * (last + u0), math.hypot(gap / math.sqrt(12.0), tol)
+
+
+def _corner_penalty(x: NDArray, big_r: float, corner: tuple[float, float] | None) -> float:
+    """Squared normalised miss of the outgoing pipe ``x = (L, theta, rho)``'s near wall, which
+    meets the incoming wall at ``L - R tan(theta / 2)``, from the observed corner (0 without
+    one)."""
+    if corner is None:
+        return 0.0
+    pred = float(x[0]) - big_r * math.tan(0.5 * float(x[1]))
+    return ((pred - corner[0]) / corner[1]) ** 2
+
+
 def _fit_outgoing(
-    pu: NDArray, pv: NDArray, big_r: float, u0: float, tol: float
+    pu: NDArray,
+    pv: NDArray,
+    big_r: float,
+    u0: float,
+    tol: float,
+    corner: tuple[float, float] | None = None,
+    scale: NDArray | None = None,
 ) -> tuple[float, float, float, float, int] | None:
     """Robust fit of the outgoing pipe's walls (side folded to ``v > 0``): ``(L, theta, rho,
-    rms, support)``; the clamped radius unless a free one fits significantly better."""
+    rms, support)``; the clamped radius unless a free one fits significantly better.
+    ``corner``: the incoming wall's observed end (:func:`_corner`); ``scale``: per-return
+    factors on the residuals (1: the tolerance fits the return's noise)."""
     if pu.size < 5:
         return None
+    sc = np.ones(pu.size) if scale is None else scale
+
+    def res_fn(x: NDArray) -> NDArray:
+        return _line_res(pu, pv, x) * sc
+
     c0 = max(3.0 * tol, 0.004)
     thetas = np.radians(np.arange(15.0, 166.0, 5.0))
     l_grid = u0 + np.linspace(-0.5 * big_r, 3.0 * big_r, 15)
@@ -305,7 +412,7 @@ def _fit_outgoing(
     res = (
         np.abs(qu[:, :, None] * np.sin(thetas)[None, None, :] - pv[None, :, None] * np.cos(thetas))
         - big_r
-    )  # (L, n, T)
+    ) * sc[None, :, None]  # (L, n, T)
     cost = np.minimum(res * res, c0 * c0).mean(axis=1)
     # the turn-side incoming wall ends where the outgoing pipe's near wall meets it, at
     # L - R tan(theta / 2): this rules out the mirror solution behind a wall seen head on
@@ -319,12 +426,12 @@ def _fit_outgoing(
     lower = np.array([-0.5, math.radians(5.0), big_r])
     upper = np.array([3.0, math.radians(175.0), big_r])
     x_eq, r_eq, w_eq = robust_gauss_newton(
-        lambda x: _line_res(pu, pv, x), x0, np.array([1e-5, 1e-5, 1e-5]), c=2.0 * c0,
+        res_fn, x0, np.array([1e-5, 1e-5, 1e-5]), c=2.0 * c0,
         iterations=10, lower=lower, upper=upper, c_final=c_fin,
     )  # fmt: skip
     lower[2], upper[2] = 0.4 * big_r, 1.6 * big_r
     x_fr, r_fr, w_fr = robust_gauss_newton(
-        lambda x: _line_res(pu, pv, x), x_eq, np.array([1e-5, 1e-5, 1e-5]), c=2.0 * c_fin,
+        res_fn, x_eq, np.array([1e-5, 1e-5, 1e-5]), c=2.0 * c_fin,
         iterations=8, lower=lower, upper=upper, c_final=c_fin,
     )  # fmt: skip
     cost_eq, cost_fr = tukey_cost(r_eq, c_fin), tukey_cost(r_fr, c_fin)
@@ -332,7 +439,10 @@ def _fit_outgoing(
     sigma2 = max(2.0 * cost_fr / n_in, (0.3e-3) ** 2)
     lr = 2.0 * (cost_eq - cost_fr) / sigma2
     x, r, w = (x_fr, r_fr, w_fr) if lr > 12.0 else (x_eq, r_eq, w_eq)
-    x, r, w = _snap_standard(pu, pv, (x, r, w), c_fin, sigma2, lower, upper, free=lr > 12.0)
+    x, r, w = _snap_standard(
+        res_fn, (x, r, w), c_fin, sigma2, lower, upper, free=lr > 12.0,
+        corner=corner, big_r=big_r,
+    )  # fmt: skip
     rms = float(np.sqrt(np.sum(w * r * r) / max(float(w.sum()), 1e-9)))
     if not np.all(np.isfinite(x)):
         return None
@@ -340,38 +450,74 @@ def _fit_outgoing(
 
 
 def _snap_standard(
-    pu: NDArray,
-    pv: NDArray,
+    res_fn: Any,
     fit: tuple[NDArray, NDArray, NDArray],
     c_fin: float,
     sigma2: float,
     lower: NDArray,
     upper: NDArray,
     free: bool,
+    corner: tuple[float, float] | None = None,
+    big_r: float = 0.0,
 ) -> tuple[NDArray, NDArray, NDArray]:
-    """The outgoing pipe held at the nearest standard fitting angle (45, 90 or 135 deg) when
-    it lies within ``SNAP_WITHIN`` and the returns allow it (likelihood ratio at most
-    ``SNAP_LR``): one plane's returns through a far opening fix the angle loosely (under
-    YDLidar X4 noise a tee's branch 40 cm ahead was fitted 60-120 deg), and the distance
-    moves with it. ``fit``: ``(x, residuals, weights)`` of the free fit, returned when the
-    angle is not held."""
+    """The outgoing pipe held at a standard fitting angle (45, 90 or 135 deg) when the
+    returns allow it (likelihood ratio against the free fit at most ``SNAP_LR``): one plane's
+    returns through a far opening fix the angle loosely (under YDLidar X4 noise a tee's branch
+    40 cm ahead was fitted 45-135 deg), and the distance moves with it. The standard angle
+    within ``SNAP_WITHIN`` of the free fit is tried; with the incoming wall's end seen
+    (``corner``, see :func:`_corner`), every standard angle is, and the likelihood ratio
+    counts how far each puts that end from where it was seen: the far wall's few returns
+    alone fit 45, 90 and 135 deg alike, where the wall ends tells them apart.
+    ``fit``: ``(x, residuals, weights)`` of the free fit, returned when no angle is held."""
     x, r, _ = fit
-    std = min(STANDARD_ANGLES, key=lambda a: abs(a - float(x[1])))
-    if abs(std - float(x[1])) > SNAP_WITHIN or abs(std - float(x[1])) < 1e-9:
-        return fit
-    lo, hi = lower.copy(), upper.copy()
-    lo[1] = hi[1] = std
-    if not free:
-        lo[2] = hi[2] = float(x[2])
-    x0 = np.array([float(x[0]), std, float(x[2])])
-    x_s, r_s, w_s = robust_gauss_newton(
-        lambda q: _line_res(pu, pv, q), x0, np.array([1e-5, 1e-5, 1e-5]), c=2.0 * c_fin,
-        iterations=8, lower=lo, upper=hi, c_final=c_fin,
-    )  # fmt: skip
-    if not np.all(np.isfinite(x_s)):
-        return fit
-    lr = 2.0 * (tukey_cost(r_s, c_fin) - tukey_cost(r, c_fin)) / sigma2
-    return (x_s, r_s, w_s) if lr <= SNAP_LR else fit
+    theta = float(x[1])
+    cands = [a for a in STANDARD_ANGLES if abs(a - theta) <= SNAP_WITHIN or corner is not None]
+    pen_free = _corner_penalty(x, big_r, corner)
+    best: tuple[float, tuple[NDArray, NDArray, NDArray]] | None = None
+    for std in cands:
+        if abs(std - theta) < 1e-9:
+            return fit
+        lo, hi = lower.copy(), upper.copy()
+        lo[1] = hi[1] = std
+        if not free:
+            lo[2] = hi[2] = float(x[2])
+        x0 = np.array([float(x[0]), std, float(x[2])])
+        if corner is not None:
+            x0[0] = _held_start(res_fn, x0, c_fin, sigma2, big_r, corner)
+        x_s, r_s, w_s = robust_gauss_newton(
+            res_fn, x0, np.array([1e-5, 1e-5, 1e-5]), c=2.0 * c_fin,
+            iterations=8, lower=lo, upper=hi, c_final=c_fin,
+        )  # fmt: skip
+        if not np.all(np.isfinite(x_s)):
+            continue
+        lr = 2.0 * (tukey_cost(r_s, c_fin) - tukey_cost(r, c_fin)) / sigma2
+        lr += _corner_penalty(x_s, big_r, corner) - pen_free
+        if best is None or lr < best[0]:
+            best = (lr, (x_s, r_s, w_s))
+    return best[1] if best is not None and best[0] <= SNAP_LR else fit
+
+
+def _held_start(
+    res_fn: Any,
+    x0: NDArray,
+    c_fin: float,
+    sigma2: float,
+    big_r: float,
+    corner: tuple[float, float],
+) -> float:
+    """Starting distance (m) of an outgoing pipe held at angle ``x0[1]`` and radius ``x0[2]``:
+    the best, on a 1 mm grid within 1.5 R of where the observed corner puts it, of the robust
+    cost of the returns plus the corner's miss (both in units of the noise); a start at the
+    free fit's distance leaves a few far returns outside the cut-off and the fit stays
+    there."""
+    l_c = corner[0] + big_r * math.tan(0.5 * float(x0[1]))
+    best_l, best = l_c, math.inf
+    for big_l in np.arange(l_c - 1.5 * big_r, l_c + 1.5 * big_r, 0.001):
+        q = np.array([float(big_l), float(x0[1]), float(x0[2])])
+        cost = 2.0 * tukey_cost(res_fn(q), c_fin) / sigma2 + _corner_penalty(q, big_r, corner)
+        if cost < best:
+            best_l, best = float(big_l), cost
+    return best_l
 
 
 def detect_axisymmetric(
