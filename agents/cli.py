@@ -465,8 +465,8 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     from agents.scripted import SCRIPTED_AGENTS
+    from detector.vocab import DETECTORS
     from pipe_env.envs import FIDELITIES
-    from pipe_env.envs.sensing_model import DETECTORS
     from pipe_env.lidar import PRESETS
 
     agents = sorted(SCRIPTED_AGENTS)

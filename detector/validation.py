@@ -5,7 +5,7 @@ Every checked argument, configuration field and file entry fails the same way::
     <where>: <field> = <value>: <problem>; allowed: <what is allowed>
 
 for example ``fittings[3].position = [0.0, nan, 1.0]: not finite; allowed: three finite numbers
-(m)`` or ``NetworkConfig.max_bend_angle = 2.5: out of range; allowed: 0.524 to 1.571 (rad)``.
+(m)`` or ``NetworkConfig.roll_angle_step = 2.5: out of range; allowed: 0.0175 to 1.571 (rad)``.
 ``where`` (a file name, a class) is optional. The error is an :class:`ArgumentError`, a
 ``ValueError`` with the parts as attributes, so callers can catch ``ValueError`` as before and
 tools can read ``field``.
@@ -72,7 +72,7 @@ class ArgumentError(ValueError):
         return ArgumentError(self.field, self.value, self.allowed, self.problem, place)
 
     def __reduce__(self) -> tuple[Any, ...]:  # picklable across worker processes
-        return (ArgumentError, (self.field, self.value, self.allowed, self.problem, self.where))
+        return (type(self), (self.field, self.value, self.allowed, self.problem, self.where))
 
 
 def fail(

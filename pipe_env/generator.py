@@ -86,7 +86,7 @@ class NetworkConfig:
         max_retries: whole-network attempts before giving up.
 
     Deprecated (for one version): ``bend_angle_range``, ``bend_angle_step`` and ``roll_step``
-    in degrees are accepted with a ``DeprecationWarning`` and converted to the fields above.
+    in degrees are accepted with a ``FutureWarning`` and converted to the fields above.
     """
 
     n_fittings: int = 8
@@ -142,7 +142,7 @@ class NetworkConfig:
         warnings.warn(
             f"NetworkConfig.{old} (degrees) is deprecated and will be removed; use {new} "
             "(radians) instead",
-            DeprecationWarning,
+            FutureWarning,  # shown by default: configs come from files, not from code
             stacklevel=4,
         )
         name = f"NetworkConfig.{old}"

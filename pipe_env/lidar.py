@@ -257,11 +257,11 @@ class RotatingLidar:
         threads: int = 1,
     ) -> None:
         if not isinstance(world, PipeWorld):
-            raise fail("world", type(world).__name__, "a PipeWorld", "wrong type")
+            raise fail("world", world, "a PipeWorld", f"a {type(world).__name__}")
         if isinstance(spec, str):
             spec = get_preset(spec)
         if not isinstance(spec, LidarSpec):
-            raise fail("spec", spec, "a LidarSpec or a preset name", "wrong type")
+            raise fail("spec", spec, "a LidarSpec or a preset name", f"a {type(spec).__name__}")
         _need_number(servo_step, "servo_step", 0.0, math.pi, "rad", low_open=True)
         _need_number(servo_range, "servo_range", servo_step, 2 * math.pi, "rad")
         check_choice("mode", mode, MODES)
@@ -326,6 +326,13 @@ class RotatingLidar:
         return self.n_planes * self.plane_period
 
     # ---------------------------------------------------------------- scanning
+    def close(self) -> None:
+        """Release the ray caster's worker threads (the MuJoCo backend with ``threads > 1``);
+        casting again after this runs on one thread."""
+        close = getattr(self._caster, "close", None)
+        if close is not None:
+            close()
+
     def scan(
         self,
         body_pose: Pose | Callable[[float], Pose],
@@ -526,10 +533,10 @@ def _need_number(
 
 def _need_rng(rng: Any) -> None:
     if not isinstance(rng, np.random.Generator):
-        raise fail("rng", type(rng).__name__, "a numpy.random.Generator", "wrong type")
+        raise fail("rng", rng, "a numpy.random.Generator", f"a {type(rng).__name__}")
 
 
 def _checked(pose: Any, name: str) -> Pose:
     if not isinstance(pose, Pose):
-        raise fail(name, type(pose).__name__, "a detector.geometry.Pose", "wrong type")
+        raise fail(name, pose, "a detector.geometry.Pose", f"a {type(pose).__name__}")
     return pose

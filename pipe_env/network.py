@@ -42,14 +42,8 @@ from detector.geometry import Pose
 from detector.validation import check_vector, fail
 from pipe_env.fittings import FittingGeometry, build_fitting
 from pipe_env.network_elements import (
-    BEND_ANGLE_RANGE,
-    BEND_RADIUS_RANGE,
-    MAX_EXTENT,
-    MAX_TAPER_HALF_ANGLE,
     NETWORK_DIAMETER_RANGE,
     SCHEMA_VERSION,
-    TAPER_LENGTH_RANGE,
-    WALL_CLEARANCE,
     Fitting,
     Run,
 )
@@ -70,14 +64,6 @@ if TYPE_CHECKING:
     from pipe_env.centreline import Centreline, CentrelinePoint
 
 __all__ = [
-    "BEND_ANGLE_RANGE",
-    "BEND_RADIUS_RANGE",
-    "MAX_EXTENT",
-    "MAX_TAPER_HALF_ANGLE",
-    "NETWORK_DIAMETER_RANGE",
-    "SCHEMA_VERSION",
-    "TAPER_LENGTH_RANGE",
-    "WALL_CLEARANCE",
     "Fitting",
     "PipeNetwork",
     "Run",

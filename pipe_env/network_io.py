@@ -103,9 +103,9 @@ def spec_errors(where: str | None = None) -> Iterator[None]:
     except (ValueError, ArithmeticError, TypeError, IndexError, KeyError) as exc:
         err = _fail(
             "network",
-            type(exc).__name__,
+            "(the spec)",
             "valid geometry (check the fittings' positions and the runs' diameters)",
-            f"invalid geometry ({exc})" if isinstance(exc, ValueError) else "invalid geometry",
+            f"invalid geometry ({type(exc).__name__}: {exc})",
         )
         raise (err.within(where) if where else err) from None
 

@@ -242,7 +242,7 @@ class Robot:
 
     def __init__(self, config: RobotConfig | None = None) -> None:
         if config is not None and not isinstance(config, RobotConfig):
-            raise fail("config", type(config).__name__, "a RobotConfig", "wrong type")
+            raise fail("config", config, "a RobotConfig", f"a {type(config).__name__}")
         self.config = config or RobotConfig()
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None

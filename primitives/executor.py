@@ -54,7 +54,7 @@ from pipe_env.lidar import LidarSpec, RotatingLidar
 from pipe_env.network import PipeNetwork
 from pipe_env.robot import Robot, RobotConfig, quat_of
 from pipe_env.world import CONTACT_PAIR_POOL, NearContacts, PipeWorld, build_world
-from primitives.command import ANCHOR_POS, ANCHOR_ROT, ANCHOR_ROT_STRAIGHT, DriveCommand
+from primitives.command import DriveCommand
 from primitives.path import DrivenPath
 from primitives.rotations import orthonormal, rx, rz
 from primitives.sequences import Sequence
@@ -75,15 +75,7 @@ from primitives.steps import (
 from primitives.telemetry import Telemetry
 from primitives.vclamp import CLAMP_SIDE, VClamp
 
-#: Re-exported: the drive command's dead bands and the clamping side.
-__all__ = [
-    "ANCHOR_POS",
-    "ANCHOR_ROT",
-    "ANCHOR_ROT_STRAIGHT",
-    "CLAMP_SIDE",
-    "Executor",
-    "SequenceOutcome",
-]
+__all__ = ["Executor", "SequenceOutcome"]
 
 #: Control period, s (50 Hz).
 CONTROL_DT = 0.02
@@ -249,7 +241,7 @@ class _ScanStop(Exception):
 
 
 class Executor:
-    """Runs sequences on ``robot`` in ``world``; ``lidar`` scans on :class:`Scan` steps.
+    """Runs sequences on ``robot`` in ``world``; ``lidar`` scans on :class:`Sweep` steps.
 
     Args:
         world: a world built with the robot (``build_world(..., customize=robot.customize)``).
@@ -834,7 +826,7 @@ class Executor:
         on_scan: OnScan | None = None,
         rng: np.random.Generator | None = None,
     ) -> SequenceOutcome:
-        """Execute ``sequence``; ``on_scan`` is called after each :class:`Scan` step and may
+        """Execute ``sequence``; ``on_scan`` is called after each :class:`Sweep` step and may
         return ``"stop"`` to end the sequence early (status ``done``)."""
         if not isinstance(sequence, Sequence):
             raise ValueError(f"sequence must be a Sequence, got {type(sequence).__name__}")

@@ -89,6 +89,12 @@ def test_config_errors_name_the_env_and_unknown_arguments_fail() -> None:
 
 
 def test_option_columns_are_named_and_bound_the_space() -> None:
+    # the observation's column order is part of the API: trained policies depend on it
+    assert OPTION_FEATURES == (
+        "valid", "straight", "reducer", "closure", "bend", "junction", "back_out", "distance",
+        "diameter", "cos_direction", "sin_direction", "angle", "confidence", "taken",
+        "goal_alignment",
+    )  # fmt: skip
     assert OPTION_FEATURES == tuple(c.name for c in OPTION_COLUMNS)
     assert [column(n) for n in OPTION_FEATURES] == list(range(len(OPTION_COLUMNS)))
     with pytest.raises(KeyError):

@@ -300,7 +300,7 @@ def test_same_config_and_seed_give_the_recorded_network(name: str) -> None:
 def test_deprecated_degree_fields_give_the_recorded_network(name: str) -> None:
     kwargs = GOLDEN_DEGREE_CONFIGS[name]
     if kwargs:
-        with pytest.warns(DeprecationWarning, match=r"\(degrees\) is deprecated"):
+        with pytest.warns(FutureWarning, match=r"\(degrees\) is deprecated"):
             cfg = NetworkConfig(**kwargs)
     else:
         cfg = NetworkConfig(**kwargs)
@@ -311,17 +311,17 @@ def test_deprecated_degree_fields_give_the_recorded_network(name: str) -> None:
 
 def test_deprecated_degree_fields_warn_naming_the_new_field() -> None:
     with pytest.warns(
-        DeprecationWarning,
+        FutureWarning,
         match=r"NetworkConfig.roll_step \(degrees\) is "
         r"deprecated .* use roll_angle_step \(radians\)",
     ):
         cfg = NetworkConfig.from_dict({"roll_step": 90.0})
     assert cfg.roll_angle_step == math.pi / 2
     assert "roll_step" not in cfg.to_dict() and cfg.to_dict()["roll_angle_step"] == math.pi / 2
-    with pytest.warns(DeprecationWarning, match="use bend_deflection_step"):
+    with pytest.warns(FutureWarning, match="use bend_deflection_step"):
         assert NetworkConfig(bend_angle_step=30.0).bend_deflection_step == math.radians(30.0)
     with pytest.raises(ValueError, match=r"^NetworkConfig.bend_angle_range\[0\] = 10.0: out of"):
-        with pytest.warns(DeprecationWarning):
+        with pytest.warns(FutureWarning):
             NetworkConfig(bend_angle_range=(10.0, 90.0))
     with pytest.raises(ValueError, match=r"NetworkConfig.roll_step = 30.0: given with roll_angle"):
         NetworkConfig(roll_step=30.0, roll_angle_step=0.5)

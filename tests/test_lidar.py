@@ -156,20 +156,20 @@ def test_bad_poses_and_rng_raise_clear_errors(straight_world) -> None:
     rng = np.random.default_rng(0)
     with pytest.raises(ValueError, match="Pose.position must be finite"):
         Pose(np.array([0.0, math.nan, 0.0]), np.eye(3))
-    wrong = r"body_pose = '\w+': wrong type; allowed: a detector.geometry.Pose"
+    wrong = r"body_pose = .*: a \w+; allowed: a detector.geometry.Pose"
     with pytest.raises(ValueError, match=wrong):
         lidar.scan(np.zeros(3), rng)
     with pytest.raises(ValueError, match=wrong):
         lidar.scan_plane((0, 0, 0), 0.0, rng)
     with pytest.raises(ValueError, match="plane_angle"):
         lidar.scan_plane(Pose.identity(), math.nan, rng)
-    with pytest.raises(ValueError, match="rng = .*: wrong type; allowed: a numpy.random.Generator"):
+    with pytest.raises(ValueError, match="rng = 0: a int; allowed: a numpy.random.Generator"):
         lidar.scan(Pose.identity(), 0)
     with pytest.raises(ValueError, match="t0"):
         lidar.scan(Pose.identity(), rng, t0=math.nan)
     moving = RotatingLidar(straight_world, "ideal", servo_step=math.radians(30), mode="continuous")
     with pytest.raises(
-        ValueError, match=r"body_pose\(0.0\) = .*: wrong type; allowed: a detector.geometry.Pose"
+        ValueError, match=r"body_pose\(0.0\) = None: a NoneType; allowed: a detector.geometry.Pose"
     ):
         moving.scan(lambda t: None, rng)
 

@@ -225,26 +225,28 @@ def _run_navigate(sc: Scenario, net: PipeNetwork, seed: int) -> dict[str, Any]:
     from pipe_env.envs import K_OPTIONS, PipeExploreEnv, PipeNavEnv, oracle_of
 
     env = gym.make(f"pipenav/{sc.env}", max_episode_steps=sc.max_decisions, **env_kwargs(sc, net))
-    agent = _make_agent(sc, env)
-    obs, info = env.reset(seed=seed)
-    agent.reset()
-    back_outs = 0
-    log = _DetectionLog()
-    log.note(info)
-    done = False
-    while not done:
-        action = agent.act(obs, info)
-        if action == K_OPTIONS - 1 and info["action_mask"][action]:
-            back_outs += 1
-        obs, _, term, trunc, info = env.step(action)
+    try:  # a full-fidelity world is released even when the agent or a step raises
+        agent = _make_agent(sc, env)
+        obs, info = env.reset(seed=seed)
+        agent.reset()
+        back_outs = 0
+        log = _DetectionLog()
         log.note(info)
-        done = term or trunc
-    base = env.unwrapped
-    assert isinstance(base, (PipeNavEnv, PipeExploreEnv)), type(base)
-    path = oracle_of(env).driven_path()
-    runs_visited = {net.nearest_centreline_point(p).run_id for p in path} - {None}
-    fidelity = base.config.fidelity
-    env.close()
+        done = False
+        while not done:
+            action = agent.act(obs, info)
+            if action == K_OPTIONS - 1 and info["action_mask"][action]:
+                back_outs += 1
+            obs, _, term, trunc, info = env.step(action)
+            log.note(info)
+            done = term or trunc
+        base = env.unwrapped
+        assert isinstance(base, (PipeNavEnv, PipeExploreEnv)), type(base)
+        path = oracle_of(env).driven_path()
+        runs_visited = {net.nearest_centreline_point(p).run_id for p in path} - {None}
+        fidelity = base.config.fidelity
+    finally:
+        env.close()
     return {
         "is_success": bool(info["is_success"]),
         "jams": int(info["jams"]),

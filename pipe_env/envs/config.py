@@ -30,8 +30,8 @@ from detector.validation import (
     check_number,
     fail,
 )
+from detector.vocab import DETECTORS
 from pipe_env.envs.fidelity import FIDELITIES
-from pipe_env.envs.sensing_model import DETECTORS
 from pipe_env.generator import NetworkConfig
 from pipe_env.lidar import PRESETS, LidarSpec
 from pipe_env.network import PipeNetwork
@@ -141,12 +141,14 @@ class EnvConfig:
             )
         try:
             return NetworkConfig.from_dict(value)
+        except ArgumentError as exc:
+            field = exc.field.removeprefix("NetworkConfig.")
+            raise fail(
+                f"network_config.{field}", exc.value, exc.allowed, exc.problem, self.env_name
+            ) from None
         except (TypeError, ValueError) as exc:
             raise fail(
-                "network_config",
-                value,
-                f"a valid NetworkConfig dict ({exc})",
-                where=self.env_name,
+                "network_config", value, "a NetworkConfig dict", str(exc), self.env_name
             ) from None
 
     def _lidar(self) -> LidarSpec:

@@ -102,6 +102,12 @@ class _FromConfig:
     def __get__(self, env: Any, owner: type | None = None) -> Any:
         return self if env is None else getattr(env.config, self.name)
 
+    def __set__(self, env: Any, value: Any) -> None:
+        raise AttributeError(
+            f"{self.name} is read-only: pass it to the constructor (gymnasium.make(..., "
+            f"{self.name}=...)); the environment's settings are its frozen config"
+        )
+
 
 class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
     """The decision loop both environments share (see the module docstring and the two
@@ -617,9 +623,6 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         state["_renderer"] = None
         state["_world_for_render"] = None
         return state
-
-
-_DecisionEnv = DecisionEnv  # the former private name
 
 
 class PipeNavEnv(DecisionEnv[NavConfig, GoalTask]):

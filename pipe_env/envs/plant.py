@@ -38,9 +38,9 @@ from detector.geometry import (
     wrap_angle,
 )
 from detector.options import StructureOption, match_option, option_vector
-from detector.vocab import StrEnum
+from detector.vocab import DETECTORS, StrEnum
 from pipe_env.envs.fidelity import Fidelity
-from pipe_env.envs.sensing_model import DETECTORS, DetectionErrorModel, error_model_for
+from pipe_env.envs.sensing_model import DetectionErrorModel, error_model_for
 from pipe_env.ground_truth import options_at
 from pipe_env.network import PipeNetwork
 from pipe_env.robot_limits import MAX_TURN, ROBOT_DIAMETER_RANGE, drivable

@@ -43,7 +43,7 @@ from detector.fusion import StructureTracker, TrackState
 from detector.geometry import Pose
 from detector.options import StructureOption, option_order
 from detector.scan import Scan
-from detector.vocab import Method
+from detector.vocab import DETECTORS, Method
 from pipe_env.envs.fidelity import Fidelity
 from pipe_env.envs.plant import (
     BACK_OUT,
@@ -53,7 +53,6 @@ from pipe_env.envs.plant import (
     detection_record,
     goal_edge_position,
 )
-from pipe_env.envs.sensing_model import DETECTORS
 from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
 from pipe_env.network import PipeNetwork
@@ -517,6 +516,8 @@ class PhysicalPlant:
         """Release the MuJoCo world (model, data, contact pairs, the LiDAR's ray caster) and
         the episode's logs and last sweep; :meth:`reset` builds the world again if the plant
         is used after closing."""
+        if self.executor is not None and self.executor.lidar is not None:
+            self.executor.lidar.close()
         self.executor = None  # type: ignore[assignment]
         self.robot = None  # type: ignore[assignment]
         self.world = None
