@@ -265,7 +265,7 @@ def _outgoing_returns(
     near_idx = even_subsample(np.flatnonzero(near_inside.reshape(-1)), cfg.fit_points // 2)
     sub_idx = np.concatenate([lobe_idx, near_idx])
     if any_roll:
-        sub_idx = even_subsample(np.flatnonzero(keep.reshape(-1)), cfg.fit_points)
+        sub_idx = even_subsample(np.flatnonzero(keep.reshape(-1)), cfg.far_wall_fit_points)
     p_all = np.ascontiguousarray(cloud.points_at(sub_idx))
     lobe_pts = []
     u_edge = math.inf
@@ -550,6 +550,7 @@ def _far_wall_way(
     if balanced and abs(f.theta - 0.5 * math.pi) < math.radians(20.0):
         # the far wall runs on evenly to both sides of the axis' foot: a pipe across,
         # both its ways open (a tee seen from its stem)
+        diag["across_balanced"] = True
         return [f, flipped]
     # (the returns' mean position along the axis, from its foot, m)
     lean = float(np.sum(w * along)) / max(float(w.sum()), 1e-9)

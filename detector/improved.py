@@ -908,7 +908,50 @@ def _detect_in_pipe_frame(
         undetermined = alt.diagnostics.get("reason") == "far wall: way on undetermined"
         if undetermined or alt.kind == Kind.JUNCTION:
             det.diagnostics["far_wall_way_undetermined"] = True
-        return alt if alt.kind == Kind.BEND else det
+        if alt.kind == Kind.BEND:
+            return alt
+        if (
+            alt.kind == Kind.JUNCTION
+            and alt.diagnostics.get("across_balanced", False)
+            and det.diagnostics.get("closure_curvature_lr", 0.0) >= cfg.across_min_curvature_lr
+            and _across_sides_open(cloud, big_r, alt, cfg)
+        ):
+            return alt
+        return det
     if alt.kind != Kind.STRAIGHT and alt.confidence > det.confidence:
         return alt
     return det
+
+
+def _across_sides_open(cloud: PipeCloud, big_r: float, alt: Detection, cfg: ImprovedConfig) -> bool:
+    """Does the pipe across ``alt`` (a far wall seen head-on, both ways open) leave both its
+    ways open? The far wall of a pipe across (a tee seen from its stem) and of a 90 deg turn
+    is the same surface; they differ next to it: towards each way of a pipe across the
+    incoming wall ends ``R |cos dphi|`` before the reference point (``dphi`` from the way's
+    roll), while on the side away from a turn it runs on to ``R cos dphi`` past it. A side is
+    closed when at least ``cfg.hole_min_returns`` returns within ``cfg.across_side_roll`` of
+    its roll, within ``cfg.across_side_band`` radii of the reference point along the axis,
+    lie on the wall (within ``cfg.across_wall_k`` times their radial noise, plus
+    ``cfg.hole_min_step``). Only a wall the scan sees near the structure can show that: as
+    many returns on the wall within ``cfg.across_view_band`` radii before it (and a radius
+    short of it) on both sides, else the ways stay undecided (a sensor whose beams meet the
+    wall that far ahead beyond its largest incidence sees neither)."""
+    big_l = alt.distance
+    u = cloud.xyz_v[0]
+    phi = np.arctan2(cloud.xyz_v[2], cloud.xyz_v[1])
+    past = np.abs(u - big_l) < cfg.across_side_band * big_r
+    view = (u > big_l - cfg.across_view_band * big_r) & (u < big_l - big_r)
+    on_wall = np.abs(cloud.r_v - big_r) <= cfg.hole_min_step + cfg.across_wall_k * cloud.sigma_v
+    y_axis, z_axis = cloud.pose.rotation[:, 1], cloud.pose.rotation[:, 2]
+    ways = [o for o in alt.options if not o.is_straight_on]
+    if len(ways) != 2:
+        return False
+    for o in ways:
+        perp = math.cos(o.direction) * y_axis + math.sin(o.direction) * z_axis
+        roll = math.atan2(float(perp[2]), float(perp[1]))
+        near_roll = np.abs(np.angle(np.exp(1j * (phi - roll)))) < cfg.across_side_roll
+        if np.count_nonzero(past & on_wall & near_roll) >= cfg.hole_min_returns:
+            return False
+        if np.count_nonzero(view & on_wall & near_roll) < cfg.hole_min_returns:
+            return False
+    return True

@@ -37,6 +37,21 @@ class ImprovedConfig:
         far_wall_min_lean: a far wall seen head-on gives the way on only when its returns lie
             on average at least this many radii (of the clamped pipe) along the fitted axis
             from the axis' foot; nearer, the direction is undetermined and no turn is reported.
+        across_side_band, across_side_roll, across_wall_k: ... and when neither way is closed:
+            the side away from a 90 deg turn (whose far wall is the same) shows the incoming
+            wall running on past the reference point, in returns within ``across_side_roll``
+            (rad) of the way's roll, within ``across_side_band`` radii of it along the axis,
+            within ``across_wall_k`` times their radial noise of the wall ...
+        across_view_band: ... and the scan sees the wall near the structure on both sides
+            (within this many radii before the reference point, a radius short of it).
+        far_wall_fit_points: returns used to fit a far wall seen head-on as an outgoing pipe
+            of unknown roll (its roll rests on the wall's curvature alone, which range noise
+            blurs: more returns than ``fit_points``).
+        across_min_curvature_lr: a far wall seen head-on that runs on evenly to both sides of
+            the axis' foot (a pipe across: a tee seen from its stem) replaces an end wall that
+            looks flat within the range noise when the wall's curvature is at least this
+            likely (likelihood ratio of a quadratic surface over a plane): an end wall is
+            flat, so a wall that curves this clearly is not one.
         all_round: a region of returns beyond the wall covering this fraction of the azimuth
             goes all round the axis (and is split into its deep parts).
         snap_within: a junction's branch fitted within this angle of a standard fitting angle
@@ -144,6 +159,12 @@ class ImprovedConfig:
     radius_lr_per_branch: float = 12.0
     max_radius_correction: float = 0.003
     far_wall_min_lean: float = 0.15
+    across_min_curvature_lr: float = 100.0
+    far_wall_fit_points: int = 1200
+    across_side_band: float = 0.6
+    across_side_roll: float = math.radians(45.0)
+    across_wall_k: float = 3.0
+    across_view_band: float = 2.5
     all_round: float = 0.75
     snap_within: float = math.radians(25.0)
     snap_lr: float = 10.0
@@ -225,6 +246,12 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "radius_lr_per_branch": (float, 0.0, True, math.inf, "a finite number >= 0"),
     "max_radius_correction": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
     "far_wall_min_lean": (float, 0.0, True, 100.0, "a number in [0, 100] (radii)"),
+    "across_side_band": (float, 0.0, False, 10.0, "a number in (0, 10] (radii)"),
+    "across_side_roll": (float, 0.0, False, math.pi, "an angle in (0, pi] rad"),
+    "across_wall_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "across_view_band": (float, 1.0, False, 100.0, "a number in (1, 100] (radii)"),
+    "far_wall_fit_points": (int, 10, True, 100000, "an integer in [10, 100000]"),
+    "across_min_curvature_lr": (float, 0.0, True, 1e6, "a number in [0, 1e6]"),
     "all_round": (float, 0.0, False, 1.0, "a number in (0, 1]"),
     "snap_within": (float, 0.0, True, math.pi / 2, "a number in [0, pi/2] rad"),
     "snap_lr": (float, 0.0, True, math.inf, "a finite number >= 0"),
