@@ -998,8 +998,9 @@ def _planar_section(r: dict[str, Any]) -> str:
                 "no ('cannot be detected')",
                 f"{ls['identified']['thesis']} of {ls['n']}",
                 f"{ls['identified']['improved']} of {ls['n']}",
-                "as the thesis: the bend's opening lies inside the minimum range; the improved "
-                "method reads the far wall of the turn as an end wall until the last places.",
+                "thesis method as the thesis: the bend's opening lies inside the minimum "
+                "range; where the improved method misses it, it reads the far wall of the "
+                "turn as an end wall.",
             ],
         ],
     )
