@@ -43,7 +43,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.branches import STANDARD_BRANCH_ANGLES
 from detector.detection import Detection
+from detector.improved_config import ImprovedConfig
 from detector.options import StructureOption
 from detector.pipe_cloud import fit_confidence, radius_mode, robust_line
 from detector.robust import mad_sigma, robust_gauss_newton, tukey_cost, tukey_weights
@@ -57,9 +59,9 @@ MIN_OPENING_POINTS = 3
 MIN_ANOMALY_POINTS = 4
 #: Standard fitting angles (rad) an outgoing pipe fitted within ``SNAP_WITHIN`` of is tried
 #: held at, and held when the likelihood ratio against the free fit is at most ``SNAP_LR``.
-STANDARD_ANGLES = (math.radians(45.0), math.radians(90.0), math.radians(135.0))
-SNAP_WITHIN = math.radians(25.0)
-SNAP_LR = 10.0
+STANDARD_ANGLES = tuple(float(a) for a in STANDARD_BRANCH_ANGLES)
+SNAP_WITHIN = ImprovedConfig().snap_within
+SNAP_LR = ImprovedConfig().snap_lr
 #: An outgoing pipe fitted less deflected than this (rad) is no opening (the layouts' bends
 #: turn by 30 deg or more; under range noise a few stray returns beyond one wall fit a pipe
 #: leaving at 13-15 deg, whose distance spoiled a tee's).

@@ -17,8 +17,6 @@ from numpy.typing import NDArray
 
 from pipe_env.robot import Robot
 
-#: The telemetry arrays' names, in row order.
-FIELDS = ("times", "sensor_position", "poses", "contact_force", "joint_angles", "lag")
 #: Rows the buffer starts with; it doubles when full.
 MIN_ROWS = 256
 

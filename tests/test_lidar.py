@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from detector.geometry import Pose, rotation_about
-from detector.scan import Scan
+from detector.scan import SCAN_ARRAYS, Scan
 from pipe_env import layouts
 from pipe_env.lidar import BACKENDS, PRESETS, LidarSpec, RotatingLidar, get_preset
 from pipe_env.meshes import circle_segments, polygon_radius
@@ -540,17 +540,7 @@ def test_scan_npz_round_trip(tmp_path, closure_world) -> None:
     path = tmp_path / "scan.npz"
     scan.save(path)
     back = Scan.load(path)
-    for name in (
-        "ranges",
-        "valid",
-        "beam_angles",
-        "plane_angles",
-        "timestamps",
-        "positions",
-        "rotations",
-        "nominal_positions",
-        "nominal_rotations",
-    ):
+    for name in SCAN_ARRAYS:
         assert getattr(back, name).tobytes() == getattr(scan, name).tobytes(), name
     assert back.spec == scan.spec and back.metadata == scan.metadata
     for frame in ("sensor", "world", "nominal"):

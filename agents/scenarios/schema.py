@@ -27,6 +27,7 @@ from detector.validation import (
 )
 from detector.vocab import DETECTORS
 from pipe_env.envs.fidelity import Fidelity
+from pipe_env.network_io import START_KEYS as POSE_KEYS
 
 __all__ = [
     "DEFAULT_TIMEOUT_S",
@@ -87,7 +88,7 @@ NETWORK_KEYS = {
 }
 SENSOR_KEYS = frozenset({"preset", "overrides", "misalignment"})
 MISALIGNMENT_KEYS = frozenset({"offset", "tilt_deg"})
-START_KEYS = frozenset({"position", "forward", "up", "rotation"})
+START_KEYS = frozenset(POSE_KEYS)
 DETECT_KEYS = frozenset({"distances", "planar"})
 #: Sensor positions before the structure in detect mode when the file gives none, m.
 DEFAULT_DETECT_DISTANCES = (0.4, 0.3, 0.2, 0.1)

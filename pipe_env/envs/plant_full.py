@@ -45,6 +45,7 @@ from detector.options import StructureOption, option_order
 from detector.scan import Scan
 from detector.vocab import DETECTORS, Method
 from pipe_env.envs.fidelity import Fidelity
+from pipe_env.envs.observations import SCAN_SHAPE
 from pipe_env.envs.plant import (
     BACK_OUT,
     Decision,
@@ -69,7 +70,6 @@ BLIND_SWEEPS = 2
 MAX_DRIVE = 4.0
 #: The goal counts as reached within this distance along the network, metres.
 GOAL_TOLERANCE = 0.05
-SCAN_IMAGE_SHAPE = (16, 32)
 #: Sweeps in place to confirm a structure first seen within the trigger distance.
 CONFIRM_RESCANS = 3
 #: The robot steers at the pipe-axis point this far ahead of its sensor, m.
@@ -84,7 +84,7 @@ SPARSE_REACH = 0.6
 SPARSE_INTERVAL = 0.15
 
 
-def scan_image(scan: Scan, shape: tuple[int, int] = SCAN_IMAGE_SHAPE) -> NDArray[np.float32]:
+def scan_image(scan: Scan, shape: tuple[int, int] = SCAN_SHAPE) -> NDArray[np.float32]:
     """A low-resolution range image: planes x beams binned to ``shape``, the nearest return per
     bin divided by the sensor's maximum range; 1 where a bin has no return."""
     max_range = float(scan.spec.get("max_range", 2.0))
