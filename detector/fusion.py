@@ -18,9 +18,17 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
   an edge or a reference point grows with the square of the distance. A scan at 20 cm counts
   16 times as much as one at 40 cm (with the square, a few scans from 45 cm placed a 60 mm tee
   4 mm too far, enough for the turn into its branch to jam).
+- **Votes on what the structure is with a gentler weight.** The kind and which ways on exist
+  are discrete: a scan's vote on them is its confidence divided by
+  ``max(distance, near_distance)^vote_power`` (2 by default: the number of returns a sweep
+  puts on a feature falls with the square of the distance). With the trust weight one scan
+  from 17 cm outweighed five from 26-42 cm, so a single near misreading (a phantom way, a
+  missed branch) decided the kind. A way is reported when the scans that saw it carry at
+  least ``way_share`` of the track's votes and number at least ``way_min_hits`` (all of the
+  track's scans if it has fewer).
 - **Associates** a detection with the track when its kind family (closure, reducer, bend or
-  junction) agrees and its reference point lies within ``gate`` (+ 10 % of the distance) of the
-  track's. Ways on are matched by direction (within ``direction_gate``).
+  junction) agrees and its reference point lies within ``gate`` (+ ``gate_growth`` times the
+  distance) of the track's. Ways on are matched by direction (within ``direction_gate``).
 - **Confirms with hysteresis.** Each consistent detection adds its confidence to the track's
   evidence, each inconsistent or straight detection (while the structure should be visible)
   removes ``miss_penalty``. A track is *confirmed* once its evidence reaches ``confirm_evidence``
@@ -66,6 +74,12 @@ from detector.vocab import Kind
 #: Ways on deflected less than this count as straight on (their direction is 0), radians.
 STRAIGHT_ON = math.radians(2.0)
 
+#: A scan's trust weight (geometry) is its confidence over its distance to this power
+#: (dimensionless): an inverse-variance weight, see the module docstring.
+TRUST_POWER = 4
+#: Confidences below this (dimensionless) count as this in weights and votes.
+MIN_CONFIDENCE = 1e-3
+
 _FAMILY = {"closure": "end", "reducer": "reducer", "bend": "turn", "junction": "turn"}
 
 
@@ -79,11 +93,15 @@ class _Way:
     hits: int
     radius_sum: float = 0.0  # weighted sum of long-bend radii, over the scans that gave one
     radius_weight: float = 0.0
+    votes: float = 0.0  # sum of the vote weights of the scans that saw this way
 
-    def add(self, v: NDArray[np.float64], diameter: float, radius: float, w: float) -> None:
+    def add(
+        self, v: NDArray[np.float64], diameter: float, radius: float, w: float, vote: float
+    ) -> None:
         self.vec_sum = self.vec_sum + v * w
         self.diam_sum += diameter * w
         self.weight += w
+        self.votes += vote
         self.hits += 1
         if radius > 0.0:
             self.radius_sum += radius * w
@@ -106,9 +124,9 @@ class _Way:
         return self.radius_sum / self.radius_weight
 
 
-def _new_way(v: NDArray[np.float64], diameter: float, radius: float, w: float) -> _Way:
+def _new_way(v: NDArray[np.float64], diameter: float, radius: float, w: float, vote: float) -> _Way:
     way = _Way(np.zeros(3), 0.0, 0.0, 0)
-    way.add(v, diameter, radius, w)
+    way.add(v, diameter, radius, w, vote)
     return way
 
 
@@ -119,7 +137,10 @@ class _Track:
     axis_sum: NDArray[np.float64]
     weight: float
     ways: list[_Way]
+    #: vote weight per kind (see ``StructureTracker.vote_power``)
     kind_weight: dict[str, float]
+    #: sum of the vote weights of the track's scans
+    votes: float = 0.0
     evidence: float = 0.0
     hits: int = 0
     confirmed: bool = False
@@ -178,7 +199,8 @@ class StructureTracker:
         confirm_count: consistent detections needed to confirm.
         confirm_evidence: evidence (sum of confidences minus penalties) needed to confirm.
         miss_penalty: evidence lost per inconsistent or straight detection.
-        gate: association distance of reference points, metres (+ 10 % of the distance).
+        gate: association distance of reference points, metres (+ ``gate_growth`` times the
+            distance).
         direction_gate: association angle of ways on, radians.
         near_distance: distances below this weigh like this one, metres.
         handover_distance: closer than this, disagreeing detections are ignored, metres.
@@ -188,6 +210,13 @@ class StructureTracker:
         place_spacing: sensor positions closer than this count as one place, m.
         contest_range: earlier scans contest a new track with structures they saw at most this
             far ahead, m.
+        vote_power: a scan's vote on the kind and on which ways exist is its confidence over
+            ``max(distance, near_distance)`` to this power (dimensionless, 0-4; the trust
+            weight of the geometry uses 4).
+        way_min_hits: scans that must have seen a way on for it to be reported (fewer if the
+            track has fewer scans).
+        way_share: share of the track's votes (0-1] the scans that saw a way must carry.
+        gate_growth: the association gates grow by this many metres per metre of distance.
     """
 
     def __init__(
@@ -203,6 +232,10 @@ class StructureTracker:
         contested_places: int = 2,
         place_spacing: float = 0.01,
         contest_range: float = 0.5,
+        vote_power: float = 2.0,
+        way_min_hits: int = 2,
+        way_share: float = 0.5,
+        gate_growth: float = 0.1,
     ) -> None:
         for name, value in (
             ("confirm_evidence", confirm_evidence),
@@ -214,6 +247,8 @@ class StructureTracker:
             ("pass_margin", pass_margin),
             ("place_spacing", place_spacing),
             ("contest_range", contest_range),
+            ("way_share", way_share),
+            ("gate_growth", gate_growth),
         ):
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"StructureTracker.{name} must be positive, got {value!r}")
@@ -224,6 +259,16 @@ class StructureTracker:
                 f"StructureTracker.contested_places must be >= 1, got {contested_places}"
             )
         self.confirm_count = int(confirm_count)
+        if not (math.isfinite(vote_power) and 0.0 <= vote_power <= 4.0):
+            raise ValueError(f"StructureTracker.vote_power must be in [0, 4], got {vote_power!r}")
+        if int(way_min_hits) < 1:
+            raise ValueError(f"StructureTracker.way_min_hits must be >= 1, got {way_min_hits}")
+        self.vote_power = float(vote_power)
+        self.way_min_hits = int(way_min_hits)
+        if way_share > 1.0:
+            raise ValueError(f"StructureTracker.way_share must be in (0, 1], got {way_share!r}")
+        self.way_share = float(way_share)
+        self.gate_growth = float(gate_growth)
         self.contested_places = int(contested_places)
         self.place_spacing = float(place_spacing)
         self.contest_range = float(contest_range)
@@ -346,7 +391,9 @@ class StructureTracker:
                 math.cos(o.direction) * e_y + math.sin(o.direction) * e_z
             )
             ways.append((rot @ v, o.diameter, o.bend_radius))
-        w = max(det.confidence, 1e-3) / max(abs(dist), self.near_distance) ** 4
+        conf = max(det.confidence, MIN_CONFIDENCE)
+        w = conf / max(abs(dist), self.near_distance) ** TRUST_POWER
+        vote = conf / max(abs(dist), self.near_distance) ** self.vote_power
         return {
             "family": _FAMILY.get(det.kind, det.kind),
             "kind": det.kind,
@@ -354,6 +401,7 @@ class StructureTracker:
             "axis": axis_w,
             "ways": ways,
             "weight": w,
+            "vote": vote,
             "confidence": det.confidence,
             "distance": dist,
             "pos": pos,
@@ -364,7 +412,7 @@ class StructureTracker:
     def _contested(self, obs: dict[str, Any]) -> bool:
         """True unless scans from another place saw a structure where this one is and none
         saw one beyond it."""
-        gate = self.gate + 0.1 * abs(obs["distance"])
+        gate = self.gate + self.gate_growth * abs(obs["distance"])
         elsewhere = [
             float((ref - obs["near_ref"]) @ obs["axis"])
             for p, ref in self._seen
@@ -379,8 +427,9 @@ class StructureTracker:
             ref_sum=obs["ref"] * w,
             axis_sum=obs["axis"] * w,
             weight=w,
-            ways=[_new_way(v, d, rb, w) for v, d, rb in obs["ways"]],
-            kind_weight={obs["kind"]: w},
+            ways=[_new_way(v, d, rb, w, obs["vote"]) for v, d, rb in obs["ways"]],
+            kind_weight={obs["kind"]: obs["vote"]},
+            votes=obs["vote"],
             evidence=obs["confidence"],
             hits=1,
             places=[obs["pos"].copy()],
@@ -390,7 +439,7 @@ class StructureTracker:
     def _consistent(self, tr: _Track, obs: dict[str, Any]) -> bool:
         if tr.family != obs["family"]:
             return False
-        gate = self.gate + 0.1 * abs(obs["distance"])
+        gate = self.gate + self.gate_growth * abs(obs["distance"])
         return float(np.linalg.norm(obs["ref"] - tr.reference)) <= gate
 
     def _fuse(self, tr: _Track, obs: dict[str, Any]) -> None:
@@ -398,7 +447,8 @@ class StructureTracker:
         tr.ref_sum = tr.ref_sum + obs["ref"] * w
         tr.axis_sum = tr.axis_sum + obs["axis"] * w
         tr.weight += w
-        tr.kind_weight[obs["kind"]] = tr.kind_weight.get(obs["kind"], 0.0) + w
+        tr.kind_weight[obs["kind"]] = tr.kind_weight.get(obs["kind"], 0.0) + obs["vote"]
+        tr.votes += obs["vote"]
         tr.evidence += obs["confidence"]
         tr.hits += 1
         tr.seen_from(obs["pos"], self.place_spacing)
@@ -409,9 +459,23 @@ class StructureTracker:
                 if ang < best_ang:
                     best, best_ang = way, ang
             if best is not None and best_ang <= self.direction_gate:
-                best.add(v, d, rb, w)
+                best.add(v, d, rb, w, obs["vote"])
             else:
-                tr.ways.append(_new_way(v, d, rb, w))
+                tr.ways.append(_new_way(v, d, rb, w, obs["vote"]))
+
+    def _kept_ways(self, tr: _Track) -> list[_Way]:
+        """The ways on a track reports: those seen by at least ``way_min_hits`` of its scans
+        (all of them if it has fewer) whose scans carry at least ``way_share`` of the track's
+        votes. A way glimpsed from far away is dropped once nearer scans disagree; a way
+        one near scan invents is dropped while the other scans do not see it. If none
+        qualifies, the way with the most votes."""
+        need = min(self.way_min_hits, tr.hits)
+        ways = [
+            w
+            for w in tr.ways
+            if len(tr.ways) == 1 or (w.votes >= self.way_share * tr.votes and w.hits >= need)
+        ]
+        return ways or [max(tr.ways, key=lambda w: w.votes)]
 
     def _distance(self, tr: _Track, pos: NDArray) -> float:
         return float((tr.reference - pos) @ tr.axis)
@@ -422,11 +486,7 @@ class StructureTracker:
             return TrackState(False, Detection.straight(confidence=0.5), 0.0, 0, False, None)
         pos, rot = self._last_pose
         dist = self._distance(tr, pos)
-        # keep the ways that carry at least half of the track's trust weight (a way glimpsed
-        # from far away is dropped once nearer, better scans disagree)
-        ways = [w for w in tr.ways if w.weight * 2 >= tr.weight or len(tr.ways) == 1]
-        if not ways:
-            ways = [max(tr.ways, key=lambda w: w.weight)]
+        ways = self._kept_ways(tr)
         kind = tr.kind
         if kind in (Kind.BEND, Kind.JUNCTION):
             kind = "junction" if len(ways) > 1 else "bend"
