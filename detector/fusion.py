@@ -25,7 +25,8 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
   from 17 cm outweighed five from 26-42 cm, so a single near misreading (a phantom way, a
   missed branch) decided the kind. A way is reported when the scans that saw it carry at
   least ``way_share`` of the track's votes and number at least ``way_min_hits`` (all of the
-  track's scans if it has fewer).
+  track's scans if it has fewer), or number ``way_keep_hits``: close up the detector loses
+  a tee's branch seen from its stem more often than it invents one consistently.
 - **Associates** a detection with the track when its kind family (closure, reducer, bend or
   junction) agrees and its reference point lies within ``gate`` (+ ``gate_growth`` times the
   distance) of the track's. Ways on are matched by direction (within ``direction_gate``).
@@ -83,7 +84,7 @@ MIN_CONFIDENCE = 1e-3
 _FAMILY = {"closure": "end", "reducer": "reducer", "bend": "turn", "junction": "turn"}
 
 
-@dataclass
+@dataclass(eq=False)
 class _Way:
     """One way on of a track, in the world frame, as weighted sums."""
 
@@ -122,6 +123,11 @@ class _Way:
         if self.radius_weight <= 0.0 or 2.0 * self.radius_weight < self.weight:
             return 0.0
         return self.radius_sum / self.radius_weight
+
+
+def _separation(a: _Way, b: _Way) -> float:
+    """Angle between the directions of two ways, radians."""
+    return math.acos(max(-1.0, min(1.0, float(a.direction @ b.direction))))
 
 
 def _new_way(v: NDArray[np.float64], diameter: float, radius: float, w: float, vote: float) -> _Way:
@@ -216,6 +222,7 @@ class StructureTracker:
         way_min_hits: scans that must have seen a way on for it to be reported (fewer if the
             track has fewer scans).
         way_share: share of the track's votes (0-1] the scans that saw a way must carry.
+        way_keep_hits: a way seen by this many scans is reported whatever its share.
         gate_growth: the association gates grow by this many metres per metre of distance.
     """
 
@@ -235,6 +242,7 @@ class StructureTracker:
         vote_power: float = 2.0,
         way_min_hits: int = 2,
         way_share: float = 0.5,
+        way_keep_hits: int = 3,
         gate_growth: float = 0.1,
     ) -> None:
         for name, value in (
@@ -265,6 +273,9 @@ class StructureTracker:
             raise ValueError(f"StructureTracker.way_min_hits must be >= 1, got {way_min_hits}")
         self.vote_power = float(vote_power)
         self.way_min_hits = int(way_min_hits)
+        if int(way_keep_hits) < 1:
+            raise ValueError(f"StructureTracker.way_keep_hits must be >= 1, got {way_keep_hits}")
+        self.way_keep_hits = int(way_keep_hits)
         if way_share > 1.0:
             raise ValueError(f"StructureTracker.way_share must be in (0, 1], got {way_share!r}")
         self.way_share = float(way_share)
@@ -466,16 +477,26 @@ class StructureTracker:
     def _kept_ways(self, tr: _Track) -> list[_Way]:
         """The ways on a track reports: those seen by at least ``way_min_hits`` of its scans
         (all of them if it has fewer) whose scans carry at least ``way_share`` of the track's
-        votes. A way glimpsed from far away is dropped once nearer scans disagree; a way
-        one near scan invents is dropped while the other scans do not see it. If none
+        votes, and those seen by ``way_keep_hits`` scans however many missed them (unless
+        within twice ``direction_gate`` of a way kept for its votes). A way
+        glimpsed from far away is dropped once nearer scans disagree; a way one near scan
+        invents is dropped while the other scans do not see it; a branch seen consistently
+        is kept when the detector loses it close up (a tee seen from its stem). If none
         qualifies, the way with the most votes."""
+        if len(tr.ways) == 1:
+            return list(tr.ways)
         need = min(self.way_min_hits, tr.hits)
-        ways = [
+        voted = [w for w in tr.ways if w.votes >= self.way_share * tr.votes and w.hits >= need]
+        # a way kept for its hits alone must not be another reading of a voted one (a branch
+        # seen at 60 deg from far, at 90 deg from near: the nearer reading supersedes)
+        seen = [
             w
             for w in tr.ways
-            if len(tr.ways) == 1 or (w.votes >= self.way_share * tr.votes and w.hits >= need)
+            if w not in voted
+            and w.hits >= self.way_keep_hits
+            and all(_separation(w, v) > 2.0 * self.direction_gate for v in voted)
         ]
-        return ways or [max(tr.ways, key=lambda w: w.votes)]
+        return voted + seen or [max(tr.ways, key=lambda w: w.votes)]
 
     def _distance(self, tr: _Track, pos: NDArray) -> float:
         return float((tr.reference - pos) @ tr.axis)

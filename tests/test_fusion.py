@@ -259,17 +259,18 @@ def test_one_near_scan_missing_a_branch_does_not_drop_the_junction():
 
 
 def test_a_branch_the_far_scans_missed_is_kept_once_near_scans_see_it():
-    # the counterpart: from far away a tee's run looks straight-on only (a bend of 0 deg is
-    # not reported, so the far scans see a narrow junction); two nearer scans see the branch:
-    # it is kept, and a way seen by one scan only is kept while the track has one scan
+    # the counterpart: three far scans read a tee's branch at 50 deg, two nearer ones at
+    # 90 deg: the nearer reading supersedes the far one (which, seen three times, would be
+    # kept were it not another reading of the same branch); a way seen by one scan only is
+    # kept while the track has one scan
     tr = StructureTracker()
     run = (0.0, 0.0)
     branch = (math.pi / 2, 0.5)
     s = tr.update(_junction(0.45, [run, branch]), np.array([0.0, 0, 0]), EYE)
     assert len(s.detection.options) == 2
     tr.reset()
-    for x in (0.55, 0.6, 0.65):
-        tr.update(_junction(1.0 - x, [run, (math.radians(30), 2.0)]), np.array([x, 0, 0]), EYE)
+    for x in (0.55, 0.6, 0.65):  # the branch read at 50 deg: a way of its own (gate 25 deg)
+        tr.update(_junction(1.0 - x, [run, (math.radians(50), 0.5)]), np.array([x, 0, 0]), EYE)
     for x in (0.75, 0.8):
         s = tr.update(_junction(1.0 - x, [run, branch]), np.array([x, 0, 0]), EYE)
     angles = sorted(round(math.degrees(o.angle)) for o in s.detection.options)
@@ -281,3 +282,28 @@ def test_vote_parameters_are_validated():
         StructureTracker(vote_power=-1.0)
     with pytest.raises(ValueError, match="way_min_hits"):
         StructureTracker(way_min_hits=0)
+    with pytest.raises(ValueError, match="way_keep_hits"):
+        StructureTracker(way_keep_hits=0)
+    with pytest.raises(ValueError, match="way_share"):
+        StructureTracker(way_share=1.5)
+
+
+def test_a_branch_seen_consistently_is_kept_when_near_scans_lose_it():
+    # calibration case (tee from its stem, 85 mm, X4): scans from 47, 40 and 35 cm see both
+    # branches, those from 30, 25 and 20 cm only one (the detector loses the other close up).
+    # Three consistent sightings keep the branch: the tee stays a junction.
+    tr = StructureTracker()
+    branches = [(math.pi / 2, -1.03), (math.pi / 2, 2.13)]
+    for x in (0.53, 0.60, 0.65):
+        tr.update(_junction(1.0 - x, branches), np.array([x, 0, 0]), EYE)
+    for x in (0.70, 0.75, 0.80):
+        s = tr.update(bend(1.0 - x, direction=2.13), np.array([x, 0, 0]), EYE)
+    assert s.confirmed and s.detection.kind == "junction"
+    dirs = sorted(o.direction for o in s.detection.options)
+    assert dirs == pytest.approx([-1.03, 2.13], abs=0.01)
+    tr = StructureTracker(way_keep_hits=4)  # without the rule: a bend
+    for x in (0.53, 0.60, 0.65):
+        tr.update(_junction(1.0 - x, branches), np.array([x, 0, 0]), EYE)
+    for x in (0.70, 0.75, 0.80):
+        s = tr.update(bend(1.0 - x, direction=2.13), np.array([x, 0, 0]), EYE)
+    assert s.detection.kind == "bend"
