@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from pathlib import Path
 
@@ -302,6 +303,9 @@ def main() -> None:
         "--failures", action="store_true", help="list the failing samples with their scans"
     )
     parser.add_argument(
+        "--write-docs", action="store_true", help="write the table into docs/benchmarks.md"
+    )
+    parser.add_argument(
         "--write",
         action="store_true",
         help=f"write {OUT.name} (models not calibrated in this run are kept)",
@@ -314,28 +318,44 @@ def main() -> None:
     for p in presets:
         check_choice("presets", p, ("ideal", "ydlidar_x4", "ls02"), where="calibrate_sensing")
     models = {}
-    print(
+    table = [
         "| detector/preset | dist rms cm | diam rms mm | angle rms deg | dir rms deg | gross | "
-        "miss | phantom | misclass | unconfirmed | s |"
-    )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+        "miss | phantom | misclass | unconfirmed | s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    print("\n".join(table))
     for method in methods:
         for preset in presets:
             t0 = time.perf_counter()
             records = run_samples(method, preset, args.samples, args.seed, args.trigger, args.step)
             m = aggregate(f"{method}/{preset}", records)
             models[m["name"]] = m
-            print(row(m, time.perf_counter() - t0), flush=True)
+            table.append(row(m, time.perf_counter() - t0))
+            print(table[-1], flush=True)
             if args.per_kind:
                 for kind in KINDS:
                     sub = [r for r in records if r["kind"] == kind]
                     if sub:
-                        print(row(aggregate(f"{method}/{preset} {kind}", sub)), flush=True)
+                        table.append(row(aggregate(f"{method}/{preset} {kind}", sub)) + " |")
+                        print(table[-1], flush=True)
             if args.failures:
                 for r in records:
                     line = describe_failure(r)
                     if line:
                         print(line, flush=True)
+    if args.write_docs:
+        from benchmarks.report import write_section
+
+        given = [a for a in sys.argv[1:] if a not in ("--write-docs", "--write", "--failures")]
+        write_section(
+            "sensing calibration",
+            f"`python benchmarks/calibrate_sensing.py {' '.join(given)}`\n\n"
+            "The fused estimate at the decision point (sweeps as the full-fidelity loop "
+            "makes them, rescans included; StructureTracker): rms of the ordinary errors, the "
+            "share of ways beyond 2 cm / 5 mm / 5 deg (gross), ways missed, phantom ways per "
+            "structure, structures of the wrong kind, structures never confirmed; seconds in "
+            "the last column.\n\n" + "\n".join(table),
+        )
     if args.write:
         OUT.parent.mkdir(parents=True, exist_ok=True)
         old = json.loads(OUT.read_text()) if OUT.exists() else {}
