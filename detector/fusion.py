@@ -70,6 +70,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from detector.detection import Detection
 from detector.options import StructureOption, option_order
+from detector.validation import check_int, check_number
 from detector.vocab import Kind
 
 #: Ways on deflected less than this count as straight on (their direction is 0), radians.
@@ -245,41 +246,27 @@ class StructureTracker:
         way_keep_hits: int = 3,
         gate_growth: float = 0.1,
     ) -> None:
-        for name, value in (
-            ("confirm_evidence", confirm_evidence),
-            ("miss_penalty", miss_penalty),
-            ("gate", gate),
-            ("direction_gate", direction_gate),
-            ("near_distance", near_distance),
-            ("handover_distance", handover_distance),
-            ("pass_margin", pass_margin),
-            ("place_spacing", place_spacing),
-            ("contest_range", contest_range),
-            ("way_share", way_share),
-            ("gate_growth", gate_growth),
+        where = "StructureTracker"
+        for name, value, unit in (
+            ("confirm_evidence", confirm_evidence, ""),
+            ("miss_penalty", miss_penalty, ""),
+            ("gate", gate, "m"),
+            ("direction_gate", direction_gate, "rad"),
+            ("near_distance", near_distance, "m"),
+            ("handover_distance", handover_distance, "m"),
+            ("pass_margin", pass_margin, "m"),
+            ("place_spacing", place_spacing, "m"),
+            ("contest_range", contest_range, "m"),
+            ("gate_growth", gate_growth, "m/m"),
         ):
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"StructureTracker.{name} must be positive, got {value!r}")
-        if int(confirm_count) < 1:
-            raise ValueError(f"StructureTracker.confirm_count must be >= 1, got {confirm_count}")
-        if int(contested_places) < 1:
-            raise ValueError(
-                f"StructureTracker.contested_places must be >= 1, got {contested_places}"
-            )
-        self.confirm_count = int(confirm_count)
-        if not (math.isfinite(vote_power) and 0.0 <= vote_power <= 4.0):
-            raise ValueError(f"StructureTracker.vote_power must be in [0, 4], got {vote_power!r}")
-        if int(way_min_hits) < 1:
-            raise ValueError(f"StructureTracker.way_min_hits must be >= 1, got {way_min_hits}")
-        self.vote_power = float(vote_power)
-        self.way_min_hits = int(way_min_hits)
-        if int(way_keep_hits) < 1:
-            raise ValueError(f"StructureTracker.way_keep_hits must be >= 1, got {way_keep_hits}")
-        self.way_keep_hits = int(way_keep_hits)
-        if way_share > 1.0:
-            raise ValueError(f"StructureTracker.way_share must be in (0, 1], got {way_share!r}")
-        self.way_share = float(way_share)
+            check_number(name, value, 0.0, None, unit, open_low=True, where=where)
+        self.confirm_count = check_int("confirm_count", confirm_count, 1, where=where)
+        self.vote_power = check_number("vote_power", vote_power, 0.0, 4.0, where=where)
+        self.way_min_hits = check_int("way_min_hits", way_min_hits, 1, where=where)
+        self.way_keep_hits = check_int("way_keep_hits", way_keep_hits, 1, where=where)
+        self.way_share = check_number("way_share", way_share, 0.0, 1.0, open_low=True, where=where)
         self.gate_growth = float(gate_growth)
+        contested_places = check_int("contested_places", contested_places, 1, where=where)
         self.contested_places = int(contested_places)
         self.place_spacing = float(place_spacing)
         self.contest_range = float(contest_range)
