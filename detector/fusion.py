@@ -18,15 +18,14 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
   an edge or a reference point grows with the square of the distance. A scan at 20 cm counts
   16 times as much as one at 40 cm (with the square, a few scans from 45 cm placed a 60 mm tee
   4 mm too far, enough for the turn into its branch to jam).
-- **Votes on what the structure is with a gentler weight.** The kind and which ways on exist
-  are discrete: a scan's vote on them is its confidence divided by
-  ``max(distance, near_distance)^vote_power`` (2 by default: the number of returns a sweep
-  puts on a feature falls with the square of the distance). With the trust weight one scan
-  from 17 cm outweighed five from 26-42 cm, so a single near misreading (a phantom way, a
-  missed branch) decided the kind. A way is reported when the scans that saw it carry at
-  least ``way_share`` of the track's votes and number at least ``way_min_hits`` (all of the
-  track's scans if it has fewer), or number ``way_keep_hits``: close up the detector loses
-  a tee's branch seen from its stem more often than it invents one consistently.
+- **Reports the ways on that enough scans saw.** A way is reported when the scans that saw it
+  number at least ``way_min_hits`` (all of the track's scans if it has fewer) and carry at
+  least ``way_share`` of the track's trust weight, or number ``way_keep_hits`` (unless it lies
+  within twice ``direction_gate`` of a way reported for its weight: another reading of the
+  same way). A single near scan outweighs several far ones, so alone it decided which ways
+  exist: a phantom way in the last scan turned a long bend into a junction, a misread branch
+  turned a tee into a bend. Close up the detector loses a tee's branch seen from its stem more
+  often than it invents one consistently over three scans.
 - **Associates** a detection with the track when its kind family (closure, reducer, bend or
   junction) agrees and its reference point lies within ``gate`` (+ ``gate_growth`` times the
   distance) of the track's. Ways on are matched by direction (within ``direction_gate``).
@@ -79,7 +78,7 @@ STRAIGHT_ON = math.radians(2.0)
 #: A scan's trust weight (geometry) is its confidence over its distance to this power
 #: (dimensionless): an inverse-variance weight, see the module docstring.
 TRUST_POWER = 4
-#: Confidences below this (dimensionless) count as this in weights and votes.
+#: Confidences below this (dimensionless) count as this in the trust weight.
 MIN_CONFIDENCE = 1e-3
 
 _FAMILY = {"closure": "end", "reducer": "reducer", "bend": "turn", "junction": "turn"}
@@ -95,15 +94,11 @@ class _Way:
     hits: int
     radius_sum: float = 0.0  # weighted sum of long-bend radii, over the scans that gave one
     radius_weight: float = 0.0
-    votes: float = 0.0  # sum of the vote weights of the scans that saw this way
 
-    def add(
-        self, v: NDArray[np.float64], diameter: float, radius: float, w: float, vote: float
-    ) -> None:
+    def add(self, v: NDArray[np.float64], diameter: float, radius: float, w: float) -> None:
         self.vec_sum = self.vec_sum + v * w
         self.diam_sum += diameter * w
         self.weight += w
-        self.votes += vote
         self.hits += 1
         if radius > 0.0:
             self.radius_sum += radius * w
@@ -131,9 +126,9 @@ def _separation(a: _Way, b: _Way) -> float:
     return math.acos(max(-1.0, min(1.0, float(a.direction @ b.direction))))
 
 
-def _new_way(v: NDArray[np.float64], diameter: float, radius: float, w: float, vote: float) -> _Way:
+def _new_way(v: NDArray[np.float64], diameter: float, radius: float, w: float) -> _Way:
     way = _Way(np.zeros(3), 0.0, 0.0, 0)
-    way.add(v, diameter, radius, w, vote)
+    way.add(v, diameter, radius, w)
     return way
 
 
@@ -144,10 +139,7 @@ class _Track:
     axis_sum: NDArray[np.float64]
     weight: float
     ways: list[_Way]
-    #: vote weight per kind (see ``StructureTracker.vote_power``)
     kind_weight: dict[str, float]
-    #: sum of the vote weights of the track's scans
-    votes: float = 0.0
     evidence: float = 0.0
     hits: int = 0
     confirmed: bool = False
@@ -217,12 +209,9 @@ class StructureTracker:
         place_spacing: sensor positions closer than this count as one place, m.
         contest_range: earlier scans contest a new track with structures they saw at most this
             far ahead, m.
-        vote_power: a scan's vote on the kind and on which ways exist is its confidence over
-            ``max(distance, near_distance)`` to this power (dimensionless, 0-4; the trust
-            weight of the geometry uses 4).
         way_min_hits: scans that must have seen a way on for it to be reported (fewer if the
             track has fewer scans).
-        way_share: share of the track's votes (0-1] the scans that saw a way must carry.
+        way_share: share of the track's trust weight (0-1] the scans that saw a way must carry.
         way_keep_hits: a way seen by this many scans is reported whatever its share.
         gate_growth: the association gates grow by this many metres per metre of distance.
     """
@@ -240,7 +229,6 @@ class StructureTracker:
         contested_places: int = 2,
         place_spacing: float = 0.01,
         contest_range: float = 0.5,
-        vote_power: float = 2.0,
         way_min_hits: int = 2,
         way_share: float = 0.5,
         way_keep_hits: int = 3,
@@ -261,7 +249,6 @@ class StructureTracker:
         ):
             check_number(name, value, 0.0, None, unit, open_low=True, where=where)
         self.confirm_count = check_int("confirm_count", confirm_count, 1, where=where)
-        self.vote_power = check_number("vote_power", vote_power, 0.0, 4.0, where=where)
         self.way_min_hits = check_int("way_min_hits", way_min_hits, 1, where=where)
         self.way_keep_hits = check_int("way_keep_hits", way_keep_hits, 1, where=where)
         self.way_share = check_number("way_share", way_share, 0.0, 1.0, open_low=True, where=where)
@@ -391,7 +378,6 @@ class StructureTracker:
             ways.append((rot @ v, o.diameter, o.bend_radius))
         conf = max(det.confidence, MIN_CONFIDENCE)
         w = conf / max(abs(dist), self.near_distance) ** TRUST_POWER
-        vote = conf / max(abs(dist), self.near_distance) ** self.vote_power
         return {
             "family": _FAMILY.get(det.kind, det.kind),
             "kind": det.kind,
@@ -399,7 +385,6 @@ class StructureTracker:
             "axis": axis_w,
             "ways": ways,
             "weight": w,
-            "vote": vote,
             "confidence": det.confidence,
             "distance": dist,
             "pos": pos,
@@ -425,9 +410,8 @@ class StructureTracker:
             ref_sum=obs["ref"] * w,
             axis_sum=obs["axis"] * w,
             weight=w,
-            ways=[_new_way(v, d, rb, w, obs["vote"]) for v, d, rb in obs["ways"]],
-            kind_weight={obs["kind"]: obs["vote"]},
-            votes=obs["vote"],
+            ways=[_new_way(v, d, rb, w) for v, d, rb in obs["ways"]],
+            kind_weight={obs["kind"]: w},
             evidence=obs["confidence"],
             hits=1,
             places=[obs["pos"].copy()],
@@ -445,8 +429,7 @@ class StructureTracker:
         tr.ref_sum = tr.ref_sum + obs["ref"] * w
         tr.axis_sum = tr.axis_sum + obs["axis"] * w
         tr.weight += w
-        tr.kind_weight[obs["kind"]] = tr.kind_weight.get(obs["kind"], 0.0) + obs["vote"]
-        tr.votes += obs["vote"]
+        tr.kind_weight[obs["kind"]] = tr.kind_weight.get(obs["kind"], 0.0) + w
         tr.evidence += obs["confidence"]
         tr.hits += 1
         tr.seen_from(obs["pos"], self.place_spacing)
@@ -457,33 +440,33 @@ class StructureTracker:
                 if ang < best_ang:
                     best, best_ang = way, ang
             if best is not None and best_ang <= self.direction_gate:
-                best.add(v, d, rb, w, obs["vote"])
+                best.add(v, d, rb, w)
             else:
-                tr.ways.append(_new_way(v, d, rb, w, obs["vote"]))
+                tr.ways.append(_new_way(v, d, rb, w))
 
     def _kept_ways(self, tr: _Track) -> list[_Way]:
         """The ways on a track reports: those seen by at least ``way_min_hits`` of its scans
         (all of them if it has fewer) whose scans carry at least ``way_share`` of the track's
-        votes, and those seen by ``way_keep_hits`` scans however many missed them (unless
-        within twice ``direction_gate`` of a way kept for its votes). A way
+        trust weight, and those seen by ``way_keep_hits`` scans however many missed them
+        (unless within twice ``direction_gate`` of a way kept for its weight). A way
         glimpsed from far away is dropped once nearer scans disagree; a way one near scan
         invents is dropped while the other scans do not see it; a branch seen consistently
         is kept when the detector loses it close up (a tee seen from its stem). If none
-        qualifies, the way with the most votes."""
+        qualifies, the way with the most weight."""
         if len(tr.ways) == 1:
             return list(tr.ways)
         need = min(self.way_min_hits, tr.hits)
-        voted = [w for w in tr.ways if w.votes >= self.way_share * tr.votes and w.hits >= need]
-        # a way kept for its hits alone must not be another reading of a voted one (a branch
+        weighty = [w for w in tr.ways if w.weight >= self.way_share * tr.weight and w.hits >= need]
+        # a way kept for its hits alone must not be another reading of a weighty one (a branch
         # seen at 60 deg from far, at 90 deg from near: the nearer reading supersedes)
         seen = [
             w
             for w in tr.ways
-            if w not in voted
+            if w not in weighty
             and w.hits >= self.way_keep_hits
-            and all(_separation(w, v) > 2.0 * self.direction_gate for v in voted)
+            and all(_separation(w, v) > 2.0 * self.direction_gate for v in weighty)
         ]
-        return voted + seen or [max(tr.ways, key=lambda w: w.votes)]
+        return weighty + seen or [max(tr.ways, key=lambda w: w.weight)]
 
     def _distance(self, tr: _Track, pos: NDArray) -> float:
         return float((tr.reference - pos) @ tr.axis)

@@ -277,9 +277,7 @@ def test_a_branch_the_far_scans_missed_is_kept_once_near_scans_see_it():
     assert angles == [0, 90]
 
 
-def test_vote_parameters_are_validated():
-    with pytest.raises(ValueError, match="vote_power"):
-        StructureTracker(vote_power=-1.0)
+def test_way_parameters_are_validated():
     with pytest.raises(ValueError, match="way_min_hits"):
         StructureTracker(way_min_hits=0)
     with pytest.raises(ValueError, match="way_keep_hits"):
