@@ -60,6 +60,7 @@ from pipe_env.envs.observations import (
     world_way,
 )
 from pipe_env.envs.oracle import Oracle
+from pipe_env.envs.outcome_log import OutcomeLog
 from pipe_env.envs.plant import Decision, KinematicPlant, Plant, PlantOutcome, PlantStatus
 from pipe_env.envs.sensing_model import error_model_for
 from pipe_env.envs.sources import draw_network, pool_network
@@ -285,6 +286,9 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         #: detection errors of every decision against ground truth
         self.detection_errors: list[dict[str, float]] = []
         self.way_log = WayLog()
+        #: what was sensed at each structure and how each attempted way ended
+        #: (:mod:`pipe_env.envs.outcome_log`)
+        self.outcome_log = OutcomeLog()
         self._reset_events: dict[str, Any] = {}
 
     def _start_episode(self, network: PipeNetwork) -> None:
@@ -331,7 +335,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         choice = self.action_type.choice(self.decision.options, row)
         odo = plant.odometry_pose()
         self.way_log.record(odo.position, world_way(choice, odo))
-        outcome = plant.execute(choice, self.task.target)
+        outcome = self._execute(self.decision, choice)
         self._record(outcome)
         self._after_action(outcome, events)
         if self.jams > jams_before:  # the chosen way, or a drive or single way after it
@@ -437,7 +441,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         """Execute a single way; (True, the decision to offer) when the drive stops here,
         (False, ``dec``) to drive on."""
         plant = self._plant
-        outcome = plant.execute(way, self.task.target)
+        outcome = self._execute(dec, way, auto=True)
         self._record(outcome)
         events["auto_structures"] += 1
         if outcome.status == PlantStatus.GOAL:
@@ -453,6 +457,14 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
                 dec = self._sense_again_after_jam()
         self.decision_points.append(dec.pose.position)
         return True, dec
+
+    def _execute(
+        self, dec: Decision, choice: StructureOption | str, auto: bool = False
+    ) -> PlantOutcome:
+        """Have the plant take ``choice`` at ``dec`` and log the attempt."""
+        outcome = self._plant.execute(choice, self.task.target)
+        self.outcome_log.record_attempt(choice, dec.truth, outcome.status, auto)
+        return outcome
 
     def _sense_again_after_jam(self) -> Decision:
         """The robot backed off the structure that jammed it (on a way the agent chose or
@@ -471,6 +483,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
 
     def _after_sensing(self, dec: Decision) -> None:
         """Record detection errors of a decision against ground truth."""
+        self.outcome_log.record_sensing(dec.options, dec.kind, dec.truth)
         if not dec.options or not dec.truth:
             return
         kind_ok = dec.kind == dec.truth[0].kind
