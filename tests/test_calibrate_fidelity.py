@@ -78,7 +78,9 @@ def test_ks_flags_shifted_errors_and_not_the_same_ones() -> None:
 
 def test_holm_keeps_only_the_flags_that_survive_the_step_down() -> None:
     def comp(p: float) -> cf.Comparison:
-        return cf.Comparison("s", "x", "g", "rate", 0, 0, 0, 1, 1, "fisher", p, significant=p < 0.05)
+        return cf.Comparison(
+            "s", "x", "g", "rate", 0, 0, 0, 1, 1, "fisher", p, significant=p < 0.05
+        )
 
     all_pass = [comp(0.01), comp(0.02), comp(0.04)]  # 0.01 < .05/3, .02 < .05/2, .04 < .05
     cf.holm_correct(all_pass)
