@@ -13,8 +13,9 @@ This module owns the decision loop (:class:`DecisionEnv`): the episode, the plan
 single ways taken automatically, metrics, rendering and pickling. The parts it is built from
 live beside it: the arguments (:mod:`pipe_env.envs.config`), the observation and action types
 (:mod:`pipe_env.envs.observations`, :mod:`pipe_env.envs.actions`), the goal and coverage tasks
-(:mod:`pipe_env.envs.tasks`), where networks come from (:mod:`pipe_env.envs.sources`), and what
-agents may know beyond the observation (:mod:`pipe_env.envs.oracle`).
+(:mod:`pipe_env.envs.tasks`), where networks come from (:mod:`pipe_env.envs.sources`), what
+agents may know beyond the observation (:mod:`pipe_env.envs.oracle`), and the episode's outcome
+accounting (``outcome_log``: :mod:`pipe_env.envs.outcome_log`).
 
 Rendering (``render_mode``): ``"ansi"`` returns the options table as text; ``"rgb_array"``
 returns an image of the robot in the pipe now (480x360, an isometric view following the robot,
