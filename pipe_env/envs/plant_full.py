@@ -32,6 +32,7 @@ detector with the plant's tracker) or :class:`OracleSource` (the plant drawing).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -511,6 +512,17 @@ class PhysicalPlant:
         self._track_state = None
         self.decision = None
         return out
+
+    def watch_motion(self, on_tick: Callable[[float], None] | None) -> float | None:
+        """Call ``on_tick(simulated time, s)`` at every control tick from now on (None: stop);
+        returns the executor's simulated time, s."""
+        self.executor.on_tick = on_tick
+        return float(self.executor.time)
+
+    def body_positions(self) -> NDArray[np.float64] | None:
+        """World positions of the robot's modules, (N, 3) m."""
+        assert self.world is not None
+        return np.array(self.world.data.xpos[self.robot.body_ids])
 
     def close(self) -> None:
         """Release the MuJoCo world (model, data, contact pairs, the LiDAR's ray caster) and
