@@ -17,10 +17,11 @@ of every comparison is estimated more tightly). Each episode's
 
 For each statistic: the fast value, the full value, their difference (full - fast) and a
 test: Fisher's exact test (two-sided) for rates, the two-sample Kolmogorov-Smirnov test for
-per-episode counts and error distributions (their medians shown). ``p < --alpha`` is flagged
-``differs``; ``Holm`` marks the flags that survive the Holm-Bonferroni correction over all the
-tests of the run (with many tests some plain flags are chance). A p above alpha means no
-difference detectable at this sample size, not equality: a few networks detect only large ones.
+per-episode counts (their means shown) and error distributions (their medians shown).
+``p < --alpha`` is flagged ``differs``; ``Holm`` marks the flags that survive the
+Holm-Bonferroni correction over all the tests of the run (with many tests some plain flags are
+chance). A p above alpha means no difference detectable at this sample size, not equality: a
+few networks detect only large ones.
 
 Usage: python benchmarks/calibrate_fidelity.py [--networks 6] [--jobs 1] [--fast-repeats 10]
        [--network-config JSON] [--alpha 0.05] [--json out.json] [--write-docs]
@@ -244,11 +245,18 @@ def distribution_comparison(
     full: Iterable[float],
     unit: str,
     alpha: float = 0.05,
+    centre: str = "median",
 ) -> Comparison:
-    """Two samples compared by their medians and the two-sample KS test."""
+    """Two samples compared by their ``centre`` (``"median"`` or ``"mean"``: the mean for small
+    counts, whose medians hide differences) and the two-sample KS test."""
+    if centre not in ("median", "mean"):
+        raise ValueError(
+            f"distribution_comparison: centre = {centre!r}: not allowed; allowed: median, mean"
+        )
     a, b = np.asarray(list(fast), dtype=float), np.asarray(list(full), dtype=float)
-    ma = float(np.median(a)) if len(a) else math.nan
-    mb = float(np.median(b)) if len(b) else math.nan
+    centre_of = np.median if centre == "median" else np.mean
+    ma = float(centre_of(a)) if len(a) else math.nan
+    mb = float(centre_of(b)) if len(b) else math.nan
     p = ks_p(a, b)
     return Comparison(
         section,
@@ -346,8 +354,9 @@ def _episode_outcomes(
                 "per episode",
                 [e[key] for e in fast],
                 [e[key] for e in full],
-                "count",
+                "mean count",
                 alpha,
+                centre="mean",
             )
         )
     return out
@@ -453,7 +462,7 @@ def markdown(comparisons: list[Comparison], header: str, alpha: float) -> str:
     lines.append(
         f"{len(flagged)} of {tested} tests flag a disagreement at p < {alpha} "
         f"({sum(c.holm for c in flagged)} after the Holm correction); rates: Fisher exact, "
-        "counts and errors: two-sample KS on the values (medians shown)."
+        "counts and errors: two-sample KS on the values (count means, error medians shown)."
     )
     for c in flagged:
         lines.append(

@@ -76,6 +76,15 @@ def test_ks_flags_shifted_errors_and_not_the_same_ones() -> None:
     assert moved.difference == pytest.approx(3.0)
 
 
+def test_counts_are_summarised_by_their_mean() -> None:
+    c = cf.distribution_comparison(
+        "s", "jams/episode", "g", [0, 0, 1], [0, 0, 3], "n", centre="mean"
+    )
+    assert (c.fast, c.full, c.difference) == pytest.approx((1 / 3, 1.0, 2 / 3))
+    with pytest.raises(ValueError, match="centre = 'mode'"):
+        cf.distribution_comparison("s", "x", "g", [1], [1], "n", centre="mode")
+
+
 def test_holm_keeps_only_the_flags_that_survive_the_step_down() -> None:
     def comp(p: float) -> cf.Comparison:
         return cf.Comparison(
