@@ -16,8 +16,9 @@ of every comparison is estimated more tightly). Each episode's
   errors (distance and diameter in mm, angle and direction in deg) at each structure.
 
 For each statistic: the fast value, the full value, their difference (full - fast) and a
-test: Fisher's exact test (two-sided) for rates, the two-sample Kolmogorov-Smirnov test for
-per-episode counts (their means shown) and error distributions (their medians shown).
+test (two-sided): Fisher's exact test for rates, the Mann-Whitney U test for per-episode
+counts (their means shown), the two-sample Kolmogorov-Smirnov test for error distributions
+(their medians shown).
 ``p < --alpha`` is flagged ``differs``; ``Holm`` marks the flags that survive the
 Holm-Bonferroni correction over all the tests of the run (with many tests some plain flags are
 chance). A p above alpha means no difference detectable at this sample size, not equality: a
@@ -159,7 +160,7 @@ class Comparison:
         difference: full - fast.
         n_fast, n_full: the sample sizes (trials of a rate, values of a distribution).
         k_fast, k_full: the events of a rate (None for a distribution).
-        test: ``fisher`` or ``ks``.
+        test: ``fisher``, ``mann-whitney`` or ``ks``.
         p: the two-sided p-value (nan when a side has no sample).
         significant: p < alpha.
         holm: still significant after the Holm-Bonferroni correction over the run's tests.
@@ -197,6 +198,17 @@ def ks_p(fast: Iterable[float], full: Iterable[float]) -> float:
     if len(a) == 0 or len(b) == 0:
         return math.nan
     return float(stats.ks_2samp(a, b).pvalue)
+
+
+def mann_whitney_p(fast: Iterable[float], full: Iterable[float]) -> float:
+    """Two-sided Mann-Whitney U p-value (nan when either side is empty; 1 when every value is
+    the same). For small counts with many ties, where KS is conservative."""
+    a, b = np.asarray(list(fast), dtype=float), np.asarray(list(full), dtype=float)
+    if len(a) == 0 or len(b) == 0:
+        return math.nan
+    if np.all(np.concatenate([a, b]) == a[0]):
+        return 1.0
+    return float(stats.mannwhitneyu(a, b, alternative="two-sided").pvalue)
 
 
 def rate_comparison(
@@ -247,8 +259,9 @@ def distribution_comparison(
     alpha: float = 0.05,
     centre: str = "median",
 ) -> Comparison:
-    """Two samples compared by their ``centre`` (``"median"`` or ``"mean"``: the mean for small
-    counts, whose medians hide differences) and the two-sample KS test."""
+    """Two samples compared by their ``centre`` and a test: ``"median"`` with the two-sample KS
+    test (error distributions), ``"mean"`` with the Mann-Whitney U test (small counts, whose
+    medians hide differences and whose ties make KS conservative)."""
     if centre not in ("median", "mean"):
         raise ValueError(
             f"distribution_comparison: centre = {centre!r}: not allowed; allowed: median, mean"
@@ -257,7 +270,7 @@ def distribution_comparison(
     centre_of = np.median if centre == "median" else np.mean
     ma = float(centre_of(a)) if len(a) else math.nan
     mb = float(centre_of(b)) if len(b) else math.nan
-    p = ks_p(a, b)
+    p = ks_p(a, b) if centre == "median" else mann_whitney_p(a, b)
     return Comparison(
         section,
         statistic,
@@ -268,7 +281,7 @@ def distribution_comparison(
         mb - ma,
         len(a),
         len(b),
-        "ks",
+        "ks" if centre == "median" else "mann-whitney",
         p,
         significant=bool(p < alpha),
     )
@@ -462,7 +475,7 @@ def markdown(comparisons: list[Comparison], header: str, alpha: float) -> str:
     lines.append(
         f"{len(flagged)} of {tested} tests flag a disagreement at p < {alpha} "
         f"({sum(c.holm for c in flagged)} after the Holm correction); rates: Fisher exact, "
-        "counts and errors: two-sample KS on the values (count means, error medians shown)."
+        "counts: Mann-Whitney U (means shown), errors: two-sample KS (medians shown)."
     )
     for c in flagged:
         lines.append(

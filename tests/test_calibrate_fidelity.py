@@ -81,6 +81,13 @@ def test_counts_are_summarised_by_their_mean() -> None:
         "s", "jams/episode", "g", [0, 0, 1], [0, 0, 3], "n", centre="mean"
     )
     assert (c.fast, c.full, c.difference) == pytest.approx((1 / 3, 1.0, 2 / 3))
+    assert c.test == "mann-whitney" and not c.significant
+    # a quarter of the episodes with a jam against none: flagged; the same counts: not
+    none, some = [0] * 80, [0, 0, 0, 1] * 20
+    jams = cf.distribution_comparison("s", "jams", "g", none, some, "n", centre="mean")
+    assert jams.significant and jams.p < 1e-4
+    same = cf.distribution_comparison("s", "jams", "g", none, none, "n", centre="mean")
+    assert same.p == 1.0 and not same.significant
     with pytest.raises(ValueError, match="centre = 'mode'"):
         cf.distribution_comparison("s", "x", "g", [1], [1], "n", centre="mode")
 
