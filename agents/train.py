@@ -164,7 +164,7 @@ def check_init(cfg: TrainConfig) -> dict[str, Any]:
     world). Returns the model's stored data (hyper-parameters, spaces, ``_n_updates``).
 
     Raises:
-        ArgumentError: naming ``init`` (or ``env_kwargs``), the value and what is allowed.
+        ArgumentError: naming ``init``, the value, the problem and what is allowed.
     """
     import gymnasium as gym
     from stable_baselines3.common.save_util import load_from_zip_file
