@@ -8,7 +8,8 @@ loops unless ``--network-config``) in both fidelities: ``full`` once per network
 of every comparison is estimated more tightly). Each episode's
 :class:`pipe_env.envs.outcome_log.OutcomeLog` gives, per fidelity:
 
-- episode outcomes: success rate, decisions, jams and structures per episode;
+- episode outcomes: success rate, decisions, jams and structures per episode, jams while
+  driving to a structure (per structure);
 - jams per attempt by the true structure kind, by the deflection class of the true way taken
   and by the side it turns to (left/up/right/down), backing out and phantom ways apart;
 - sensing at the decision point: the rate of missed true ways, of structures with a phantom way,
@@ -359,6 +360,18 @@ def _episode_outcomes(
             alpha,
         )
     ]
+    out.append(
+        rate_comparison(
+            section,
+            "drive jams",
+            "per structure",
+            sum(int(e["outcomes"].get("drive_jams", 0)) for e in fast),
+            sum(e["structures"] for e in fast),
+            sum(int(e["outcomes"].get("drive_jams", 0)) for e in full),
+            sum(e["structures"] for e in full),
+            alpha,
+        )
+    )
     for key in ("decisions", "jams", "structures"):
         out.append(
             distribution_comparison(

@@ -413,6 +413,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
             assert dec is not None
             # stalled while driving: the robot decides where it is
             if out.status == PlantStatus.JAMMED:
+                self.outcome_log.drive_jams += 1
                 self._count_jam(events, "drive_jammed", out.note)
             self.structures += 1
             self._after_sensing(dec)

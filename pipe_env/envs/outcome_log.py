@@ -1,6 +1,7 @@
 """The decision loop's own outcome accounting, the same in both fidelities.
 
-:class:`OutcomeLog` (``env.unwrapped.outcome_log``, fresh every episode) keeps two lists:
+:class:`OutcomeLog` (``env.unwrapped.outcome_log``, fresh every episode) keeps the jams while
+driving and two lists:
 
 - :class:`SensedStructure`: what was sensed at every structure the robot stopped before (single
   ways taken automatically and senses after a jam included) against the ground truth at the
@@ -163,10 +164,13 @@ def attempted_way(choice: StructureOption | str, truth: list[StructureOption]) -
 
 @dataclass
 class OutcomeLog:
-    """One episode's :class:`SensedStructure` and :class:`Attempt` records, in order."""
+    """One episode's :class:`SensedStructure` and :class:`Attempt` records, in order, and
+    ``drive_jams``: drives to a structure that ended jammed (full fidelity: the robot stalled
+    while driving; no attempt of a way)."""
 
     sensed: list[SensedStructure] = field(default_factory=list)
     attempts: list[Attempt] = field(default_factory=list)
+    drive_jams: int = 0
 
     def record_sensing(
         self, options: list[StructureOption], kind: str, truth: list[StructureOption]
@@ -187,8 +191,9 @@ class OutcomeLog:
         self.attempts.append(Attempt(true_kind, way, side, str(status), bool(auto)))
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data: ``{"sensed": [...], "attempts": [...]}``."""
+        """Plain data: ``{"sensed": [...], "attempts": [...], "drive_jams": n}``."""
         return {
             "sensed": [asdict(s) for s in self.sensed],
             "attempts": [asdict(a) for a in self.attempts],
+            "drive_jams": int(self.drive_jams),
         }
