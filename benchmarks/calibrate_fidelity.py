@@ -556,12 +556,15 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     episodes = run_all(plan, args.config, args.jobs, progress)
     wall = time.perf_counter() - t0
     comparisons = compare(episodes, args.alpha)
+    config_arg = (
+        f" --network-config '{json.dumps(args.config)}'" if args.config != NETWORK_CONFIG else ""
+    )
     header = (
         f"RoutePlanner, {DETECTOR} detector, {args.networks} held-out networks "
         f"({json.dumps(args.config, sort_keys=True)}): full fidelity once per network, fast "
         f"{args.fast_repeats} times (other seeds); {wall:.0f} s wall with {args.jobs} job(s). "
         "Command: `python benchmarks/calibrate_fidelity.py "
-        f"--networks {args.networks} --fast-repeats {args.fast_repeats}`."
+        f"--networks {args.networks} --fast-repeats {args.fast_repeats}{config_arg}`."
     )
     report = markdown(comparisons, header, args.alpha)
     print("\n" + report)
