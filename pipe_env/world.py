@@ -245,11 +245,17 @@ class NearContacts:
 
     Call :meth:`update` before every physics interval (e.g. a control tick) and after moving the
     geoms by hand. A piece is paired with a geom when the piece's bounding box (in its own frame)
-    lies within ``reach`` of the geom's bounding sphere. Pairs are selected again before any geom
-    can have moved by ``reach`` since the last selection, judged from the largest motion of any
-    geom over the last interval (``guard`` times it, plus ``slack``); if a geom still moved
-    further over an interval, ``overruns`` counts it (a contact could have been missed). More
-    pairs than the pool holds: automatic collisions for that interval (``fallbacks``).
+    lies within ``reach`` of the geom's bounding sphere. Every selection also notes each geom's
+    clearance: the distance from its bounding sphere to the nearest piece it is not paired with
+    (more than ``reach``; the pieces beyond the coarse selection count at their bound), less the
+    pairs' contact margin. A geom can touch an unpaired piece only after moving by its
+    clearance, so pairs are selected again before any geom can have moved by its clearance since
+    the last selection, judged from the largest motion of any geom over the last interval
+    (``guard`` times it, plus ``slack``); if a geom still moved further over an interval,
+    ``overruns`` counts it (a contact could have been missed). Driving along a pipe, the nearest
+    unpaired pieces (the neighbouring panels around the bore) keep their distance, so pairs are
+    selected again mostly when a new piece (a fitting's) comes near. More pairs than the pool
+    holds: automatic collisions (``fallbacks``) until the geoms have moved by ``reach``.
 
     Args:
         world: a world built with contact walls.
@@ -304,6 +310,12 @@ class NearContacts:
         self._anchor: NDArray[np.float64] | None = None
         self._last: NDArray[np.float64] | None = None
         self._motion = 0.0
+        #: each geom's clearance at the last selection, m (``reach`` after a fallback)
+        self._clearance = np.full(len(self.geoms), self.reach)
+        #: the largest contact margin of a (geom, piece) pair, m
+        self._margin = float(m.geom_margin[self.geoms].max(initial=0.0)) + float(
+            m.geom_margin[walls].max(initial=0.0)
+        )
         self._pairs: tuple[NDArray[np.int_], NDArray[np.int_]] | None = None
         # the coarse selection: (geom positions when made, piece indices, their centres,
         # rotations and half sizes)
@@ -350,10 +362,11 @@ class NearContacts:
             self._motion = _moved(xp, self._last)
         self._last = xp
         if self._anchor is not None and not force:
-            moved = _moved(xp, self._anchor)
-            if moved > self.reach and self.model.body_contype[0] == 0:
+            moved = _distances(xp, self._anchor)
+            ahead = self.guard * self._motion + self.slack
+            if self.model.body_contype[0] == 0 and bool(np.any(moved > self._clearance)):
                 self.overruns += 1  # on pairs (not fallen back), a contact may have been missed
-            if moved + self.guard * self._motion + self.slack <= self.reach:
+            if bool(np.all(moved + ahead <= self._clearance)):
                 return
         self._select(xp)
 
@@ -373,7 +386,9 @@ class NearContacts:
         # each geom's centre in each piece's frame: its distance from the piece's box
         local = np.matmul(xp[None, :, :] - centre[:, None, :], rot)  # (K, G, 3)
         out = np.maximum(np.abs(local) - half[:, None, :], 0.0)
-        ki, gi = np.nonzero(np.einsum("kgi,kgi->kg", out, out) <= r * r)
+        dist2 = np.einsum("kgi,kgi->kg", out, out)
+        paired = dist2 <= r * r
+        ki, gi = np.nonzero(paired)
         pieces = near[ki]
         n = len(gi)
         if n > len(self._pool):
@@ -381,7 +396,9 @@ class NearContacts:
             self.disable()
             self._anchor = xp
             self._last = xp
+            self._clearance = np.full(len(self.geoms), self.reach)
             return
+        self._clearance = self._clearances(xp, dist2, paired)
         g1 = self.geoms[gi]
         g2 = self.walls[pieces]
         # MuJoCo's order of automatic contacts: by body pair, then geom ids
@@ -404,9 +421,30 @@ class NearContacts:
         self.n_pairs = n
         self._anchor = xp
 
+    def _clearances(
+        self, xp: NDArray[np.float64], dist2: NDArray[np.float64], paired: NDArray[np.bool_]
+    ) -> NDArray[np.float64]:
+        """Each geom's distance (m) from its bounding sphere to the nearest piece it is not
+        paired with, less the contact margin: of the coarse pieces (``dist2``: squared
+        distances of the geoms' centres from their boxes, (K, G)) and, for the pieces beyond
+        them, the coarse selection's bound (more than ``reach + _COARSE`` from every geom when
+        made, less how far the geom has moved since)."""
+        assert self._coarse is not None
+        beyond = self.reach + _COARSE - _distances(xp, self._coarse[0])
+        if dist2.size:
+            unpaired = np.where(paired, np.inf, dist2).min(axis=0)
+            beyond = np.minimum(beyond, np.sqrt(unpaired) - self._radius)
+        return np.asarray(beyond - self._margin)
+
 
 #: :class:`NearContacts` narrows the pieces to those within this of the geoms first, m.
 _COARSE = 0.05
+
+
+def _distances(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Distances between corresponding rows of two (n, 3) arrays."""
+    dv = a - b
+    return np.sqrt(np.einsum("ij,ij->i", dv, dv))
 
 
 def _moved(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
