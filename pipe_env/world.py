@@ -32,6 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import mujoco
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -249,13 +250,17 @@ class NearContacts:
     clearance: the distance from its bounding sphere to the nearest piece it is not paired with
     (more than ``reach``; the pieces beyond the coarse selection count at their bound), less the
     pairs' contact margin. A geom can touch an unpaired piece only after moving by its
-    clearance, so pairs are selected again before any geom can have moved by its clearance since
-    the last selection, judged from the largest motion of any geom over the last interval
-    (``guard`` times it, plus ``slack``); if a geom still moved further over an interval,
-    ``overruns`` counts it (a contact could have been missed). Driving along a pipe, the nearest
-    unpaired pieces (the neighbouring panels around the bore) keep their distance, so pairs are
-    selected again mostly when a new piece (a fitting's) comes near. More pairs than the pool
-    holds: automatic collisions (``fallbacks``) until the geoms have moved by ``reach``.
+    clearance. Before any geom can have moved by its clearance since the last measurement,
+    judged from the largest motion of any geom over the last interval (``guard`` times it, plus
+    ``slack``), the clearances are measured again with the pairs kept (``remeasures``); only if a
+    geom has come within that guarded motion plus another ``slack`` of a piece it is not
+    paired with are the pairs selected again (``selections``). Driving along a pipe the geoms move
+    along the panels, not towards them, so pairs are selected again mostly when a new piece (a
+    fitting's) comes near. If a geom still moved further than its clearance over an interval,
+    ``overruns`` counts it (a contact could have been missed). Pairs kept from a selection
+    whose pieces have moved away change no contact (a pair of geoms apart has none). More
+    pairs than the pool holds: automatic collisions (``fallbacks``) until the geoms have moved
+    by ``reach``.
 
     Args:
         world: a world built with contact walls.
@@ -329,7 +334,11 @@ class NearContacts:
             ]
             | None
         ) = None
+        #: which (geom, coarse piece) the pairs hold, (G, K)
+        self._paired: NDArray[np.bool_] | None = None
         self.n_pairs = 0
+        #: pair selections; clearances measured again with the pairs kept
+        self.remeasures = 0
         self.selections = 0
         self.fallbacks = 0
         self.overruns = 0
@@ -344,6 +353,7 @@ class NearContacts:
         self._anchor = None
         self._last = None
         self._pairs = None
+        self._paired = None
         self.n_pairs = 0
 
     def forget(self) -> None:
@@ -358,17 +368,44 @@ class NearContacts:
         """Select the pairs again if the geoms may come within reach of unpaired pieces before
         the next call (``data.geom_xpos`` must be current); always with ``force``."""
         xp = data.geom_xpos[self.geoms]
-        if self._last is not None:
-            self._motion = _moved(xp, self._last)
+        last, anchor = self._last, self._anchor
         self._last = xp
-        if self._anchor is not None and not force:
-            moved = _distances(xp, self._anchor)
-            ahead = self.guard * self._motion + self.slack
-            if self.model.body_contype[0] == 0 and bool(np.any(moved > self._clearance)):
-                self.overruns += 1  # on pairs (not fallen back), a contact may have been missed
-            if bool(np.all(moved + ahead <= self._clearance)):
-                return
-        self._select(xp)
+        if last is None or anchor is None:
+            if last is not None:
+                self._motion = _moved(xp, last)
+            self._select(xp)
+            return
+        motion, overrun, select = _motion_check(
+            xp, last, anchor, self._clearance, self.guard, self.slack
+        )
+        self._motion = motion
+        if force:
+            self._select(xp)
+            return
+        on_pairs = self.model.body_contype[0] == 0
+        if overrun and on_pairs:
+            self.overruns += 1  # on pairs (not fallen back), a contact may have been missed
+        if select and not (on_pairs and self._remeasure(xp)):
+            self._select(xp)
+
+    def _remeasure(self, xp: NDArray[np.float64]) -> bool:
+        """Measure the clearances of the current pairs again at ``xp`` (the geoms moved, but
+        maybe along the pieces, not towards them); True, and the pairs kept, if every geom
+        stays further than the guarded motion plus another ``slack`` from the pieces it is not
+        paired with; False if the pairs must be selected again."""
+        if self._coarse is None or self._paired is None:
+            return False
+        if _moved(xp, self._coarse[0]) > _COARSE - self.reach:
+            return False  # the coarse pieces no longer hold every piece near the geoms
+        _, _, centre, rot, half = self._coarse
+        clearance = self._clearances(xp, _box_distances2(xp, rot, centre, half), self._paired)
+        ahead = self.guard * self._motion + self.slack
+        if not bool(np.all(clearance >= ahead + self.slack)):
+            return False
+        self._clearance = clearance
+        self._anchor = xp
+        self.remeasures += 1
+        return True
 
     def _select(self, xp: NDArray[np.float64]) -> None:
         m = self.model
@@ -383,12 +420,9 @@ class NearContacts:
             near = np.flatnonzero(((c + b[:, None] >= lo) & (c - b[:, None] <= hi)).all(axis=1))
             self._coarse = (xp, near, c[near], self._rot[near], self._half[near])
         _, near, centre, rot, half = self._coarse
-        # each geom's centre in each piece's frame: its distance from the piece's box
-        local = np.matmul(xp[None, :, :] - centre[:, None, :], rot)  # (K, G, 3)
-        out = np.maximum(np.abs(local) - half[:, None, :], 0.0)
-        dist2 = np.einsum("kgi,kgi->kg", out, out)
-        paired = dist2 <= r * r
-        ki, gi = np.nonzero(paired)
+        dist2 = _box_distances2(xp, rot, centre, half)  # (G, K)
+        paired = dist2 <= (r * r)[:, None]
+        gi, ki = np.nonzero(paired)
         pieces = near[ki]
         n = len(gi)
         if n > len(self._pool):
@@ -397,8 +431,10 @@ class NearContacts:
             self._anchor = xp
             self._last = xp
             self._clearance = np.full(len(self.geoms), self.reach)
+            self._paired = None
             return
         self._clearance = self._clearances(xp, dist2, paired)
+        self._paired = paired
         g1 = self.geoms[gi]
         g2 = self.walls[pieces]
         # MuJoCo's order of automatic contacts: by body pair, then geom ids
@@ -426,19 +462,72 @@ class NearContacts:
     ) -> NDArray[np.float64]:
         """Each geom's distance (m) from its bounding sphere to the nearest piece it is not
         paired with, less the contact margin: of the coarse pieces (``dist2``: squared
-        distances of the geoms' centres from their boxes, (K, G)) and, for the pieces beyond
+        distances of the geoms' centres from their boxes, (G, K)) and, for the pieces beyond
         them, the coarse selection's bound (more than ``reach + _COARSE`` from every geom when
         made, less how far the geom has moved since)."""
         assert self._coarse is not None
         beyond = self.reach + _COARSE - _distances(xp, self._coarse[0])
         if dist2.size:
-            unpaired = np.where(paired, np.inf, dist2).min(axis=0)
+            unpaired = np.where(paired, np.inf, dist2).min(axis=1)
             beyond = np.minimum(beyond, np.sqrt(unpaired) - self._radius)
         return np.asarray(beyond - self._margin)
 
 
 #: :class:`NearContacts` narrows the pieces to those within this of the geoms first, m.
 _COARSE = 0.05
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _motion_check(
+    xp: NDArray[np.float64],
+    last: NDArray[np.float64],
+    anchor: NDArray[np.float64],
+    clearance: NDArray[np.float64],
+    guard: float,
+    slack: float,
+) -> tuple[float, bool, bool]:
+    """The geoms at ``xp`` (G, 3), at ``last`` an interval ago and at ``anchor`` at the last
+    selection: (the largest motion over the interval m, whether a geom has moved further than
+    its clearance since the selection, whether one can before the next interval ends: moved +
+    ``guard`` * motion + ``slack`` beyond its clearance)."""
+    motion2 = 0.0
+    for g in range(xp.shape[0]):
+        d0, d1, d2 = xp[g, 0] - last[g, 0], xp[g, 1] - last[g, 1], xp[g, 2] - last[g, 2]
+        motion2 = max(motion2, d0 * d0 + d1 * d1 + d2 * d2)
+    motion = math.sqrt(motion2)
+    ahead = guard * motion + slack
+    overrun, select = False, False
+    for g in range(xp.shape[0]):
+        d0, d1, d2 = xp[g, 0] - anchor[g, 0], xp[g, 1] - anchor[g, 1], xp[g, 2] - anchor[g, 2]
+        moved = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        overrun = overrun or moved > clearance[g]
+        select = select or moved + ahead > clearance[g]
+    return motion, overrun, select
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _box_distances2(
+    xp: NDArray[np.float64],
+    rot: NDArray[np.float64],
+    centre: NDArray[np.float64],
+    half: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Squared distances (G, K) of points ``xp`` (G, 3) from boxes of centres ``centre`` (K, 3),
+    rotations ``rot`` (K, 3, 3) and half sizes ``half`` (K, 3), m^2."""
+    out = np.empty((xp.shape[0], rot.shape[0]))
+    for k in range(rot.shape[0]):
+        for g in range(xp.shape[0]):
+            v0 = xp[g, 0] - centre[k, 0]
+            v1 = xp[g, 1] - centre[k, 1]
+            v2 = xp[g, 2] - centre[k, 2]
+            total = 0.0
+            for i in range(3):
+                local = v0 * rot[k, 0, i] + v1 * rot[k, 1, i] + v2 * rot[k, 2, i]
+                excess = abs(local) - half[k, i]
+                if excess > 0.0:
+                    total += excess * excess
+            out[g, k] = total
+    return out
 
 
 def _distances(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
