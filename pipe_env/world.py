@@ -14,9 +14,11 @@ automatically, MuJoCo's midphase tests every robot geom against every piece of t
 world with contact walls therefore also holds a pool of ``CONTACT_PAIR_POOL`` predefined geom
 pairs (parked on two far-away dummy spheres). :class:`NearContacts` fills the pool with the pairs
 (robot geom, wall piece) whose pieces lie within a reach of the geoms, with MuJoCo's own mixed
-contact parameters, and switches the world body's automatic collisions off; it re-selects the
-pairs before the geoms can have moved by the reach, and falls back to automatic collisions if the
-pool is too small. The contacts are the same as the automatic ones (tests compare them).
+contact parameters, and switches the world body's automatic collisions off; it selects the
+pairs again only when a geom can have come near a piece it is not paired with (each geom's
+clearance, measured again first: moving along a pipe keeps it), and falls back to automatic
+collisions if the pool is too small. The contacts are the same as the automatic ones (tests
+compare them).
 
 The wall geoms never move: MuJoCo poses them once, not at every physics step (its sleeping is
 on, with every moving body kept awake; see :func:`_static_walls_posed_once`).

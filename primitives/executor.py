@@ -34,6 +34,11 @@ Physics: before every control tick the robot's collision pairs are brought up to
 wall pieces near it (:class:`pipe_env.world.NearContacts`; the same contacts as MuJoCo's
 automatic collisions against every piece, at about half the cost of a step);
 :meth:`Executor.use_near_contacts` switches back to the automatic collisions.
+
+Per control tick the executor's own work is batched: every module's target (the followers'
+driven-path poses, the V's legs, the rolls, the quaternions) in one pass over preallocated
+arrays with compiled kernels, bit for bit what the per-module helpers computed; telemetry rows
+are written in place.
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ from pathlib import Path
 from typing import Any
 
 import mujoco
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -229,6 +235,27 @@ class _Jam(Exception):
     pass
 
 
+@numba.njit(cache=True, error_model="numpy")
+def _worst_tracking(
+    xpos: NDArray[np.float64],
+    bodies: NDArray[np.intp],
+    mocap_pos: NDArray[np.float64],
+    mocap: NDArray[np.intp],
+) -> tuple[float, int]:
+    """The largest squared distance (m^2) of ``bodies`` from their mocap targets ``mocap``, and
+    its index (the first of equals); (0, -1) without bodies."""
+    worst, at = 0.0, -1
+    for i in range(bodies.shape[0]):
+        b, t = bodies[i], mocap[i]
+        d0 = xpos[b, 0] - mocap_pos[t, 0]
+        d1 = xpos[b, 1] - mocap_pos[t, 1]
+        d2 = xpos[b, 2] - mocap_pos[t, 2]
+        err2 = d0 * d0 + d1 * d1 + d2 * d2
+        if at < 0 or err2 > worst:
+            worst, at = err2, i
+    return worst, at
+
+
 class _Halt(Exception):
     def __init__(self, status: str, reason: str) -> None:
         super().__init__(reason)
@@ -293,11 +320,14 @@ class Executor:
         self._target_s = np.zeros(n)
         self._mocap = np.asarray(robot.mocap_ids, dtype=np.intp)
         self._follower_bodies = np.asarray(robot.body_ids[1:], dtype=np.intp)
+        self._follower_mocap = self._mocap[1:].copy()
         #: the parts of the executor's state: the drive command, the clamping V, the driven
         #: path and the current run's telemetry
         self.command = DriveCommand()
         self.vclamp = VClamp(self.config)
-        self._behind = np.array([self.vclamp.behind(i) for i in range(1, n)], dtype=bool)
+        # (rows of the followers' odometers; the last row, the V's front joint, is not behind)
+        self._behind = np.array([self.vclamp.behind(i) for i in range(1, n)] + [False])
+        self._mocap_views = self._mocap_target_views()
         self.path = DrivenPath()
         self.telemetry = Telemetry()
         #: distance moved by the current run (sequence or drive), m
@@ -389,21 +419,34 @@ class Executor:
         # ``shortening`` further back; the last row: the path at the joint at the V's front
         s = self._target_s
         np.subtract(self.odometer, self._offsets[1:], out=s[:-1])
-        s[:-1][self._behind] += self.vclamp.shortening
+        s[self._behind] += self.vclamp.shortening
         s[-1] = self.vclamp.apex_odometer(self.odometer)
         self.path.poses_into(s, pos[1:], rot[1:])
         self.vclamp.leg_targets(pos[-1], rot[-1], pos, rot)
         if cmd.roll != 0.0:  # the front half (modules before the roll joint) is rolled
             front = slice(1, self.config.middle_joint)
             rot[front] = rot[front] @ rx(cmd.roll)
-        for i, off in cmd.bend_offsets.items():
-            if off and 1 <= i < len(quat):
-                rot[i] = rot[i] @ rotation_about([0.0, 0.0, 1.0], off)
         n = len(quat)
+        for i, off in cmd.bend_offsets.items():
+            if off and 1 <= i < n:
+                rot[i] = rot[i] @ rotation_about([0.0, 0.0, 1.0], off)
         quats_into(rot[:n], quat)
-        d = self.data
-        d.mocap_pos[self._mocap] = pos[:n]
-        d.mocap_quat[self._mocap] = quat
+        mocap_pos, mocap_quat = self._mocap_views
+        if mocap_pos is not None and mocap_quat is not None:
+            np.copyto(mocap_pos, pos[:n])
+            np.copyto(mocap_quat, quat)
+        else:
+            self.data.mocap_pos[self._mocap] = pos[:n]
+            self.data.mocap_quat[self._mocap] = quat
+
+    def _mocap_target_views(self) -> tuple[NDArray | None, NDArray | None]:
+        """Views of the modules' rows of ``data.mocap_pos`` and ``data.mocap_quat`` when their
+        mocap ids are consecutive (written in place every tick), else (None, None)."""
+        ids = self._mocap
+        if len(ids) and np.array_equal(ids, np.arange(ids[0], ids[0] + len(ids))):
+            rows = slice(int(ids[0]), int(ids[0]) + len(ids))
+            return self.data.mocap_pos[rows], self.data.mocap_quat[rows]
+        return None, None
 
     # ------------------------------------------------------------------ stepping
     def use_near_contacts(self, on: bool) -> None:
@@ -447,12 +490,9 @@ class Executor:
     def _check_tracking(self) -> None:
         """Jam if a follower module is further than ``jam_tracking`` off its target."""
         d = self.data
-        dv = d.xpos[self._follower_bodies] - d.mocap_pos[self._mocap[1:]]
-        sq = dv * dv
-        err2 = sq[:, 0] + sq[:, 1] + sq[:, 2]  # (the squared norms, summed as norm sums them)
-        if err2.size and math.sqrt(err2.max()) > self.config.jam_tracking:
-            k = int(np.argmax(err2)) + 1
-            raise _Jam(f"module {k} is pushed {math.sqrt(err2.max()) * 1000:.1f} mm off its path")
+        err2, k = _worst_tracking(d.xpos, self._follower_bodies, d.mocap_pos, self._follower_mocap)
+        if math.sqrt(err2) > self.config.jam_tracking:
+            raise _Jam(f"module {k + 1} is pushed {math.sqrt(err2) * 1000:.1f} mm off its path")
 
     def _front_pose(self) -> tuple[NDArray, NDArray]:
         b = self.robot.body_ids[0]
@@ -776,8 +816,8 @@ class Executor:
 
     def _steer_error(self) -> float:
         """Angle between the front's heading and the commanded heading, rad."""
-        _, r = self._front_pose()
-        return math.acos(float(np.clip(r[:, 0] @ self.command.heading[:, 0], -1.0, 1.0)))
+        r = self.data.xmat[self.robot.body_ids[0]].reshape(3, 3)
+        return math.acos(max(-1.0, min(1.0, float(r[:, 0] @ self.command.heading[:, 0]))))
 
     def _check_steer(self) -> None:
         """Steering: jam if the walls force the front too far off its commanded heading."""

@@ -65,6 +65,10 @@ class VClamp:
         self.config = config
         self.alpha = 0.0
         self.side = CLAMP_SIDE
+        j, k = config.middle_joint, config.leg_modules
+        #: the V's front joint is this far behind the front module along the path, m
+        self._apex_back = (j - k - 0.5) * config.pitch
+        self._leg_length = config.leg_length
         #: the legs' rotations of the last (side, alpha) asked for
         self._folds: tuple[int, float, NDArray[np.float64]] | None = None
 
@@ -76,7 +80,7 @@ class VClamp:
     @property
     def shortening(self) -> float:
         """How much closer the rear half follows the front along the path, m."""
-        return 2.0 * self.config.leg_length * (1.0 - math.cos(self.alpha))
+        return 2.0 * self._leg_length * (1.0 - math.cos(self.alpha))
 
     def in_legs(self, i: int) -> bool:
         """True if module ``i`` is one of the folded V's legs."""
@@ -101,8 +105,7 @@ class VClamp:
     def apex_odometer(self, odometer: float) -> float:
         """Odometer (m) of the driven path at the joint at the front of the V, the front
         module being at ``odometer`` m."""
-        c = self.config
-        return odometer - (c.middle_joint - c.leg_modules - 0.5) * c.pitch
+        return odometer - self._apex_back
 
     def leg_targets(
         self,

@@ -1,5 +1,6 @@
-"""The executor's per-tick targets, computed in batched passes, are bit for bit those of the
-per-module helpers (``mju_mat2Quat``, ``DrivenPath.pose``, ``VClamp.leg_poses``)."""
+"""The executor's per-tick work, batched or compiled, is bit for bit that of the per-module
+helpers it replaced (``mju_mat2Quat``, ``DrivenPath.pose``, ``VClamp.leg_poses``,
+``mj_contactForce``)."""
 
 from __future__ import annotations
 
@@ -7,15 +8,18 @@ import math
 
 import mujoco
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from detector.geometry import rotation_about
 from pipe_env import layouts
+from pipe_env.ground_truth import structures_ahead
 from pipe_env.robot import quat_of
-from primitives.executor import Executor
+from primitives.executor import Executor, _Jam
 from primitives.path import DrivenPath
 from primitives.rotations import log_rotation, quats_into, rotation_angle, rx
+from primitives.sequences import for_option, go_straight
 
 _unit = st.floats(-1.0, 1.0, allow_nan=False)
 
@@ -115,3 +119,39 @@ def test_batched_targets_are_the_per_module_ones() -> None:
         pos, quat = _reference_targets(ex)
         assert np.array_equal(ex.data.mocap_pos[ids], pos), trial
         assert np.array_equal(ex.data.mocap_quat[ids], quat), trial
+
+
+def _reference_contact_force(ex: Executor) -> float:
+    """The robot's contact force as ``mj_contactForce``, contact by contact."""
+    m, d, robot = ex.model, ex.data, ex.robot
+    total, f6 = 0.0, np.zeros(6)
+    for k in range(d.ncon):
+        con = d.contact[k]
+        if con.geom1 in robot.geom_ids or con.geom2 in robot.geom_ids:
+            mujoco.mj_contactForce(m, d, k, f6)
+            total += abs(f6[0])
+    return total
+
+
+@pytest.mark.parametrize("cone", [mujoco.mjtCone.mjCONE_PYRAMIDAL, mujoco.mjtCone.mjCONE_ELLIPTIC])
+def test_contact_force_is_mj_contact_forces_sum(cone: int) -> None:
+    ex = Executor.for_network(layouts.mitre_bend(0.06, math.pi / 2, math.pi / 2), lidar=None)
+    ex.model.opt.cone = cone
+    rows: list[tuple[float, float, int]] = []
+    ex.on_tick = lambda t: rows.append(
+        (ex.robot.contact_force(), _reference_contact_force(ex), ex.data.ncon)
+    )
+    ex.run(go_straight(0.05))
+    option = structures_ahead(ex.world.network, ex.robot.sensor_pose(), 5.0)[0]
+    ex.run(for_option(option, incoming_diameter=ex.robot.clamped_diameter()))
+    assert len(rows) > 300 and max(n for _, _, n in rows) >= 2
+    assert sum(1 for f, _, _ in rows if f > 0) >= 20
+    assert all(f == ref for f, ref, _ in rows)
+
+
+def test_a_follower_pushed_off_its_target_jams_naming_it() -> None:
+    ex = Executor.for_network(layouts.straight(0.1), lidar=None)
+    ex._check_tracking()  # on its targets: nothing
+    ex.data.xpos[ex.robot.body_ids[3]] += [0.0, 0.0, 2.0 * ex.config.jam_tracking]
+    with pytest.raises(_Jam, match="module 3 is pushed"):
+        ex._check_tracking()
