@@ -10,6 +10,7 @@ import pytest
 
 _PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_full_fidelity.py"
 _spec = importlib.util.spec_from_file_location("bench_full_fidelity", _PATH)
+assert _spec is not None and _spec.loader is not None
 bench = importlib.util.module_from_spec(_spec)
 sys.modules["bench_full_fidelity"] = bench
 _spec.loader.exec_module(bench)
