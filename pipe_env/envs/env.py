@@ -302,10 +302,10 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         plant = self.plant
         plant.reset(np.random.default_rng(self.np_random.integers(2**63)))
         self._frames = []
-        executor = getattr(plant, "executor", None)
-        if self.collect_frames and executor is not None:
-            self._next_frame_time = executor.time
-            executor.on_tick = self._on_tick
+        if self.collect_frames:
+            now = plant.watch_motion(self._on_tick)
+            if now is not None:
+                self._next_frame_time = now
         self._start_counters()
         self._waypoints = [plant.waypoint()]
         self.task.initialize_episode(network, plant)
@@ -587,10 +587,8 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         if self._renderer is None or self._renderer.world is not world:
             self._renderer = WorldRenderer(world, 480, 360)
         pose = plant.pose()
-        robot = getattr(plant, "robot", None)  # full fidelity: frame the whole robot
-        target = (
-            world.data.xpos[robot.body_ids].mean(axis=0) if robot is not None else pose.position
-        )
+        bodies = plant.body_positions()  # full fidelity: frame the whole robot
+        target = bodies.mean(axis=0) if bodies is not None else pose.position
         cam = self._renderer.camera("iso", target=target, distance=0.9)
         image: NDArray[np.uint8] = self._renderer.render(cam, markers=[(pose.position, 0.03)])
         return image
