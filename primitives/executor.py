@@ -34,6 +34,11 @@ Physics: before every control tick the robot's collision pairs are brought up to
 wall pieces near it (:class:`pipe_env.world.NearContacts`; the same contacts as MuJoCo's
 automatic collisions against every piece, at about half the cost of a step);
 :meth:`Executor.use_near_contacts` switches back to the automatic collisions.
+
+Per control tick the executor's own work is batched: every module's target (the followers'
+driven-path poses, the V's legs, the rolls, the quaternions) in one pass over preallocated
+arrays with compiled kernels, bit for bit what the per-module helpers computed; telemetry rows
+are written in place.
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ from pathlib import Path
 from typing import Any
 
 import mujoco
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -56,7 +62,7 @@ from pipe_env.robot import Robot, RobotConfig, quat_of
 from pipe_env.world import CONTACT_PAIR_POOL, NearContacts, PipeWorld, build_world
 from primitives.command import DriveCommand
 from primitives.path import DrivenPath
-from primitives.rotations import orthonormal, rx, rz
+from primitives.rotations import orthonormal, quats_into, rx, rz
 from primitives.sequences import Sequence
 from primitives.steps import (
     Bend,
@@ -229,6 +235,27 @@ class _Jam(Exception):
     pass
 
 
+@numba.njit(cache=True, error_model="numpy")
+def _worst_tracking(
+    xpos: NDArray[np.float64],
+    bodies: NDArray[np.intp],
+    mocap_pos: NDArray[np.float64],
+    mocap: NDArray[np.intp],
+) -> tuple[float, int]:
+    """The largest squared distance (m^2) of ``bodies`` from their mocap targets ``mocap``, and
+    its index (the first of equals); (0, -1) without bodies."""
+    worst, at = 0.0, -1
+    for i in range(bodies.shape[0]):
+        b, t = bodies[i], mocap[i]
+        d0 = xpos[b, 0] - mocap_pos[t, 0]
+        d1 = xpos[b, 1] - mocap_pos[t, 1]
+        d2 = xpos[b, 2] - mocap_pos[t, 2]
+        err2 = d0 * d0 + d1 * d1 + d2 * d2
+        if at < 0 or err2 > worst:
+            worst, at = err2, i
+    return worst, at
+
+
 class _Halt(Exception):
     def __init__(self, status: str, reason: str) -> None:
         super().__init__(reason)
@@ -283,10 +310,24 @@ class Executor:
         self.odometer = 0.0
         # follower offsets behind the front module's centre along the path, m
         self._offsets = self.config.pitch * np.arange(self.config.n_modules)
+        # the per-tick targets of every module (position m, rotation, quaternion; one more
+        # row: the driven path at the V's front joint), the followers' odometers (and that
+        # joint's), which followers are behind the V, and the modules' mocap ids
+        n = self.config.n_modules
+        self._target_pos = np.zeros((n + 1, 3))
+        self._target_rot = np.zeros((n + 1, 3, 3))
+        self._target_quat = np.zeros((n, 4))
+        self._target_s = np.zeros(n)
+        self._mocap = np.asarray(robot.mocap_ids, dtype=np.intp)
+        self._follower_bodies = np.asarray(robot.body_ids[1:], dtype=np.intp)
+        self._follower_mocap = self._mocap[1:].copy()
         #: the parts of the executor's state: the drive command, the clamping V, the driven
         #: path and the current run's telemetry
         self.command = DriveCommand()
         self.vclamp = VClamp(self.config)
+        # (rows of the followers' odometers; the last row, the V's front joint, is not behind)
+        self._behind = np.array([self.vclamp.behind(i) for i in range(1, n)] + [False])
+        self._mocap_views = self._mocap_target_views()
         self.path = DrivenPath()
         self.telemetry = Telemetry()
         #: distance moved by the current run (sequence or drive), m
@@ -364,31 +405,48 @@ class Executor:
 
     # ------------------------------------------------------------------ targets
     def _set_targets(self) -> None:
-        """Drive target of the front; follow-the-leader (and V) targets of the followers."""
-        d = self.data
-        ids = self.robot.mocap_ids
-        d.mocap_pos[ids[0]] = self.command.position
-        d.mocap_quat[ids[0]] = quat_of(self.command.rotation)
-        # the driven path keeps the rear half's frames; the front half (modules before the roll
-        # joint) is rolled by the commanded roll
+        """Drive target of the front; follow-the-leader (and V) targets of the followers.
+
+        All modules' targets in one pass over preallocated arrays: the followers' driven-path
+        poses in one batched lookup, the V's legs over them, the front half's commanded roll in
+        one batched product, every quaternion in one batched conversion (bit for bit
+        ``mju_mat2Quat``'s), and one write of the mocap poses."""
         cmd = self.command
-        roll_front = rx(cmd.roll) if cmd.roll != 0.0 else None
-        front_half = self.config.middle_joint
-        legs = self.vclamp.leg_poses(self.path, self.odometer)
-        shift = self.vclamp.shortening
-        for i in range(1, self.config.n_modules):
-            if i in legs:
-                pos, rot = legs[i]
-            else:
-                s_i = self.odometer - self._offsets[i]
-                pos, rot = self.path.pose(s_i + (shift if self.vclamp.behind(i) else 0.0))
-            if roll_front is not None and i < front_half:
-                rot = rot @ roll_front
-            off = cmd.bend_offsets.get(i)
-            if off:
-                rot = rot @ rotation_about([0.0, 0.0, 1.0], off)
-            d.mocap_pos[ids[i]] = pos
-            d.mocap_quat[ids[i]] = quat_of(rot)
+        pos, rot, quat = self._target_pos, self._target_rot, self._target_quat
+        pos[0] = cmd.position
+        rot[0] = cmd.rotation
+        # the driven path keeps the rear half's frames; modules behind the V follow it
+        # ``shortening`` further back; the last row: the path at the joint at the V's front
+        s = self._target_s
+        np.subtract(self.odometer, self._offsets[1:], out=s[:-1])
+        s[self._behind] += self.vclamp.shortening
+        s[-1] = self.vclamp.apex_odometer(self.odometer)
+        self.path.poses_into(s, pos[1:], rot[1:])
+        self.vclamp.leg_targets(pos[-1], rot[-1], pos, rot)
+        if cmd.roll != 0.0:  # the front half (modules before the roll joint) is rolled
+            front = slice(1, self.config.middle_joint)
+            rot[front] = rot[front] @ rx(cmd.roll)
+        n = len(quat)
+        for i, off in cmd.bend_offsets.items():
+            if off and 1 <= i < n:
+                rot[i] = rot[i] @ rotation_about([0.0, 0.0, 1.0], off)
+        quats_into(rot[:n], quat)
+        mocap_pos, mocap_quat = self._mocap_views
+        if mocap_pos is not None and mocap_quat is not None:
+            np.copyto(mocap_pos, pos[:n])
+            np.copyto(mocap_quat, quat)
+        else:
+            self.data.mocap_pos[self._mocap] = pos[:n]
+            self.data.mocap_quat[self._mocap] = quat
+
+    def _mocap_target_views(self) -> tuple[NDArray | None, NDArray | None]:
+        """Views of the modules' rows of ``data.mocap_pos`` and ``data.mocap_quat`` when their
+        mocap ids are consecutive (written in place every tick), else (None, None)."""
+        ids = self._mocap
+        if len(ids) and np.array_equal(ids, np.arange(ids[0], ids[0] + len(ids))):
+            rows = slice(int(ids[0]), int(ids[0]) + len(ids))
+            return self.data.mocap_pos[rows], self.data.mocap_quat[rows]
+        return None, None
 
     # ------------------------------------------------------------------ stepping
     def use_near_contacts(self, on: bool) -> None:
@@ -420,19 +478,21 @@ class Executor:
         d = self.data
         front = d.xpos[self.robot.body_ids[0]]
         diff = self.command.position - front
-        lag = float(diff @ lag_axis) if lag_axis is not None else float(np.linalg.norm(diff))
+        lag = float(diff @ lag_axis) if lag_axis is not None else math.sqrt(diff.dot(diff))
         self.telemetry.record(self.time, self.data, self.robot, lag)
-        if not np.all(np.isfinite(d.qpos)):
+        if not np.isfinite(d.qpos).all():
             raise _Jam("the simulation diverged")
         if lag > self.config.jam_lag:
             raise _Jam(f"stalled: the front lags its drive target by {lag * 1000:.1f} mm")
-        ids = self.robot.mocap_ids
-        bodies = self.robot.body_ids
-        err = np.linalg.norm(d.xpos[bodies[1:]] - d.mocap_pos[ids[1:]], axis=1)
-        if err.size and float(err.max()) > self.config.jam_tracking:
-            k = int(np.argmax(err)) + 1
-            raise _Jam(f"module {k} is pushed {err.max() * 1000:.1f} mm off its path")
+        self._check_tracking()
         return lag
+
+    def _check_tracking(self) -> None:
+        """Jam if a follower module is further than ``jam_tracking`` off its target."""
+        d = self.data
+        err2, k = _worst_tracking(d.xpos, self._follower_bodies, d.mocap_pos, self._follower_mocap)
+        if math.sqrt(err2) > self.config.jam_tracking:
+            raise _Jam(f"module {k + 1} is pushed {math.sqrt(err2) * 1000:.1f} mm off its path")
 
     def _front_pose(self) -> tuple[NDArray, NDArray]:
         b = self.robot.body_ids[0]
@@ -756,8 +816,8 @@ class Executor:
 
     def _steer_error(self) -> float:
         """Angle between the front's heading and the commanded heading, rad."""
-        _, r = self._front_pose()
-        return math.acos(float(np.clip(r[:, 0] @ self.command.heading[:, 0], -1.0, 1.0)))
+        r = self.data.xmat[self.robot.body_ids[0]].reshape(3, 3)
+        return math.acos(max(-1.0, min(1.0, float(r[:, 0] @ self.command.heading[:, 0]))))
 
     def _check_steer(self) -> None:
         """Steering: jam if the walls force the front too far off its commanded heading."""
