@@ -78,9 +78,14 @@ from primitives.vclamp import CLAMP_SIDE, VClamp
 
 __all__ = ["Executor", "SequenceOutcome"]
 
-#: Control period, s (50 Hz): the default of the executor's ``control_dt`` (a whole number of
-#: physics steps, ``pipe_env.world.TIMESTEP``). Everything the executor does per control tick
-#: is set in SI units (speeds, rates, durations) and converted with the period in use.
+#: Control period, s (50 Hz; 10 physics steps of ``pipe_env.world.TIMESTEP``): the default of
+#: the executor's ``control_dt``. Everything the executor does per control tick is set in SI
+#: units (speeds, rates, durations, the jam thresholds in metres) and converted with the period
+#: in use. Measured (``benchmarks/physics_step_study.py``: tolerance cases, jam / no-jam cases
+#: and seeded RoutePlanner episodes on a grid of 2-8 ms steps and 20-100 ms periods): every
+#: outcome holds at 2 ms steps up to 100 ms periods, but from 40 ms the near-contact selection
+#: overruns its reach within a tick (the V folding at ``CLAMP_RATE`` moves its apex about
+#: 0.1 m/s, ``NEAR_REACH`` in 60 ms): contacts could be missed. 20 ms stays.
 CONTROL_DT = 0.02
 #: Control periods an executor may run at, s.
 CONTROL_DT_RANGE = (0.001, 0.2)
@@ -128,8 +133,9 @@ KINEMATIC_MARGIN = 0.0
 #: axis and its heading within ``KINEMATIC_TILT`` of it (a robot well placed in the pipe).
 KINEMATIC_OFFSET = 0.15
 KINEMATIC_TILT = math.radians(5.0)
-#: A clamped straight drive of 5 cm falls this much short of its command (measured: 0.12-0.14
-#: mm in 60-120 mm pipes), m; the executor measures it again on every such physical drive.
+#: A clamped straight drive of 5 cm falls this much short of its command, m; the executor
+#: measures it again on every such physical drive. It depends on the control period (the lag
+#: a tick leaves): measured 0.12-0.14 mm in 60-120 mm pipes at 20 ms (0-0.08 mm at 40-60 ms).
 DEFAULT_SHORTFALL = 0.00013
 #: Larger shortfalls (a drive pushing against something) are not taken as the straight's, m.
 MAX_SHORTFALL = 0.002

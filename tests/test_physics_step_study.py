@@ -90,21 +90,31 @@ def _result(ts: float, cp: float, ok: bool, episodes: bool = False) -> Any:
     return r
 
 
-def test_a_point_is_adopted_only_with_one_grid_step_of_margin() -> None:
+def test_a_point_is_adopted_only_with_one_grid_step_of_margin_in_the_step() -> None:
     ts, cp = [0.002, 0.003, 0.004], [0.02, 0.04, 0.06]
     ok = {(0.002, 0.02), (0.002, 0.04), (0.002, 0.06), (0.003, 0.02), (0.003, 0.04)}
     ok |= {(0.004, 0.02)}
     results = [_result(t, c, (t, c) in ok, episodes=True) for t in ts for c in cp]
-    chosen = study.adopt(results, ts, cp)
-    # 2/60 and 4/20 lie on the grid's edge (no larger neighbour), 3/40's neighbours 4/40 and
-    # 3/60 fail; of 2/20, 3/21 and 2/40 (both neighbours passing) the longest period wins
+    # 2/60's larger step (3/60) fails, 3/40's (4/40) too, 4 ms has no larger step; of 2/20,
+    # 3/21 and 2/40 (larger step passing) the longest period wins
+    chosen = study.adopt(results, ts)
     assert chosen is not None and chosen.point.label() == "2/40"
     # with its episodes failing, the next longest
     for r in results:
         if r.point.label() == "2/40":
             r.checks["episodes"] = False
-    chosen = study.adopt(results, ts, cp)
+    chosen = study.adopt(results, ts)
     assert chosen is not None and chosen.point.label() == "3/21"
+
+
+def test_the_near_contact_check_counts_overruns() -> None:
+    ex = Executor.for_network(layouts.straight(0.09, 1.0), lidar=None, control_dt=0.02)
+    assert ex.near is not None
+    ok, note = study.near_contact_check([ex])
+    assert ok and note.startswith("overruns 0")
+    ex.near.overruns = 2
+    ok, note = study.near_contact_check([ex])
+    assert not ok and note.startswith("overruns 2")
 
 
 @pytest.mark.slow
