@@ -22,7 +22,7 @@ defaults before this study):
    then be missed);
 3. seeded full-fidelity RoutePlanner episodes (held-out 6-fitting 3D networks, ``improved``
    detector, ``physics="contact"``) at the reference and at the candidates (the largest grid
-   points that pass 1 and 2 with margin; every point with ``--episodes-everywhere``): success
+   points that pass 1 and 2; every point with ``--episodes-everywhere``): success
    and jams no worse than the reference's, no diverged simulation, no module pushed off its
    path and no near-contact overrun.
 
@@ -653,14 +653,9 @@ def study(args: argparse.Namespace) -> tuple[list[Result], Result | None]:
             f"({sum(r.checks.values())}/{len(r.checks)}) {r.case_wall:.0f} s",
             flush=True,
         )
-    by_point = {r.point: r for r in results}
     ref = results[0]
     if args.episodes:
-        chosen = [
-            r
-            for r in results[1:]
-            if args.episodes_everywhere or margin_ok(r, by_point, args.timesteps)
-        ]
+        chosen = [r for r in results[1:] if args.episodes_everywhere or r.cases_pass]
         chosen = sorted(chosen, key=_size, reverse=True)
         if not args.episodes_everywhere:
             chosen = chosen[: args.candidates]
