@@ -48,7 +48,13 @@ CONTACT_GROUP = 2
 #: contype bit of the contact walls; robot geoms set this bit in their conaffinity.
 CONTACT_BIT = 1
 WALL_RGBA = (0.62, 0.64, 0.68, 0.45)
+#: The physics step, s (the default of :func:`build_world`'s ``timestep``). Measured with
+#: ``benchmarks/physics_step_study.py``: 3 ms steps hold only up to 60 ms control periods (no
+#: margin) and 4 ms or more let the robot's front into a bore it must stall before; 2 ms stays.
 TIMESTEP = 0.002
+#: Physics steps a world may be built with, s (a study of larger steps: see
+#: ``benchmarks/physics_step_study.py``).
+TIMESTEP_RANGE = (0.0005, 0.01)
 #: Predefined geom pairs a world with contact walls holds for :class:`NearContacts`.
 CONTACT_PAIR_POOL = 160
 #: Names of the two far-away dummy spheres unused pairs point at.
@@ -133,6 +139,7 @@ def build_world(
     *,
     contact_walls: bool = True,
     customize: Callable[[mujoco.MjSpec], None] | None = None,
+    timestep: float = TIMESTEP,
 ) -> PipeWorld:
     """Compile ``network`` into a MuJoCo world (see module docstring).
 
@@ -140,11 +147,13 @@ def build_world(
         network: a valid network (validated here).
         contact_walls: add the contact walls (skip them for sensing-only worlds).
         customize: called with the spec before compiling, to add bodies such as a robot.
+        timestep: the physics step, s, in :data:`TIMESTEP_RANGE`.
     """
+    timestep = check_number("timestep", timestep, *TIMESTEP_RANGE, unit="s", where="build_world")
     network.validate()
     spec = mujoco.MjSpec()
     spec.modelname = f"pipenav_{network.name}"
-    spec.option.timestep = TIMESTEP
+    spec.option.timestep = timestep
     spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
     spec.visual.headlight.diffuse = [0.6, 0.6, 0.6]
     spec.stat.extent = float(np.linalg.norm(np.subtract(*network.bounds()[::-1])))
