@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from detector.grid import build_grid, region_stats
+from detector.grid import _region_stats, build_grid, label_grid, region_stats
 from detector.improved_config import ImprovedConfig
 from detector.robust import mad_sigma, tukey_weights
 from detector.scan import Scan, radial_noise
@@ -302,6 +302,16 @@ def classify_returns(
     floor where there is no return) and the masks of ``-tol_in <= e <= tol``, ``e > tol`` and
     ``e < -tol_in``, where ``tol_in`` is ``tol`` less any lowering of the floor (a lowered
     floor serves the openings only: returns beyond the wall)."""
+    return classify_counted(cloud, big_r, cfg)[:4]
+
+
+def classify_counted(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
+) -> tuple[
+    NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_], int, int, int
+]:
+    """:func:`classify_returns` and how many returns lie on the wall, beyond it and inside it:
+    ``(tol, wall, beyond, inside, n_wall, n_beyond, n_inside)``."""
     floor = cfg.tol_floor if cloud.floor is None else cloud.floor
     lift = 0.0 if cloud.floor is None else cfg.tol_floor - cloud.floor
     g, k = cloud.shape
@@ -317,6 +327,9 @@ def _classify_kernel(cell, g, k, r_v, sigma_v, u_v, big_r, floor, noise_k, slope
     wall = np.zeros((g, k), dtype=np.bool_)
     beyond = np.zeros((g, k), dtype=np.bool_)
     inside = np.zeros((g, k), dtype=np.bool_)
+    n_wall = 0
+    n_beyond = 0
+    n_inside = 0
     for i in range(cell.size):
         row = cell[i] // k
         col = cell[i] - row * k
@@ -326,11 +339,88 @@ def _classify_kernel(cell, g, k, r_v, sigma_v, u_v, big_r, floor, noise_k, slope
         t_in = t + lift
         if e > t:
             beyond[row, col] = True
+            n_beyond += 1
         elif e < -t_in:
             inside[row, col] = True
+            n_inside += 1
         elif e <= t and e >= -t_in:
             wall[row, col] = True
-    return tol, wall, beyond, inside
+            n_wall += 1
+    return tol, wall, beyond, inside, n_wall, n_beyond, n_inside
+
+
+def significant_regions(
+    beyond: NDArray[np.bool_],
+    inside: NDArray[np.bool_],
+    wraps: bool,
+    min_points: int,
+    min_rows: int,
+) -> tuple[
+    NDArray[np.int32],
+    int,
+    NDArray[np.bool_],
+    int,
+    NDArray[np.bool_],
+    NDArray[np.bool_],
+    NDArray[np.int32] | None,
+]:
+    """The regions of returns off the wall (``beyond | inside``, (G, K) masks) large enough to
+    be a structure: at least ``min_points`` cells spanning at least ``min_rows`` rows of the
+    grid (8-neighbourhood, joined across the row seam when the grid ``wraps`` and has three
+    rows or more: :func:`detector.grid.label_regions`). Returns ``(labels, n, keep, n_keep,
+    beyond_kept, inside_kept, labels_beyond)``: the labelling of every region (1..n), the
+    cells of the significant ones and their count, those beyond and inside the wall, and the
+    labels of the cells beyond the wall (0 elsewhere) when no significant region holds cells
+    both beyond and inside it (else ``None``). One compiled pass."""
+    labels, n_lab, keep, n_keep, beyond_k, inside_k, pre, unmixed = _significant_regions(
+        np.ascontiguousarray(beyond),
+        np.ascontiguousarray(inside),
+        bool(wraps) and beyond.shape[0] >= 3,
+        int(min_points),
+        int(min_rows),
+    )
+    return labels, int(n_lab), keep, int(n_keep), beyond_k, inside_k, (pre if unmixed else None)
+
+
+@njit(cache=True)
+def _significant_regions(beyond, inside, wraps, min_points, min_rows):
+    g, k = beyond.shape
+    anomaly = np.empty((g, k), dtype=np.bool_)
+    for r in range(g):
+        for c in range(k):
+            anomaly[r, c] = beyond[r, c] or inside[r, c]
+    labels, n_lab = label_grid(anomaly, wraps)
+    keep = np.zeros((g, k), dtype=np.bool_)
+    beyond_k = np.zeros((g, k), dtype=np.bool_)
+    inside_k = np.zeros((g, k), dtype=np.bool_)
+    pre = np.zeros((g, k), dtype=np.int32)
+    n_keep = 0
+    if n_lab == 0:
+        return labels, n_lab, keep, n_keep, beyond_k, inside_k, pre, False
+    counts, rows = _region_stats(labels, n_lab)
+    good = np.zeros(n_lab + 1, dtype=np.bool_)
+    for lab in range(1, n_lab + 1):
+        good[lab] = counts[lab] >= min_points and rows[lab] >= min_rows
+    mixed = np.zeros(n_lab + 1, dtype=np.bool_)
+    for r in range(g):
+        for c in range(k):
+            lab = labels[r, c]
+            if good[lab]:
+                keep[r, c] = True
+                n_keep += 1
+                if inside[r, c]:
+                    inside_k[r, c] = True
+                    mixed[lab] = True
+                elif beyond[r, c]:
+                    beyond_k[r, c] = True
+    unmixed = True
+    for r in range(g):
+        for c in range(k):
+            if beyond_k[r, c]:
+                if mixed[labels[r, c]]:
+                    unmixed = False
+                pre[r, c] = labels[r, c]
+    return labels, n_lab, keep, n_keep, beyond_k, inside_k, pre, unmixed
 
 
 def wall_tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
