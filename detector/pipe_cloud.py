@@ -191,19 +191,26 @@ def prepare_cloud(
     scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig
 ) -> PipeCloud:
     wraps, k_cols, src, dirs, trig, src_missing, beam_step = _pattern(scan)
-    # (missing cells point at a copy of a real one and are dropped)
-    cell, pb, ranges, local = _gather_returns(
-        scan.valid.reshape(-1), scan.ranges.reshape(-1), src, src_missing, dirs, range_bias
-    )
+    g = src.size // max(k_cols, 1)
+    valid, ranges_in = scan.valid.reshape(-1), scan.ranges.reshape(-1)
     if _moves(scan):
+        # (missing cells point at a copy of a real one and are dropped)
+        cell, pb, ranges, local = _gather_returns(
+            valid, ranges_in, src, src_missing, dirs, range_bias
+        )
         # continuous sweep: express every plane in the last plane's sensor frame (odometry)
         plane = pb // scan.n_beams
         world = np.einsum("nij,jn->in", scan.nominal_rotations[plane], local)
         world += scan.nominal_positions[plane].T
         local = scan.nominal_rotations[-1].T @ (world - scan.nominal_positions[-1][:, None])
-    # (the returns within the horizon, on the grid cropped to the columns that hold returns)
-    g = src.size // max(k_cols, 1)
-    cell, ranges, local, tr, k = _crop(cell, ranges, local, trig, k_cols, cfg.horizon)
+        # (the returns within the horizon, on the grid cropped to the columns that hold
+        # returns)
+        cell, ranges, local, tr, k = _crop(cell, ranges, local, trig, k_cols, cfg.horizon)
+    else:
+        # (both steps in one pass: the sensor frame is the one frame of the sweep)
+        cell, ranges, local, tr, k = _gather_cropped(
+            valid, ranges_in, src, src_missing, dirs, trig, range_bias, k_cols, cfg.horizon
+        )
     shape = (g, k)
     sigma_range, sigma_r = radial_noise(scan.spec, ranges, tr[0], tr[1])
     cloud = PipeCloud(
@@ -285,12 +292,79 @@ def _crop(cell, ranges, local, trig, k_cols, horizon):
 
 def _moves(scan: Scan) -> bool:
     """Does the believed (nominal) sensor pose change during the sweep (position or
-    orientation)? Then the planes are motion-compensated into the last plane's frame."""
+    orientation, by more than 1e-9)? Then the planes are motion-compensated into the last
+    plane's frame."""
     if scan.n_planes < 2:
         return False
-    if float(np.ptp(scan.nominal_positions, axis=0).max()) > 1e-9:
-        return True
-    return float(np.ptp(scan.nominal_rotations, axis=0).max()) > 1e-9
+    return _spread_exceeds(
+        scan.nominal_positions.reshape(scan.n_planes, -1), 1e-9
+    ) or _spread_exceeds(scan.nominal_rotations.reshape(scan.n_planes, -1), 1e-9)
+
+
+@njit(cache=True)
+def _spread_exceeds(values, tol):
+    """Does any column of the (n, m) ``values`` span more than ``tol`` (``np.ptp`` along the
+    first axis)?"""
+    n, m = values.shape
+    for j in range(m):
+        lo = values[0, j]
+        hi = values[0, j]
+        for i in range(1, n):
+            v = values[i, j]
+            if v < lo:
+                lo = v
+            if v > hi:
+                hi = v
+        if hi - lo > tol:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _gather_cropped(valid, ranges, src, missing, dirs, trig, bias, k_cols, horizon):
+    """:func:`_gather_returns` then :func:`_crop` in one pass over the grid (a sweep whose
+    planes share one sensor frame): the returns nearer than ``horizon`` along the sensor's
+    axis, their cells on the grid cropped to the columns that hold them, ranges, points
+    ``(3, n)`` and ``|sin|, |cos|`` of their beam angles ``(2, n)``; and the cropped grid's
+    width."""
+    m = src.size
+    keep = np.ones(m, dtype=np.bool_)
+    for c in missing:
+        keep[c] = False
+    n = 0
+    k0 = k_cols
+    k1 = -1
+    for c in range(m):
+        if keep[c] and valid[src[c]]:
+            r = max(ranges[src[c]] - bias, 0.0)
+            if dirs[0, c] * r <= horizon:
+                n += 1
+                col = c % k_cols
+                k0 = min(k0, col)
+                k1 = max(k1, col)
+                continue
+        keep[c] = False
+    if n == 0:
+        k0, k1 = 0, 0
+    width = k1 + 1 - k0
+    out_cell = np.empty(n, dtype=np.intp)
+    out_range = np.empty(n)
+    out_local = np.empty((3, n))
+    out_trig = np.empty((2, n))
+    j = 0
+    for c in range(m):
+        if keep[c]:
+            r = max(ranges[src[c]] - bias, 0.0)
+            row = c // k_cols
+            out_cell[j] = row * width + (c - row * k_cols - k0)
+            out_range[j] = r
+            out_local[0, j] = dirs[0, c] * r
+            out_local[1, j] = dirs[1, c] * r
+            out_local[2, j] = dirs[2, c] * r
+            out_trig[0, j] = trig[0, c]
+            out_trig[1, j] = trig[1, c]
+            j += 1
+    return out_cell, out_range, out_local, out_trig, width
 
 
 def classify_returns(
