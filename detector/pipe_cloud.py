@@ -331,6 +331,8 @@ def _gather_cropped(valid, ranges, src, missing, dirs, trig, bias, k_cols, horiz
     keep = np.ones(m, dtype=np.bool_)
     for c in missing:
         keep[c] = False
+    kept = np.empty(m, dtype=np.intp)
+    r_kept = np.empty(m)
     n = 0
     k0 = k_cols
     k1 = -1
@@ -338,32 +340,29 @@ def _gather_cropped(valid, ranges, src, missing, dirs, trig, bias, k_cols, horiz
         if keep[c] and valid[src[c]]:
             r = max(ranges[src[c]] - bias, 0.0)
             if dirs[0, c] * r <= horizon:
+                kept[n] = c
+                r_kept[n] = r
                 n += 1
                 col = c % k_cols
                 k0 = min(k0, col)
                 k1 = max(k1, col)
-                continue
-        keep[c] = False
     if n == 0:
         k0, k1 = 0, 0
     width = k1 + 1 - k0
     out_cell = np.empty(n, dtype=np.intp)
-    out_range = np.empty(n)
     out_local = np.empty((3, n))
     out_trig = np.empty((2, n))
-    j = 0
-    for c in range(m):
-        if keep[c]:
-            r = max(ranges[src[c]] - bias, 0.0)
-            row = c // k_cols
-            out_cell[j] = row * width + (c - row * k_cols - k0)
-            out_range[j] = r
-            out_local[0, j] = dirs[0, c] * r
-            out_local[1, j] = dirs[1, c] * r
-            out_local[2, j] = dirs[2, c] * r
-            out_trig[0, j] = trig[0, c]
-            out_trig[1, j] = trig[1, c]
-            j += 1
+    for j in range(n):
+        c = kept[j]
+        r = r_kept[j]
+        row = c // k_cols
+        out_cell[j] = row * width + (c - row * k_cols - k0)
+        out_local[0, j] = dirs[0, c] * r
+        out_local[1, j] = dirs[1, c] * r
+        out_local[2, j] = dirs[2, c] * r
+        out_trig[0, j] = trig[0, c]
+        out_trig[1, j] = trig[1, c]
+    out_range = r_kept[:n].copy()
     return out_cell, out_range, out_local, out_trig, width
 
 
