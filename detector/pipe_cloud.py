@@ -94,9 +94,16 @@ class PipeCloud:
         return self.xyz.transpose(1, 2, 0)
 
     def sigma_percentile(self, q: float) -> float:
-        """The ``q``-th percentile of the returns' radial noise (m; computed once)."""
+        """The ``q``-th percentile of the returns' radial noise (m; computed once; the
+        percentiles of :data:`SIGMA_PERCENTILES` in one partial sort)."""
         v = self._sigma_pct.get(q)
         if v is None:
+            if q in SIGMA_PERCENTILES and not self._sigma_pct:
+                for qq, vq in zip(
+                    SIGMA_PERCENTILES, partial_percentiles(self.sigma_v, SIGMA_PERCENTILES)
+                ):
+                    self._sigma_pct[qq] = vq
+                return self._sigma_pct[q]
             v = self._sigma_pct[q] = partial_percentile(self.sigma_v, q)
         return v
 
@@ -523,6 +530,33 @@ def partial_percentile(x: NDArray[np.float64], q: float) -> float:
         return float(np.partition(x, lo)[lo])
     part = np.partition(x, (lo, lo + 1))
     return float(part[lo] + (h - lo) * (part[lo + 1] - part[lo]))
+
+
+def partial_percentiles(x: NDArray[np.float64], qs: tuple[float, ...]) -> list[float]:
+    """:func:`partial_percentile` of ``x`` at each of ``qs`` (the same numbers), from one
+    partial sort."""
+    n = x.size
+    if n == 0:
+        return [0.0 for _ in qs]
+    spots = []
+    for q in qs:
+        h = (n - 1) * q / 100.0
+        lo = min(int(h), n - 1)
+        spots.append((h, lo))
+    kth = sorted({k for _, lo in spots for k in (lo, lo + 1) if k < n})
+    part = np.partition(x, kth)
+    out = []
+    for h, lo in spots:
+        if lo + 1 >= n:
+            out.append(float(part[lo]))
+        else:
+            out.append(float(part[lo] + (h - lo) * (part[lo + 1] - part[lo])))
+    return out
+
+
+#: The percentiles of the returns' radial noise the detector reads
+#: (:meth:`PipeCloud.sigma_percentile`).
+SIGMA_PERCENTILES = (50.0, 90.0)
 
 
 def axis_direction(theta: float, phi: float) -> NDArray[np.float64]:
