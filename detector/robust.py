@@ -253,7 +253,7 @@ def robust_fit(
     cf = c if c_final is None else c_final
     n_anneal = max(1, iterations - 1 if anneal is None else anneal)
     given = fit_kernels.NOT_GIVEN
-    return fit_kernels.robust_fit_kernel(  # type: ignore[no-any-return]
+    return fit_kernels.robust_fit_kernel(
         model,
         np.ascontiguousarray(data, dtype=float),
         fit_kernels.NO_INTS if ipar is None else np.ascontiguousarray(ipar, dtype=np.intp),
