@@ -21,7 +21,7 @@ from detector.improved_config import ImprovedConfig
 from detector.pipe_cloud import (
     PipeCloud,
     covers_azimuth,
-    even_subsample,
+    even_indices,
     partial_percentile,
     wall_tolerance,
 )
@@ -70,7 +70,7 @@ def refine_wall_axis(
     sub = _axis_returns(xyz, cloud.r_v, big_r, gate, math.nan if u_max is None else u_max)
     if sub.shape[1] == 0:
         return cloud.pose, info
-    sub = np.ascontiguousarray(sub[:, even_subsample(np.arange(sub.shape[1]), cfg.axis_points)])
+    sub = np.ascontiguousarray(sub[:, even_indices(sub.shape[1], cfg.axis_points)])
     # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
     # gentle taper would pass for a tilted wall), so it is held at the prior
     span = float(partial_percentile(sub[0], 95) - partial_percentile(sub[0], 5))
@@ -208,13 +208,26 @@ def wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: 
     1 % of them within the wall tolerance under the current pose?"""
     if u_max < 0.15:  # (a short stretch of wall: the first pass's wider view helps)
         return False
-    near = cloud.xyz_v[0] < u_max
-    n_near = int(np.count_nonzero(near))
+    n_near, n_off = _near_off_wall(
+        cloud.xyz_v[0], cloud.r_v, wall_tolerance(cloud, cfg), big_r, u_max
+    )
     if n_near < 200:
         return False
-    e = cloud.r_v - big_r
-    n_off = int(np.count_nonzero(near & (np.abs(e) > wall_tolerance(cloud, cfg))))
     return n_off <= 0.01 * n_near
+
+
+@njit(cache=True)
+def _near_off_wall(u, r, tol, big_r, u_max):
+    """How many returns lie nearer than ``u_max`` along the axis, and how many of those lie
+    off the wall of radius ``big_r`` by more than their tolerance ``tol`` (m)."""
+    n_near = 0
+    n_off = 0
+    for i in range(u.size):
+        if u[i] < u_max:
+            n_near += 1
+            if abs(r[i] - big_r) > tol[i]:
+                n_off += 1
+    return n_near, n_off
 
 
 def scatter_floor(cfg: ImprovedConfig, rms: float) -> float:

@@ -29,6 +29,7 @@ from detector.pipe_cloud import (
     PipeCloud,
     axis_direction,
     azimuth_coverage,
+    even_indices,
     even_subsample,
     fit_confidence,
     partial_percentile,
@@ -271,7 +272,7 @@ def _outgoing_returns(
     u_edge = math.inf
     for lb in lobes:
         lp = cloud.points(lb.mask)
-        lp = lp[even_subsample(np.arange(lp.shape[0]), 200)]
+        lp = lp[even_indices(lp.shape[0], 200)]
         lobe_pts.append(lp)
         # where the beams left the incoming cylinder (sensor near the axis)
         rr = np.sqrt(np.square(lp[:, 1]) + np.square(lp[:, 2]))
@@ -327,7 +328,7 @@ def _coarse_start(
                 (np.sin(rolls)[:, None] * st).reshape(-1),
             ]
         )  # (3, RT)
-        lq = lp[even_subsample(np.arange(lp.shape[0]), 50 if bp.any_roll else 60)]
+        lq = lp[even_indices(lp.shape[0], 50 if bp.any_roll else 60)]
         # the mean squared distance of the returns from the pipe's wall, capped; the sensor
         # sees every wall from inside its pipe: a cylinder behind the returns (the same patch
         # seen from outside) is penalised like an outlier
@@ -953,7 +954,7 @@ def _hole_prior(
         # is seen, scored by the returns through the opening and by the hole length (returns
         # at the edges fall off the wall, so a hole may look longer, never shorter)
         ell_t = centre - big_r * cos_t / sin_t  # (T,)
-        lq = lp[even_subsample(np.arange(lp.shape[0]), 100)]
+        lq = lp[even_indices(lp.shape[0], 100)]
         qx = lq[None, :, 0] - ell_t[:, None]  # (T, n)
         lat = lq[:, 1] * math.cos(lb.roll) + lq[:, 2] * math.sin(lb.roll)  # (n,)
         t = qx * cos_t[:, None] + lat[None, :] * sin_t[:, None]

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from detector.grid import _region_stats, build_grid, label_grid, region_stats
+from detector.grid import build_grid, label_grid, label_stats, region_stats
 from detector.improved_config import ImprovedConfig
 from detector.robust import mad_sigma, tukey_weights
 from detector.scan import Scan, radial_noise
@@ -477,7 +477,7 @@ def _significant_regions(beyond, inside, wraps, min_points, min_rows):
     n_keep = 0
     if n_lab == 0:
         return labels, n_lab, keep, n_keep, beyond_k, inside_k, pre, False
-    counts, rows = _region_stats(labels, n_lab)
+    counts, rows = label_stats(labels, n_lab)
     good = np.zeros(n_lab + 1, dtype=np.bool_)
     for lab in range(1, n_lab + 1):
         good[lab] = counts[lab] >= min_points and rows[lab] >= min_rows
@@ -517,6 +517,14 @@ def even_subsample(idx: NDArray[np.intp], n: int) -> NDArray[np.intp]:
         return idx
     step = idx.size / n
     return idx[(np.arange(n) * step).astype(np.intp)]
+
+
+def even_indices(m: int, n: int) -> NDArray[np.intp]:
+    """``even_subsample(np.arange(m), n)`` without the ``m`` indices: the positions of ``n``
+    of ``m`` items spread evenly (all ``m`` when there are no more than ``n``)."""
+    if m <= n:
+        return np.arange(m)
+    return (np.arange(n) * (m / n)).astype(np.intp)
 
 
 def partial_percentile(x: NDArray[np.float64], q: float) -> float:
