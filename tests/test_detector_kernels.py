@@ -21,6 +21,7 @@ from detector.pipe_cloud import (
     _gather_cropped,
     _gather_returns,
     _spread_exceeds,
+    azimuth_coverage,
     partial_percentile,
     partial_percentiles,
     region_sizes,
@@ -445,3 +446,15 @@ def test_partial_percentiles_are_numpys(values: list[float]) -> None:
 def test_spread_exceeds_is_ptp(seed: int, n: int, spread: float) -> None:
     v = np.random.default_rng(seed).normal(size=(n, 9)) * spread
     assert _spread_exceeds(v, 1e-9) == bool(np.ptp(v, axis=0).max() > 1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seeds, st.integers(0, 300), st.sampled_from([12, 36, 72]))
+def test_azimuth_coverage_matches_numpy(seed: int, n: int, bins: int) -> None:
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(n, 3))
+    p[: n // 3, 1] = 0.0  # (angles on the sector edges: +-pi/2, 0, pi)
+    phi = np.arctan2(p[:, 2], p[:, 1])
+    k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
+    ref = float(np.count_nonzero(np.bincount(k, minlength=bins))) / bins
+    assert azimuth_coverage(p, bins) == ref
