@@ -112,9 +112,9 @@ class PipeCloud:
         return per_return[np.flatnonzero(mask.reshape(-1)[self.cell])]
 
     def points(self, mask: NDArray[np.bool_]) -> NDArray[np.float64]:
-        """(n, 3) pipe-frame points of the grid cells in ``mask`` (in grid order)."""
-        idx = np.flatnonzero(mask.reshape(-1)[self.cell])
-        return np.take(self.xyz_v, idx, axis=1).T
+        """(n, 3) pipe-frame points of the grid cells in ``mask`` (in grid order; a view of a
+        ``(3, n)`` array)."""
+        return _masked_columns(np.ascontiguousarray(mask).reshape(-1), self.cell, self.xyz_v).T
 
     def points_at(self, flat_cells: NDArray[np.intp]) -> NDArray[np.float64]:
         """(n, 3) pipe-frame points of the given flat grid cells."""
@@ -136,6 +136,25 @@ class PipeCloud:
         """Go back to a pose whose points were computed before."""
         self.pose, self.xyz_v = pose, xyz_v
         self._xyz = self._r_v = self._tol_v = None
+
+
+@njit(cache=True)
+def _masked_columns(mask, cell, xyz):
+    """The columns ``i`` of ``xyz`` ((3, N)) whose grid cell ``cell[i]`` is set in the flat
+    ``mask``, in their order: ``(3, n)``."""
+    n = 0
+    for i in range(cell.size):
+        if mask[cell[i]]:
+            n += 1
+    out = np.empty((3, n))
+    j = 0
+    for i in range(cell.size):
+        if mask[cell[i]]:
+            out[0, j] = xyz[0, i]
+            out[1, j] = xyz[1, i]
+            out[2, j] = xyz[2, i]
+            j += 1
+    return out
 
 
 def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -20,6 +20,7 @@ from detector.pipe_cloud import (
     _crop,
     _gather_cropped,
     _gather_returns,
+    _masked_columns,
     _spread_exceeds,
     azimuth_coverage,
     partial_percentile,
@@ -458,3 +459,14 @@ def test_azimuth_coverage_matches_numpy(seed: int, n: int, bins: int) -> None:
     k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
     ref = float(np.count_nonzero(np.bincount(k, minlength=bins))) / bins
     assert azimuth_coverage(p, bins) == ref
+
+
+@settings(max_examples=40, deadline=None)
+@given(seeds, st.floats(0.0, 1.0))
+def test_masked_columns_are_numpys(seed: int, density: float) -> None:
+    rng = np.random.default_rng(seed)
+    cell = np.flatnonzero(rng.random(200) < 0.7)
+    xyz = rng.normal(size=(3, cell.size))
+    mask = rng.random(200) < density
+    ref = np.take(xyz, np.flatnonzero(mask[cell]), axis=1)
+    np.testing.assert_array_equal(_masked_columns(mask, cell, xyz), ref)
