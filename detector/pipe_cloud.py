@@ -129,13 +129,23 @@ class PipeCloud:
     def r_v(self) -> NDArray[np.float64]:
         """(N,) distance of each return from the pipe axis under the current pose."""
         if self._r_v is None:
-            self._r_v = np.sqrt(np.square(self.xyz_v[1]) + np.square(self.xyz_v[2]))
+            self._r_v = _radii(self.xyz_v)
         return self._r_v
 
     def restore(self, pose: SensorInPipe, xyz_v: NDArray[np.float64]) -> None:
         """Go back to a pose whose points were computed before."""
         self.pose, self.xyz_v = pose, xyz_v
         self._xyz = self._r_v = self._tol_v = None
+
+
+@njit(cache=True)
+def _radii(xyz):
+    """Distance of each ``(3, N)`` point from the x axis: ``sqrt(y^2 + z^2)``."""
+    n = xyz.shape[1]
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = math.sqrt(xyz[1, i] * xyz[1, i] + xyz[2, i] * xyz[2, i])
+    return out
 
 
 @njit(cache=True)
@@ -527,8 +537,17 @@ def wall_tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]
     if cloud.tol0 is None:
         cloud.tol0 = cfg.tol_floor + cfg.noise_k * cloud.sigma_v
     if cloud._tol_v is None:
-        cloud._tol_v = cloud.tol0 + cfg.axis_slope * np.abs(cloud.xyz_v[0])
+        cloud._tol_v = _sloped_tolerance(cloud.tol0, cfg.axis_slope, cloud.xyz_v[0])
     return cloud._tol_v
+
+
+@njit(cache=True)
+def _sloped_tolerance(tol0, slope, u):
+    """``tol0 + slope |u|`` (m), elementwise."""
+    out = np.empty(u.size)
+    for i in range(u.size):
+        out[i] = tol0[i] + slope * abs(u[i])
+    return out
 
 
 def even_subsample(idx: NDArray[np.intp], n: int) -> NDArray[np.intp]:

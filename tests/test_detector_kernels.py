@@ -21,6 +21,8 @@ from detector.pipe_cloud import (
     _gather_cropped,
     _gather_returns,
     _masked_columns,
+    _radii,
+    _sloped_tolerance,
     _spread_exceeds,
     azimuth_coverage,
     partial_percentile,
@@ -470,3 +472,15 @@ def test_masked_columns_are_numpys(seed: int, density: float) -> None:
     mask = rng.random(200) < density
     ref = np.take(xyz, np.flatnonzero(mask[cell]), axis=1)
     np.testing.assert_array_equal(_masked_columns(mask, cell, xyz), ref)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seeds, st.integers(0, 200))
+def test_radii_and_sloped_tolerance_are_numpys(seed: int, n: int) -> None:
+    rng = np.random.default_rng(seed)
+    xyz = rng.normal(size=(3, n))
+    tol0 = rng.random(n)
+    np.testing.assert_array_equal(_radii(xyz), np.sqrt(np.square(xyz[1]) + np.square(xyz[2])))
+    np.testing.assert_array_equal(
+        _sloped_tolerance(tol0, 0.002, xyz[0]), tol0 + 0.002 * np.abs(xyz[0])
+    )
