@@ -59,13 +59,8 @@ class PipeCloud:
     def _grid(self, values: NDArray, fill: float | bool) -> NDArray:
         g, k = self.shape
         if values.ndim == 1:
-            out = np.full(g * k, fill, dtype=values.dtype)
-            out[self.cell] = values
-            return out.reshape(g, k)
-        out = np.full((values.shape[0], g * k), fill, dtype=values.dtype)
-        for row, vals in zip(out, values):  # (row by row: a faster scatter)
-            row[self.cell] = vals
-        return out.reshape(values.shape[0], g, k)
+            return _scatter(values[None, :], self.cell, g * k, fill).reshape(g, k)
+        return _scatter(values, self.cell, g * k, fill).reshape(values.shape[0], g, k)
 
     @property
     def valid(self) -> NDArray[np.bool_]:
@@ -136,6 +131,18 @@ class PipeCloud:
         """Go back to a pose whose points were computed before."""
         self.pose, self.xyz_v = pose, xyz_v
         self._xyz = self._r_v = self._tol_v = None
+
+
+@njit(cache=True)
+def _scatter(values, cell, size, fill):
+    """``(rows, size)`` of ``fill`` with ``values[:, i]`` at column ``cell[i]``."""
+    rows = values.shape[0]
+    out = np.empty((rows, size), dtype=values.dtype)
+    out[:] = fill
+    for r in range(rows):
+        for i in range(cell.size):
+            out[r, cell[i]] = values[r, i]
+    return out
 
 
 @njit(cache=True)

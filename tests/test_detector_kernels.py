@@ -22,6 +22,7 @@ from detector.pipe_cloud import (
     _gather_returns,
     _masked_columns,
     _radii,
+    _scatter,
     _sloped_tolerance,
     _spread_exceeds,
     azimuth_coverage,
@@ -484,3 +485,16 @@ def test_radii_and_sloped_tolerance_are_numpys(seed: int, n: int) -> None:
     np.testing.assert_array_equal(
         _sloped_tolerance(tol0, 0.002, xyz[0]), tol0 + 0.002 * np.abs(xyz[0])
     )
+
+
+@settings(max_examples=30, deadline=None)
+@given(seeds, st.integers(1, 3))
+def test_scatter_is_numpys(seed: int, rows: int) -> None:
+    rng = np.random.default_rng(seed)
+    cell = np.flatnonzero(rng.random(100) < 0.6)
+    values = rng.normal(size=(rows, cell.size))
+    ref = np.full((rows, 100), 0.0)
+    ref[:, cell] = values
+    np.testing.assert_array_equal(_scatter(values, cell, 100, 0.0), ref)
+    flags = _scatter(np.ones((1, cell.size), dtype=bool), cell, 100, False)
+    np.testing.assert_array_equal(flags[0], np.isin(np.arange(100), cell))
