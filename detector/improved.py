@@ -129,6 +129,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from detector.axis_fit import (
@@ -408,8 +409,8 @@ def _with_ring_holes(
     fitting angle (90, 45 or 135 deg) whose far side fits the bump best; the run goes on past
     them (the rings beyond lie on its wall)."""
     # (cheap tests first: too few returns beyond the wall at all, or nearer than the limit)
-    beyond = cloud.r_v - big_r > np.maximum(0.00035, 4.0 * cloud.sigma_v)
-    if np.count_nonzero(beyond) < 6:
+    beyond, n_beyond = _beyond_bump(cloud.r_v, cloud.sigma_v, big_r)
+    if n_beyond < 6:
         return det
     support = det.diagnostics.get("fit_support")
     weak = (
@@ -490,6 +491,19 @@ def _with_ring_holes(
         replaced_kind=det.kind,
     )
     return Detection("junction", options, conf, diag)
+
+
+@njit(cache=True)
+def _beyond_bump(r, sigma, big_r):
+    """Which returns at distances ``r`` from the axis lie beyond the wall of radius ``big_r``
+    by more than 0.35 mm and four times their radial noise ``sigma`` (m), and how many."""
+    out = np.empty(r.size, dtype=np.bool_)
+    n = 0
+    for i in range(r.size):
+        out[i] = r[i] - big_r > max(0.00035, 4.0 * sigma[i])
+        if out[i]:
+            n += 1
+    return out, n
 
 
 # --------------------------------------------------------------------------- the pose again
