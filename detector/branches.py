@@ -67,10 +67,10 @@ def find_lobes(
     lobes: list[Lobe] = []
     counts, row_span = region_sizes(labels, n_lab)
     cand = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
-    regions = [(labels == k, int(counts[k])) for k in cand[cand > 0].tolist()]
-    regions = [part for m, n in regions for part in _split_all_round(cloud, m, n, big_r, cfg)]
-    for m, n in regions:
-        p = cloud.points(m)
+    found = [(labels == k, int(counts[k])) for k in cand[cand > 0].tolist()]
+    regions = [part for m, n in found for part in _split_all_round(cloud, m, n, big_r, cfg)]
+    for m, n, p_m in regions:
+        p = cloud.points(m) if p_m is None else p_m
         depth = (
             float(partial_percentile(np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2])), 90)) - big_r
         )
@@ -101,27 +101,28 @@ def find_lobes(
 
 def _split_all_round(
     cloud: PipeCloud, mask: NDArray[np.bool_], n: int, big_r: float, cfg: ImprovedConfig
-) -> list[tuple[NDArray[np.bool_], int]]:
+) -> list[tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]]:
     """A region of returns beyond the wall that goes all round the axis, split into its deep
     parts when there are two or more: entering a wider run from a tee's stem, the run's wall
     lies a step beyond the stem's all round and joins the two ways on into one region; only
     along the run do the returns reach deep (beyond half the region's 90th-percentile depth).
-    Otherwise the region as it is (``(mask, n)``)."""
+    Otherwise the region as it is (``(mask, n)``). Each part comes with its points
+    (:meth:`PipeCloud.points`) when they were gathered, else ``None``."""
     p = cloud.points(mask)
     if azimuth_coverage(p) < cfg.all_round:
-        return [(mask, n)]
+        return [(mask, n, p)]
     depth = np.hypot(cloud.xyz[1][mask], cloud.xyz[2][mask]) - big_r
     deep = np.zeros_like(mask)
     deep[mask] = depth > 0.5 * float(partial_percentile(depth, 90.0))
     labels, n_lab = label_regions(deep, cloud.wraps)
     if n_lab < 2:
-        return [(mask, n)]
+        return [(mask, n, p)]
     counts, row_span = region_sizes(labels, n_lab)
     parts = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
     parts = parts[parts > 0]
     if parts.size < 2:
-        return [(mask, n)]
-    return [(labels == k, int(counts[k])) for k in parts.tolist()]
+        return [(mask, n, p)]
+    return [(labels == k, int(counts[k]), None) for k in parts.tolist()]
 
 
 # --------------------------------------------------------------------------- outgoing pipes

@@ -581,7 +581,8 @@ def partial_percentile(x: NDArray[np.float64], q: float) -> float:
     lo = min(int(h), n - 1)
     if lo + 1 >= n:
         return float(np.partition(x, lo)[lo])
-    part = np.partition(x, (lo, lo + 1))
+    part = x.copy()  # (np.partition's copy and sort, without its wrappers)
+    part.partition((lo, lo + 1))
     return float(part[lo] + (h - lo) * (part[lo + 1] - part[lo]))
 
 
@@ -597,7 +598,8 @@ def partial_percentiles(x: NDArray[np.float64], qs: tuple[float, ...]) -> list[f
         lo = min(int(h), n - 1)
         spots.append((h, lo))
     kth = sorted({k for _, lo in spots for k in (lo, lo + 1) if k < n})
-    part = np.partition(x, kth)
+    part = x.copy()
+    part.partition(kth)
     out = []
     for h, lo in spots:
         if lo + 1 >= n:

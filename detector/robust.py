@@ -37,7 +37,8 @@ def median(x: NDArray[np.float64]) -> float:
     h = n // 2
     if n % 2:
         return float(np.partition(x, h)[h])
-    part = np.partition(x, (h - 1, h))
+    part = x.copy()  # (np.partition's copy and sort, without its wrappers)
+    part.partition((h - 1, h))
     return float((part[h - 1] + part[h]) / 2.0)
 
 
