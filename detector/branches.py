@@ -299,6 +299,19 @@ def _outgoing_returns(
     )
 
 
+#: The coarse start's deflections (rad) with their cosines and sines: up to 100 deg for a bend
+#: (``True``), 150 deg otherwise.
+_COARSE_THETAS = {
+    only: (t, np.cos(t), np.sin(t))
+    for only, t in (
+        (True, np.radians(np.arange(30.0, 101.0, 7.5))),
+        (False, np.radians(np.arange(30.0, 151.0, 7.5))),
+    )
+}
+#: The coarse start's rolls (rad) of a far wall seen head-on (its roll unknown).
+_COARSE_ROLLS = np.radians(np.arange(0.0, 360.0, 20.0))
+
+
 def _coarse_start(
     bp: BranchProblem,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -309,7 +322,7 @@ def _coarse_start(
     # one way on and no run going on: a bend, deflecting up to 90 deg (wye branches at 135 deg
     # come with a second way)
     bend_only = bp.n_l == 1 and not bp.straight_on
-    thetas = np.radians(np.arange(30.0, 101.0 if bend_only else 151.0, 7.5))
+    thetas, cos_t, sin_t = _COARSE_THETAS[bend_only]
     l_grid = bp.u_edge + np.linspace(0.0, 3.0 * big_r, 13)
     if bp.any_roll:
         # the far wall of a turn lies past the turn's reference point
@@ -319,16 +332,12 @@ def _coarse_start(
     per_lobe = []
     rolls_of = []
     for lb, lp in zip(bp.lobes, bp.lobe_pts):
-        rolls = np.radians(np.arange(0.0, 360.0, 20.0)) if bp.any_roll else np.array([lb.roll])
+        rolls = _COARSE_ROLLS if bp.any_roll else np.array([lb.roll])
         rolls_of.append(rolls)
-        st = np.sin(thetas)
-        dirs = np.stack(
-            [
-                np.tile(np.cos(thetas), rolls.size),
-                (np.cos(rolls)[:, None] * st).reshape(-1),
-                (np.sin(rolls)[:, None] * st).reshape(-1),
-            ]
-        )  # (3, RT)
+        dirs = np.empty((3, rolls.size * thetas.size))  # (3, RT): roll-major
+        dirs[0] = np.tile(cos_t, rolls.size)
+        dirs[1] = (np.cos(rolls)[:, None] * sin_t).reshape(-1)
+        dirs[2] = (np.sin(rolls)[:, None] * sin_t).reshape(-1)
         lq = lp[even_indices(lp.shape[0], 50 if bp.any_roll else 60)]
         # the mean squared distance of the returns from the pipe's wall, capped; the sensor
         # sees every wall from inside its pipe: a cylinder behind the returns (the same patch
