@@ -295,19 +295,17 @@ def _train(args: argparse.Namespace) -> int:
     import yaml
 
     import pipe_env  # noqa: F401  (registers the environment ids)
-    from agents.train import DEFAULT_CONFIG, TrainConfig, train
+    from agents.train import DEFAULT_CONFIG, TrainConfig, check_init, check_rollout, train
 
     try:
         cfg = TrainConfig.from_yaml(args.config or DEFAULT_CONFIG)
     except (OSError, ValueError, TypeError, yaml.YAMLError) as exc:
         _print(f"error: --config {args.config!r}: {exc}")
         return EXIT_USAGE
-    if args.minutes is not None:
-        cfg.max_minutes = args.minutes
-    if args.timesteps is not None:
-        cfg.total_timesteps = args.timesteps
     try:
+        cfg = _train_overrides(cfg, args)
         cfg.check_ppo_keys()
+        check_rollout(cfg)
     except ValueError as exc:
         _print(f"error: --config {args.config or DEFAULT_CONFIG!s}: {exc}")
         return EXIT_USAGE
@@ -316,6 +314,12 @@ def _train(args: argparse.Namespace) -> int:
     except (ValueError, TypeError, gym.error.Error) as exc:
         _print(f"error: --config {args.config or DEFAULT_CONFIG!s}: env_kwargs: {exc}")
         return EXIT_USAGE
+    if cfg.init is not None:
+        try:
+            check_init(cfg)
+        except ValueError as exc:
+            _print(f"error: --init: {exc}")
+            return EXIT_USAGE
     if _out_dir(args.out) is None:
         return EXIT_USAGE
     with _progress() as progress:
@@ -335,6 +339,26 @@ def _train(args: argparse.Namespace) -> int:
     if summary.get("note"):
         _print(f"note: {summary['note']}")
     return 0
+
+
+def _train_overrides(cfg: Any, args: argparse.Namespace) -> Any:
+    """``cfg`` with the command line's overrides, checked again as a whole (ValueError)."""
+    from dataclasses import replace
+
+    changes: dict[str, Any] = {}
+    if args.minutes is not None:
+        changes["max_minutes"] = args.minutes
+    if args.timesteps is not None:
+        changes["total_timesteps"] = args.timesteps
+    if args.n_envs is not None:
+        changes["n_envs"] = args.n_envs
+    if args.init is not None:
+        changes["init"] = args.init
+    if args.fidelity is not None:
+        changes["env_kwargs"] = {**cfg.env_kwargs, "fidelity": args.fidelity}
+    if args.n_steps is not None:
+        changes["ppo"] = {**cfg.ppo, "n_steps": args.n_steps}
+    return replace(cfg, **changes)  # (replace re-runs the config's checks)
 
 
 def _eval(args: argparse.Namespace) -> int:
@@ -573,6 +597,31 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="episodes of the closing held-out evaluation; 0 skips it (default: the config's "
         "eval.final_episodes, else eval.episodes)",
+    )
+    tr.add_argument(
+        "--fidelity",
+        default=None,
+        choices=FIDELITIES,
+        help="override the config's env fidelity (full: each worker its own MuJoCo world)",
+    )
+    tr.add_argument(
+        "--init",
+        default=None,
+        help="start from this MaskablePPO model .zip (its weights and hyper-parameters; the "
+        "rollout length is the run's) and keep learning in the run's environment",
+    )
+    tr.add_argument(
+        "--n-envs",
+        type=_int_at_least(1),
+        default=None,
+        help="parallel environments (the config's vec_env when > 1; default: the config's)",
+    )
+    tr.add_argument(
+        "--n-steps",
+        type=_int_at_least(1),
+        default=None,
+        help="timesteps per environment per rollout (ppo.n_steps; the minibatch is at most the "
+        "rollout)",
     )
     tr.add_argument("--no-progress", action="store_true", help="no progress bars")
     tr.set_defaults(func=_train)

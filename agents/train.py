@@ -12,6 +12,14 @@ selection saw; see :mod:`agents.evaluate`).
 Every model file (checkpoints, the best and the final model) is written atomically
 (:func:`atomic_maskable_ppo`): a run interrupted while saving leaves the previous file whole.
 
+A run may start from a trained model (``init``, ``pipenav train --init MODEL``): its weights and
+hyper-parameters are loaded and learning continues in the run's environment, e.g. fine-tuning
+the fast-fidelity policy in the full fidelity's physical loop (``--fidelity full``: every
+vector-env worker builds its own MuJoCo world). The rollout (``ppo.n_steps``, ``ppo.batch_size``,
+:data:`INIT_OVERRIDES`) follows the run's config, since a full-fidelity rollout must be far
+shorter; the model must have the environment's observation and action spaces
+(:func:`check_init`).
+
 Every key is checked before any work: the top-level keys, the ``eval`` keys
 (:data:`EVAL_KEYS`) and the ``ppo`` keys (MaskablePPO's own keyword arguments); a mistyped key
 is a ValueError naming it and the allowed ones.
@@ -33,6 +41,7 @@ from typing import TYPE_CHECKING, Any
 import yaml
 
 from detector.atomic import atomic_write_bytes, atomic_write_text
+from detector.validation import fail
 from pipe_env.network_io import finite_json
 
 if TYPE_CHECKING:
@@ -43,6 +52,9 @@ VEC_ENVS = ("subproc", "dummy")
 #: Keys of a config's ``eval`` mapping: validation episodes and interval (timesteps) during
 #: training, the validation pool seed, and the episodes of the closing held-out evaluation.
 EVAL_KEYS = ("episodes", "every_timesteps", "pool_seed", "final_episodes")
+#: ``ppo`` keys a run started from a model (``init``) takes from its config; every other
+#: hyper-parameter comes from the model.
+INIT_OVERRIDES = ("n_steps", "batch_size")
 #: MaskablePPO arguments train() sets itself (not allowed under ``ppo``).
 _PPO_SET_BY_TRAIN = ("self", "policy", "env", "seed", "verbose", "tensorboard_log")
 
@@ -64,6 +76,8 @@ class TrainConfig:
     #: torch threads for the policy: 1 is fastest for small MLPs (OpenMP spin-waiting costs
     #: milliseconds per layer when the cores are also busy with environment workers).
     torch_threads: int = 1
+    #: a MaskablePPO model .zip to start from (None: a new policy); see the module docstring
+    init: str | None = None
 
     def __post_init__(self) -> None:
         if self.vec_env not in VEC_ENVS:
@@ -87,6 +101,8 @@ class TrainConfig:
         for name in ("env_kwargs", "ppo", "eval"):
             if not isinstance(getattr(self, name), dict):
                 raise ValueError(f"{name}={getattr(self, name)!r}: use a mapping")
+        if self.init is not None and not (isinstance(self.init, str) and self.init):
+            raise fail("init", self.init, "a MaskablePPO model .zip path, or null", where="train")
         unknown = sorted(set(self.eval) - set(EVAL_KEYS))
         if unknown:
             raise ValueError(f"eval: unknown keys {unknown}; allowed: {list(EVAL_KEYS)}")
@@ -124,6 +140,71 @@ class TrainConfig:
             return cls(**data)
         except ValueError as exc:
             raise ValueError(f"{path}: {exc}") from None
+
+
+def check_rollout(cfg: TrainConfig) -> None:
+    """Raise naming the field when ``ppo.n_steps`` and ``n_envs`` give a rollout of fewer than
+    two timesteps (PPO needs at least two to form a minibatch)."""
+    n_steps = cfg.ppo.get("n_steps", 2048)
+    if not (isinstance(n_steps, int) and not isinstance(n_steps, bool) and n_steps >= 1):
+        raise fail("ppo.n_steps", n_steps, "an integer >= 1", where="train")
+    if n_steps * cfg.n_envs < 2:
+        raise fail(
+            "ppo.n_steps",
+            n_steps,
+            "n_steps * n_envs >= 2",
+            problem=f"with n_envs = {cfg.n_envs} a rollout of {n_steps * cfg.n_envs} timestep",
+            where="train",
+        )
+
+
+def check_init(cfg: TrainConfig) -> dict[str, Any]:
+    """Check the model ``cfg.init`` can start the run: an existing MaskablePPO file whose
+    observation and action spaces are the environment's (built without a reset: no MuJoCo
+    world). Returns the model's stored data (hyper-parameters, spaces, ``_n_updates``).
+
+    Raises:
+        ArgumentError: naming ``init``, the value, the problem and what is allowed.
+    """
+    import gymnasium as gym
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    import pipe_env  # noqa: F401  (registers the environment ids)
+    from agents.evaluate import is_maskable_model
+
+    path = cfg.init
+    allowed = "a MaskablePPO model .zip (sb3-contrib) of the environment's spaces"
+    if path is None:
+        raise fail("init", path, allowed, problem="no model given", where="train")
+    if not Path(path).is_file():
+        raise fail("init", path, allowed, problem="no such file", where="train")
+    try:
+        maskable = is_maskable_model(path)
+    except ValueError:
+        raise fail(
+            "init", path, allowed, problem="not a Stable-Baselines3 model file", where="train"
+        ) from None
+    if not maskable:
+        raise fail(
+            "init", path, allowed, problem="a plain PPO model (no action masks)", where="train"
+        )
+    data, _, _ = load_from_zip_file(path, device="cpu", print_system_info=False)
+    assert data is not None
+    env = gym.make(cfg.env_id, **cfg.env_kwargs)
+    try:
+        for name in ("observation_space", "action_space"):
+            if data.get(name) != getattr(env, name):
+                raise fail(
+                    "init",
+                    path,
+                    allowed,
+                    problem=f"its {name} differs from that of {cfg.env_id} with env_kwargs "
+                    f"{cfg.env_kwargs} (scan_image must match the model's training)",
+                    where="train",
+                )
+    finally:
+        env.close()
+    return data
 
 
 def model_zip_path(path: str | os.PathLike[str]) -> Path:
@@ -226,6 +307,30 @@ class _BudgetProgress:
         self.progress.stop()
 
 
+def _make_model(cfg: TrainConfig, venv: Any, out: Path) -> MaskablePPO:
+    """A new MaskablePPO per ``cfg.ppo``, or the model ``cfg.init`` with the run's rollout
+    (:data:`INIT_OVERRIDES`) on ``venv``; model files are saved atomically."""
+    cls = atomic_maskable_ppo()
+    if cfg.init is None:
+        return cls(
+            "MultiInputPolicy",
+            venv,
+            seed=cfg.seed,
+            verbose=0,
+            tensorboard_log=str(out / "tb"),
+            **cfg.ppo,
+        )
+    overrides = {k: cfg.ppo[k] for k in INIT_OVERRIDES if k in cfg.ppo}
+    if "n_steps" in overrides:  # a minibatch no larger than the rollout
+        rollout = int(overrides["n_steps"]) * cfg.n_envs
+        overrides["batch_size"] = min(int(overrides.get("batch_size", rollout)), rollout)
+    model = cls.load(
+        cfg.init, env=venv, device="cpu", tensorboard_log=str(out / "tb"), verbose=0, **overrides
+    )
+    model.set_random_seed(cfg.seed)
+    return model
+
+
 def train(
     cfg: TrainConfig,
     out: str | Path,
@@ -250,6 +355,9 @@ def train(
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     cfg.check_ppo_keys()
+    check_rollout(cfg)
+    if cfg.init is not None:
+        check_init(cfg)
     torch.set_num_threads(cfg.torch_threads)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -260,16 +368,8 @@ def train(
 
     eval_cfg = {"episodes": 50, "every_timesteps": 50_000, "pool_seed": VALIDATION_POOL_SEED}
     eval_cfg.update(cfg.eval)
-    eval_env = DummyVecEnv(make_env_fns(cfg, pool_seed=int(eval_cfg["pool_seed"]), n=1))
-    ppo_kwargs = dict(cfg.ppo)
-    model = atomic_maskable_ppo()(
-        "MultiInputPolicy",
-        venv,
-        seed=cfg.seed,
-        verbose=0,
-        tensorboard_log=str(out / "tb"),
-        **ppo_kwargs,
-    )
+    model = _make_model(cfg, venv, out)
+    n_updates_at_start = int(model._n_updates)
 
     class Budget(BaseCallback):
         """Stops training when the wall-clock budget is spent."""
@@ -292,6 +392,15 @@ def train(
 
     bar = _BudgetProgress(cfg.total_timesteps, cfg.max_minutes) if progress_bar else None
     every = max(int(eval_cfg["every_timesteps"]) // cfg.n_envs, 1)
+    # the validation env only when a validation can happen within the timestep budget (learn
+    # runs whole rollouts): building it resets an episode, a MuJoCo world in full fidelity
+    rollout = int(model.n_steps) * cfg.n_envs
+    reachable = -(-cfg.total_timesteps // rollout) * rollout
+    eval_env = (
+        DummyVecEnv(make_env_fns(cfg, pool_seed=int(eval_cfg["pool_seed"]), n=1))
+        if reachable >= every * cfg.n_envs
+        else None
+    )
     callbacks = CallbackList(
         [
             *([ShowProgress(bar)] if bar is not None else []),
@@ -301,14 +410,20 @@ def train(
                 str(out / "checkpoints"),
                 name_prefix="ppo",
             ),
-            MaskableEvalCallback(
-                eval_env,
-                n_eval_episodes=int(eval_cfg["episodes"]),
-                eval_freq=every,
-                best_model_save_path=str(out / "best"),
-                log_path=str(out / "eval"),
-                deterministic=True,
-                verbose=0,
+            *(
+                [
+                    MaskableEvalCallback(
+                        eval_env,
+                        n_eval_episodes=int(eval_cfg["episodes"]),
+                        eval_freq=every,
+                        best_model_save_path=str(out / "best"),
+                        log_path=str(out / "eval"),
+                        deterministic=True,
+                        verbose=0,
+                    )
+                ]
+                if eval_env is not None
+                else []
             ),
         ]
     )
@@ -321,10 +436,15 @@ def train(
     wall = time.monotonic() - t0
     model.save(out / "final_model.zip")
     venv.close()
-    eval_env.close()
+    if eval_env is not None:
+        eval_env.close()
     best = out / "best" / "best_model.zip"
     summary: dict[str, Any] = {
         "timesteps": int(model.num_timesteps),
+        "init": cfg.init,
+        "fidelity": cfg.env_kwargs.get("fidelity", "fast"),
+        "n_updates_at_start": n_updates_at_start,
+        "n_updates": int(model._n_updates),
         "wall_seconds": round(wall, 1),
         "timesteps_per_second": round(model.num_timesteps / max(wall, 1e-9), 1),
         "final_model": str(out / "final_model.zip"),

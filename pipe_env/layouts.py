@@ -237,7 +237,7 @@ def t_junction(
         return _assemble(
             "t_junction", db, "tee", np.zeros(3), outs, distance, outlet_length, {}, meta
         )
-    raise ValueError(f"t_junction entry={entry!r} is not allowed; use 'run' or 'stem'")
+    raise fail("t_junction.entry", entry, "'run', 'stem'")
 
 
 def y_junction(
@@ -273,7 +273,7 @@ def y_junction(
         return _assemble(
             "y_junction", db, "wye", np.zeros(3), outs, distance, outlet_length, {}, meta
         )
-    raise ValueError(f"y_junction entry={entry!r} is not allowed; use 'run' or 'branch'")
+    raise fail("y_junction.entry", entry, "'run', 'branch'")
 
 
 def cross_junction(

@@ -23,23 +23,18 @@ meaning on the robot:
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import asdict, dataclass, fields
 from typing import Any, ClassVar
 
+from detector.validation import check_int, check_number, fail
 from detector.vocab import StrEnum
 
 DEFAULT_SPEED = 0.05  # m/s
 
 
 def _num(obj: Any, name: str, lo: float, hi: float, unit: str) -> None:
-    v = getattr(obj, name)
-    ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
-    if not ok or not lo <= v <= hi:
-        raise ValueError(
-            f"{type(obj).__name__}.{name} = {v!r} is invalid; allowed: [{lo:g}, {hi:g}] {unit}"
-        )
-    object.__setattr__(obj, name, float(v))
+    v = check_number(f"{type(obj).__name__}.{name}", getattr(obj, name), lo, hi, unit)
+    object.__setattr__(obj, name, v)
 
 
 class SequenceStatus(StrEnum):
@@ -83,7 +78,7 @@ class Drive(Step):
         _num(self, "distance", -50.0, 50.0, "m")
         _num(self, "speed", 0.001, 0.5, "m/s")
         if not isinstance(self.comply, bool):
-            raise ValueError(f"Drive.comply = {self.comply!r} is invalid; allowed: True, False")
+            raise fail("Drive.comply", self.comply, "True, False", "not a bool")
 
     def to_dict(self) -> dict[str, Any]:
         d = super().to_dict()
@@ -125,10 +120,7 @@ class Bend(Step):
     angle: float
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.joint, int) and not isinstance(self.joint, bool)):
-            raise ValueError(f"Bend.joint = {self.joint!r} is invalid; allowed: an int >= 1")
-        if self.joint < 1:
-            raise ValueError(f"Bend.joint = {self.joint!r} is invalid; allowed: an int >= 1")
+        object.__setattr__(self, "joint", check_int("Bend.joint", self.joint, low=1))
         _num(self, "angle", -math.radians(170), math.radians(170), "rad")
 
 
@@ -193,9 +185,7 @@ class Halt(Step):
 
     def __post_init__(self) -> None:
         if self.status not in HALT_STATUSES:
-            raise ValueError(
-                f"Halt.status = {self.status!r} is invalid; allowed: 'blocked', 'dead_end'"
-            )
+            raise fail("Halt.status", self.status, "'blocked', 'dead_end'")
 
 
 STEP_TYPES: dict[str, type[Step]] = {
@@ -206,13 +196,15 @@ STEP_TYPES: dict[str, type[Step]] = {
 def step_from_dict(d: dict[str, Any]) -> Step:
     """The primitive a :meth:`Step.to_dict` made; errors name the unknown op or field."""
     if not isinstance(d, dict) or "op" not in d:
-        raise ValueError(f"a step must be a dict with an 'op' key, got {d!r}")
+        raise fail("step", d, "a mapping with an 'op' key", "not a step")
     op = d["op"]
     if op not in STEP_TYPES:
-        raise ValueError(f"step op {op!r} is unknown; allowed: {sorted(STEP_TYPES)}")
+        raise fail("op", op, ", ".join(sorted(STEP_TYPES)), "unknown", where="step")
     cls = STEP_TYPES[op]
     names = {f.name for f in fields(cls)}
     extra = set(d) - names - {"op"}
     if extra:
-        raise ValueError(f"step {op!r} has unknown fields {sorted(extra)}; allowed {sorted(names)}")
+        raise fail(
+            "fields", sorted(extra), ", ".join(sorted(names)), "unknown", where=f"step {op!r}"
+        )
     return cls(**{k: v for k, v in d.items() if k != "op"})

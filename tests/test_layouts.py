@@ -120,7 +120,7 @@ def test_start_pose_and_behind_room() -> None:
 def test_bad_parameters_are_named() -> None:
     with pytest.raises(ValueError, match=r"layout: angle = 0.1: out of range"):
         layouts.mitre_bend(angle=0.1)
-    with pytest.raises(ValueError, match=r"entry='side' is not allowed"):
+    with pytest.raises(ValueError, match=r"entry = 'side': not allowed; allowed: 'run'"):
         layouts.t_junction(entry="side")
     with pytest.raises(ValueError, match=r"layout = 'spiral': unknown; allowed: closure"):
         layouts.make_layout("spiral")

@@ -13,8 +13,9 @@ This module owns the decision loop (:class:`DecisionEnv`): the episode, the plan
 single ways taken automatically, metrics, rendering and pickling. The parts it is built from
 live beside it: the arguments (:mod:`pipe_env.envs.config`), the observation and action types
 (:mod:`pipe_env.envs.observations`, :mod:`pipe_env.envs.actions`), the goal and coverage tasks
-(:mod:`pipe_env.envs.tasks`), where networks come from (:mod:`pipe_env.envs.sources`), and what
-agents may know beyond the observation (:mod:`pipe_env.envs.oracle`).
+(:mod:`pipe_env.envs.tasks`), where networks come from (:mod:`pipe_env.envs.sources`), what
+agents may know beyond the observation (:mod:`pipe_env.envs.oracle`), and the episode's outcome
+accounting (``outcome_log``: :mod:`pipe_env.envs.outcome_log`).
 
 Rendering (``render_mode``): ``"ansi"`` returns the options table as text; ``"rgb_array"``
 returns an image of the robot in the pipe now (480x360, an isometric view following the robot,
@@ -60,6 +61,7 @@ from pipe_env.envs.observations import (
     world_way,
 )
 from pipe_env.envs.oracle import Oracle
+from pipe_env.envs.outcome_log import OutcomeLog
 from pipe_env.envs.plant import Decision, KinematicPlant, Plant, PlantOutcome, PlantStatus
 from pipe_env.envs.sensing_model import error_model_for
 from pipe_env.envs.sources import draw_network, pool_network
@@ -285,6 +287,9 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         #: detection errors of every decision against ground truth
         self.detection_errors: list[dict[str, float]] = []
         self.way_log = WayLog()
+        #: what was sensed at each structure and how each attempted way ended
+        #: (:mod:`pipe_env.envs.outcome_log`)
+        self.outcome_log = OutcomeLog()
         self._reset_events: dict[str, Any] = {}
 
     def _start_episode(self, network: PipeNetwork) -> None:
@@ -302,10 +307,10 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         plant = self.plant
         plant.reset(np.random.default_rng(self.np_random.integers(2**63)))
         self._frames = []
-        executor = getattr(plant, "executor", None)
-        if self.collect_frames and executor is not None:
-            self._next_frame_time = executor.time
-            executor.on_tick = self._on_tick
+        if self.collect_frames:
+            now = plant.watch_motion(self._on_tick)
+            if now is not None:
+                self._next_frame_time = now
         self._start_counters()
         self._waypoints = [plant.waypoint()]
         self.task.initialize_episode(network, plant)
@@ -331,7 +336,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         choice = self.action_type.choice(self.decision.options, row)
         odo = plant.odometry_pose()
         self.way_log.record(odo.position, world_way(choice, odo))
-        outcome = plant.execute(choice, self.task.target)
+        outcome = self._execute(self.decision, choice)
         self._record(outcome)
         self._after_action(outcome, events)
         if self.jams > jams_before:  # the chosen way, or a drive or single way after it
@@ -408,6 +413,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
             assert dec is not None
             # stalled while driving: the robot decides where it is
             if out.status == PlantStatus.JAMMED:
+                self.outcome_log.drive_jams += 1
                 self._count_jam(events, "drive_jammed", out.note)
             self.structures += 1
             self._after_sensing(dec)
@@ -437,7 +443,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         """Execute a single way; (True, the decision to offer) when the drive stops here,
         (False, ``dec``) to drive on."""
         plant = self._plant
-        outcome = plant.execute(way, self.task.target)
+        outcome = self._execute(dec, way, auto=True)
         self._record(outcome)
         events["auto_structures"] += 1
         if outcome.status == PlantStatus.GOAL:
@@ -453,6 +459,14 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
                 dec = self._sense_again_after_jam()
         self.decision_points.append(dec.pose.position)
         return True, dec
+
+    def _execute(
+        self, dec: Decision, choice: StructureOption | str, auto: bool = False
+    ) -> PlantOutcome:
+        """Have the plant take ``choice`` at ``dec`` and log the attempt."""
+        outcome = self._plant.execute(choice, self.task.target)
+        self.outcome_log.record_attempt(choice, dec.truth, outcome.status, auto)
+        return outcome
 
     def _sense_again_after_jam(self) -> Decision:
         """The robot backed off the structure that jammed it (on a way the agent chose or
@@ -471,6 +485,7 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
 
     def _after_sensing(self, dec: Decision) -> None:
         """Record detection errors of a decision against ground truth."""
+        self.outcome_log.record_sensing(dec.options, dec.kind, dec.truth)
         if not dec.options or not dec.truth:
             return
         kind_ok = dec.kind == dec.truth[0].kind
@@ -587,10 +602,8 @@ class DecisionEnv(gym.Env[Observation, np.int64], Generic[ConfigT, TaskT]):
         if self._renderer is None or self._renderer.world is not world:
             self._renderer = WorldRenderer(world, 480, 360)
         pose = plant.pose()
-        robot = getattr(plant, "robot", None)  # full fidelity: frame the whole robot
-        target = (
-            world.data.xpos[robot.body_ids].mean(axis=0) if robot is not None else pose.position
-        )
+        bodies = plant.body_positions()  # full fidelity: frame the whole robot
+        target = bodies.mean(axis=0) if bodies is not None else pose.position
         cam = self._renderer.camera("iso", target=target, distance=0.9)
         image: NDArray[np.uint8] = self._renderer.render(cam, markers=[(pose.position, 0.03)])
         return image

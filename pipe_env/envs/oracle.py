@@ -96,8 +96,7 @@ class Oracle:
     @property
     def last_scan(self) -> ScanData | None:
         """The last LiDAR sweep (full fidelity), None in fast fidelity or before one."""
-        scan: Any = getattr(self._plant(), "last_scan", None)
-        return scan if isinstance(scan, ScanData) else None
+        return self._plant().last_scan
 
     @property
     def detection_log(self) -> list[dict]:

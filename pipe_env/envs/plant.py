@@ -23,6 +23,7 @@ Edge positions: the robot is on a run's edge at ``s`` metres (centreline) from f
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
@@ -38,6 +39,7 @@ from detector.geometry import (
     wrap_angle,
 )
 from detector.options import StructureOption, match_option, option_vector
+from detector.scan import Scan
 from detector.vocab import DETECTORS, StrEnum
 from pipe_env.envs.fidelity import Fidelity
 from pipe_env.envs.sensing_model import DetectionErrorModel, error_model_for
@@ -161,6 +163,7 @@ class Plant(Protocol):
         scan_image: low-resolution range image of the last sweep (full fidelity with
             ``scan_image=True``), else None.
         world: the MuJoCo world the robot moves in (full fidelity), else None.
+        last_scan: the last LiDAR sweep (full fidelity, after one), else None.
     """
 
     fidelity: str
@@ -171,6 +174,7 @@ class Plant(Protocol):
     sim_time: float
     scan_image: NDArray[np.float32] | None
     world: PipeWorld | None
+    last_scan: Scan | None
 
     def reset(self, rng: np.random.Generator) -> None:
         """Put the robot at the network's start pose with fresh logs, drawing from ``rng``."""
@@ -218,6 +222,16 @@ class Plant(Protocol):
         """Waypoints as (N, 3) world positions, m."""
         ...
 
+    def watch_motion(self, on_tick: Callable[[float], None] | None) -> float | None:
+        """Call ``on_tick(simulated time, s)`` at every control tick of the motion from now on
+        (None: stop); returns the current simulated time, or None for a plant without
+        continuous motion (fast fidelity), which never calls it."""
+        ...
+
+    def body_positions(self) -> NDArray[np.float64] | None:
+        """World positions of the robot's modules, (N, 3) m (full fidelity), else None."""
+        ...
+
     def close(self) -> None:
         """Release what the plant holds."""
         ...
@@ -243,6 +257,7 @@ class KinematicPlant:
     #: no sweeps and no MuJoCo world in the fast fidelity (the :class:`Plant` protocol's)
     scan_image: NDArray[np.float32] | None = None
     world: PipeWorld | None = None
+    last_scan: Scan | None = None
 
     def __init__(
         self,
@@ -543,6 +558,14 @@ class KinematicPlant:
         self.state = target
         self.decision = None
         return out
+
+    def watch_motion(self, on_tick: Callable[[float], None] | None) -> float | None:
+        """Kinematic plants jump between decisions: no ticks to watch (None)."""
+        return None
+
+    def body_positions(self) -> NDArray[np.float64] | None:
+        """No robot bodies in the fast fidelity (None)."""
+        return None
 
     def close(self) -> None:
         """Nothing to release (the plant interface's close)."""

@@ -32,6 +32,7 @@ detector with the plant's tracker) or :class:`OracleSource` (the plant drawing).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,6 +44,7 @@ from detector.fusion import StructureTracker, TrackState
 from detector.geometry import Pose
 from detector.options import StructureOption, option_order
 from detector.scan import Scan
+from detector.validation import check_number, fail
 from detector.vocab import DETECTORS, Method
 from pipe_env.envs.fidelity import Fidelity
 from pipe_env.envs.observations import SCAN_SHAPE
@@ -102,6 +104,9 @@ def scan_image(scan: Scan, shape: tuple[int, int] = SCAN_SHAPE) -> NDArray[np.fl
     return out
 
 
+_WHERE = "PhysicalPlant"
+
+
 class PhysicalPlant:
     """Full-fidelity plant (see module docstring).
 
@@ -122,6 +127,8 @@ class PhysicalPlant:
             fittings move the clamped robot kinematically, see
             :meth:`primitives.executor.Executor.free_straight`) or ``"everywhere"`` (contact
             physics for every motion: the reference).
+        timestep: the physics step, s (None: ``pipe_env.world.TIMESTEP``).
+        control_dt: the executor's control period, s (None: ``primitives.executor.CONTROL_DT``).
     """
 
     fidelity = Fidelity.FULL.value
@@ -139,26 +146,26 @@ class PhysicalPlant:
         robot_config: Any = None,
         physics: str = "contact",
         sparse_interval: float = SPARSE_INTERVAL,
+        timestep: float | None = None,
+        control_dt: float | None = None,
     ) -> None:
         from primitives.executor import PHYSICS_MODES
 
         if physics not in PHYSICS_MODES:
-            raise ValueError(f"physics {physics!r} is unknown; allowed: {PHYSICS_MODES}")
+            raise fail("physics", physics, ", ".join(PHYSICS_MODES), where=_WHERE)
 
         if network.start_pose is None:
-            raise ValueError("the network has no start_pose; the robot needs one")
+            raise fail("network.start_pose", None, "a Pose", "missing", where=_WHERE)
         if detector not in DETECTORS:
-            raise ValueError(f"detector {detector!r} is unknown; allowed: {DETECTORS}")
+            raise fail("detector", detector, ", ".join(DETECTORS), where=_WHERE)
         self.network = network
         self.detector = detector
         self.trigger_distance = float(trigger_distance)
         self.keep_image = bool(scan_image)
         self.scan_interval = float(scan_interval)
-        if not (math.isfinite(sparse_interval) and scan_interval <= sparse_interval <= 0.5):
-            raise ValueError(
-                f"sparse_interval = {sparse_interval!r} is invalid; allowed [scan_interval, 0.5] m"
-            )
-        self.sparse_interval = float(sparse_interval)
+        self.sparse_interval = check_number(
+            "sparse_interval", sparse_interval, self.scan_interval, 0.5, "m", where=_WHERE
+        )
         #: the longest drive ``advance`` makes without a decision: the network's centreline
         #: length plus a metre (further, the robot drove through a structure it did not see)
         self._limit = 1.0 + float(sum(edge_length(network, r.id) for r in network.runs))
@@ -176,6 +183,11 @@ class PhysicalPlant:
             "physics": physics,
             **lidar_kwargs,
         }
+        # the physics step and control period: the executor's defaults unless given
+        if timestep is not None:
+            self._executor_args["timestep"] = timestep
+        if control_dt is not None:
+            self._executor_args["control_dt"] = control_dt
         self._build()
         self.reset(np.random.default_rng(0))
 
@@ -454,9 +466,7 @@ class PhysicalPlant:
         out = PlantOutcome()
         if isinstance(choice, str):
             if choice != BACK_OUT:
-                raise ValueError(
-                    f"choice must be a StructureOption or {BACK_OUT!r}, got {choice!r}"
-                )
+                raise fail("choice", choice, f"a StructureOption or {BACK_OUT!r}", where=_WHERE)
             return self._back_out(dec)
         odometer_at_decision = self._odometer
         sequence = for_option(choice, incoming_diameter=self.read_clamp())
@@ -511,6 +521,17 @@ class PhysicalPlant:
         self._track_state = None
         self.decision = None
         return out
+
+    def watch_motion(self, on_tick: Callable[[float], None] | None) -> float | None:
+        """Call ``on_tick(simulated time, s)`` at every control tick from now on (None: stop);
+        returns the executor's simulated time, s."""
+        self.executor.on_tick = on_tick
+        return float(self.executor.time)
+
+    def body_positions(self) -> NDArray[np.float64] | None:
+        """World positions of the robot's modules, (N, 3) m."""
+        assert self.world is not None
+        return np.array(self.world.data.xpos[self.robot.body_ids])
 
     def close(self) -> None:
         """Release the MuJoCo world (model, data, contact pairs, the LiDAR's ray caster) and

@@ -23,8 +23,10 @@ import numpy as np
 
 from detector.geometry import clamp
 from detector.options import KINDS, StructureOption, option_order
+from detector.validation import check_number, fail
 from detector.vocab import DETECTORS, Kind, Method
 
+_WHERE = "DetectionErrorModel"
 _SIGMAS = ("distance_sigma", "diameter_sigma", "angle_sigma", "direction_sigma")
 
 
@@ -64,15 +66,9 @@ class DetectionErrorModel:
 
     def __post_init__(self) -> None:
         for key in _SIGMAS + tuple(f"gross_{k}" for k in _SIGMAS):
-            v = getattr(self, key)
-            if not (math.isfinite(v) and 0.0 <= v <= math.pi):
-                raise ValueError(
-                    f"DetectionErrorModel.{key} = {v!r} is invalid; allowed [0, pi] (m or rad)"
-                )
+            check_number(f"{_WHERE}.{key}", getattr(self, key), 0.0, math.pi, "m or rad")
         for key in ("miss_rate", "phantom_rate", "misclass_rate", "confidence", "gross_rate"):
-            v = getattr(self, key)
-            if not (math.isfinite(v) and 0.0 <= v <= 1.0):
-                raise ValueError(f"DetectionErrorModel.{key} = {v!r} is invalid; allowed [0, 1]")
+            check_number(f"{_WHERE}.{key}", getattr(self, key), 0.0, 1.0)
 
     @property
     def exact(self) -> bool:
@@ -220,7 +216,7 @@ def error_model_for(detector: str, lidar: Any = "ideal") -> DetectionErrorModel:
         lidar: a preset name or a ``LidarSpec`` (its ``name`` selects the calibrated entry).
     """
     if detector not in DETECTORS:
-        raise ValueError(f"detector={detector!r} is not allowed; use one of {DETECTORS}")
+        raise fail("detector", detector, ", ".join(DETECTORS), where="error_model_for")
     if detector == Method.GROUND_TRUTH:
         return DetectionErrorModel("ground_truth")
     preset = lidar if isinstance(lidar, str) else str(getattr(lidar, "name", "ideal"))
