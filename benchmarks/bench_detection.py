@@ -29,7 +29,11 @@ classified scans are beyond the thesis's requirements (distance 2 cm, angle and 
 5 deg).
 
 Writes ``results/detection/report.md`` (the tables), ``fig_5_2_estimates_vs_position.png`` and
-``fig_5_3_misalignment.png``. ``--quick`` runs a small subset (about a minute).
+``fig_5_3_misalignment.png``. ``--quick`` runs a small subset (about a minute). To iterate on
+one kind: ``--kinds reducer --sensors ydlidar_x4,ls02 --parts accuracy`` runs the main 3D
+tables only, for those rows and sensors (the layouts are drawn as in the full run, but the
+scans' noise is drawn in a different order, so the figures are of the same cases, not the
+same scans).
 """
 
 from __future__ import annotations
@@ -67,6 +71,9 @@ from pipe_env.world import build_world  # noqa: E402
 
 DIAMETERS_FULL = (0.057, 0.075, 0.1, 0.125)
 DIAMETERS_QUICK = (0.057, 0.1)
+SENSORS = ("ideal", "ydlidar_x4", "ls02")
+#: the study's parts, for ``--parts``
+PARTS = ("planar", "accuracy", "misalignment", "clamp", "false-alarms", "long-bends", "speed")
 
 
 @dataclass
@@ -845,15 +852,45 @@ def speed_table(runner: Runner, sensors: list[str]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """The command line: ``kinds``, ``sensors`` (lists) and ``parts`` (a set) checked."""
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="small run (about a minute)")
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--out", default="results/detection")
     ap.add_argument(
         "--write-docs", action="store_true", help="write the figures into docs/benchmarks.md"
     )
+    ap.add_argument(
+        "--kinds",
+        default="",
+        help="comma-separated layouts or row labels of the 3D study to run (e.g. reducer,closure;"
+        " default: all)",
+    )
+    ap.add_argument(
+        "--sensors", default=",".join(SENSORS), help=f"comma-separated subset of {SENSORS}"
+    )
+    ap.add_argument("--parts", default=",".join(PARTS), help=f"comma-separated subset of {PARTS}")
     args = ap.parse_args(argv)
+    args.kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
+    args.sensors = [k.strip() for k in args.sensors.split(",") if k.strip()]
+    args.parts = {k.strip() for k in args.parts.split(",") if k.strip()}
+    for name, given, allowed in (
+        ("--sensors", args.sensors, SENSORS),
+        ("--parts", args.parts, PARTS),
+    ):
+        bad = sorted(set(given) - set(allowed))
+        if bad or not given:
+            ap.error(f"{name} = {','.join(bad) or '(empty)'}: unknown; allowed: {allowed}")
+    partial = args.kinds or len(args.sensors) < len(SENSORS) or len(args.parts) < len(PARTS)
+    if args.write_docs and partial:
+        ap.error("--write-docs = given with --kinds/--sensors/--parts; allowed: full runs only")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    kinds, sensors, parts = args.kinds, args.sensors, args.parts
     t_start = time.perf_counter()
     rng = np.random.default_rng(args.seed)
     out = Path(args.out)
@@ -865,13 +902,16 @@ def main(argv: list[str] | None = None) -> int:
     warm_up()
     sections = []
     # 2D
+    # (run whichever parts are asked for: its scans draw from ``rng`` before the cases do)
     text2d, planar_series = planar_study(rng, np.linspace(0.40, 0.10, 7 if quick else 31))
-    sections.append(text2d)
-    # 3D thesis cases and extended cases, per sensor
+    if "planar" in parts:
+        sections.append(text2d)
+    # 3D thesis cases and extended cases, per sensor (every case is drawn, whichever run)
     cases = thesis_cases() + extended_cases(rng, diameters)
-    sensors = ["ideal", "ydlidar_x4", "ls02"]
+    if kinds:
+        cases = [c for c in cases if any(k in (c.layout, c.group) for k in kinds)]
     series_3d: list = []
-    for sensor in sensors:
+    for sensor in sensors if "accuracy" in parts else []:
         recs = []
         for case in cases:
             if sensor == "ideal" and case.group == "thesis: mitre bend 90 deg":
@@ -886,37 +926,43 @@ def main(argv: list[str] | None = None) -> int:
         sections.append(overall_table(recs, f"3D, {sensor} sensor, 40-10 cm"))
         sections.append(summarise(recs, f"3D per structure, {sensor} sensor, 40-10 cm"))
     # misalignment
-    offsets = [0.0, 0.1, 0.2] if quick else [0.0, 0.05, 0.1, 0.15, 0.2]
-    tilts = [0.0, 4.0] if quick else [0.0, 2.0, 4.0]
-    mis_text, sweep = misalignment_study(
-        runner, np.linspace(0.40, 0.10, 3 if quick else 7), offsets, tilts
-    )
-    sections.append(mis_text)
+    sweep: list = []
+    if "misalignment" in parts:
+        offsets = [0.0, 0.1, 0.2] if quick else [0.0, 0.05, 0.1, 0.15, 0.2]
+        tilts = [0.0, 4.0] if quick else [0.0, 2.0, 4.0]
+        mis_text, sweep = misalignment_study(
+            runner, np.linspace(0.40, 0.10, 3 if quick else 7), offsets, tilts
+        )
+        sections.append(mis_text)
     # clamped-diameter (encoder) error
-    sections.append(
-        clamp_error_study(
-            runner, np.linspace(0.40, 0.10, 3 if quick else 7), [-2.0, -1.0, 1.0, 2.0]
+    if "clamp" in parts:
+        sections.append(
+            clamp_error_study(
+                runner, np.linspace(0.40, 0.10, 3 if quick else 7), [-2.0, -1.0, 1.0, 2.0]
+            )
         )
-    )
     # false alarms
-    sections.append(straight_false_alarms(runner, sensors, 60 if quick else 400, diameters))
+    if "false-alarms" in parts:
+        sections.append(straight_false_alarms(runner, sensors, 60 if quick else 400, diameters))
     # more long bends, from their own draw (the cases above stay as they were)
-    sections.append(
-        long_bend_study(
-            runner,
-            np.random.default_rng([args.seed, 2]),
-            sensors,
-            distances,
-            diameters,
-            1 if quick else 3,
+    if "long-bends" in parts:
+        sections.append(
+            long_bend_study(
+                runner,
+                np.random.default_rng([args.seed, 2]),
+                sensors,
+                distances,
+                diameters,
+                1 if quick else 3,
+            )
         )
-    )
-    speed = speed_table(runner, sensors)
-    sections.append(speed)
+    speed = speed_table(runner, sensors) if "speed" in parts else ""
+    if speed:
+        sections.append(speed)
     sections.append(
         f"Long-bend positions skipped (the sensor would be inside the arc): {runner.skipped_in_arc}"
     )
-    figs = plots(out, series_3d, sweep, planar_series)
+    figs = plots(out, series_3d, sweep, planar_series) if parts == set(PARTS) else []
     elapsed = time.perf_counter() - t_start
     header = (
         f"# Detection accuracy study ({'quick' if quick else 'full'} run, seed "

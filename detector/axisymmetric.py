@@ -91,12 +91,66 @@ def _closure(
             diag["closure_curved"] = curved
         if plane_seen and spread <= 0.5 * tol_u and flat_plane:
             conf = fit_confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
+            seen_through = _end_wall_seen_through(cloud, big_r, dist, tol_u, conf, cfg, diag)
+            if seen_through is not None:
+                return seen_through
             opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
             # (curved only by the quadratic test: an end wall unless the returns show a
             # turn; the caller decides)
             diag["closure_tentative"] = not flat
             return Detection("closure", [opt], conf, diag)
     return None
+
+
+def _end_wall_seen_through(
+    cloud: PipeCloud,
+    big_r: float,
+    dist: float,
+    tol_u: float,
+    conf: float,
+    cfg: ImprovedConfig,
+    diag: dict[str, Any],
+) -> Detection | None:
+    """An end wall ``dist`` (m) ahead, flat to within ``tol_u`` (m), that is no cap of the
+    incoming pipe (radius ``big_r``, m) but the end wall of a narrower or wider pipe seen
+    through a reducer: a reducer then (its confidence ``conf`` halved), else None.
+
+    Every return on the end wall's plane counts, whatever its class (a metre away the wall
+    tolerance takes in the outer rings). A cap fills the pipe: the rings of beams reach its
+    rim to within a beam spacing. Beams aimed past the outermost ring on the plane, short of
+    the rim, met a narrowing; returns beyond the rim, a widening. From far away (or under a
+    sensor that loses grazing returns) the reducer's own wall does not return: its start is
+    bounded by the last wall return before it (the estimate) and, for a widening, by where
+    the beams beyond the rim crossed the wall radius; its radius by the end wall's rings."""
+    xyz, r_all = cloud.xyz_v, cloud.r_v
+    u_all = xyz[0]
+    slab = np.abs(u_all - dist) <= tol_u
+    if not np.any(slab) or cloud.beam_step <= 0.0:
+        return None
+    r_slab = r_all[slab]
+    off = float(np.hypot(cloud.pose.position[1], cloud.pose.position[2]))
+    spacing = dist * cloud.beam_step
+    r_out = float(r_slab.max())
+    beyond = r_slab > big_r + off + cfg.rim_margin + cfg.rim_beyond_k * cloud.sigma_v[slab]
+    share = float(np.count_nonzero(beyond)) / r_slab.size
+    narrower = big_r - r_out > cfg.rim_spacings * spacing + off + cfg.rim_margin
+    wider = share >= cfg.rim_beyond_share
+    diag.update(end_wall_rim_radius=r_out, end_wall_beyond_share=share)
+    if not (narrower or wider):
+        return None
+    # (the start: past the last return on the incoming wall before the end wall)
+    on_wall = (np.abs(r_all - big_r) <= cloud.sigma_v * 4.0 + cfg.rim_margin) & (u_all < dist)
+    start = float(partial_percentile(u_all[on_wall], 99.0)) if np.any(on_wall) else 0.0
+    if wider:
+        r2 = float(partial_percentile(r_slab[beyond], 98.0))
+        # (the beams beyond the rim crossed the wall radius before the widening ended)
+        u_cross = dist * big_r / np.maximum(r_slab[beyond], 1e-9)
+        start = min(start, float(u_cross.min()))
+    else:
+        r2 = min(r_out + 0.5 * spacing, big_r)
+    diag.update(end_wall_seen_through="wider" if wider else "narrower", reducer_r2=r2)
+    opt = StructureOption("reducer", max(start, 0.0), 2.0 * r2, 0.0, 0.0, 0.5 * conf)
+    return Detection("reducer", [opt], 0.5 * conf, diag)
 
 
 def _refit_without_end_wall(
