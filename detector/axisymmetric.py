@@ -102,6 +102,29 @@ def _closure(
     return None
 
 
+def _normal_cdf(z: float) -> float:
+    """The standard normal distribution function at ``z``."""
+    return 0.5 * math.erfc(-z / math.sqrt(2.0))
+
+
+def _end_wall_rings(
+    cloud: PipeCloud, slab: NDArray[np.bool_]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The rings of beams (one per beam-angle column of the scan grid) that return from the
+    end wall's plane (``slab``, over the compact returns): per ring, the share of its beams
+    that do, their median distance from the axis (m) and median radial noise (m)."""
+    g, k = cloud.shape
+    cols = cloud.cell[slab] % max(k, 1)
+    r_s, sig_s = cloud.r_v[slab], cloud.sigma_v[slab]
+    shares, radii, sigmas = [], [], []
+    for c in np.unique(cols):
+        sel = cols == c
+        shares.append(float(np.count_nonzero(sel)) / max(g, 1))
+        radii.append(float(np.median(r_s[sel])))
+        sigmas.append(float(np.median(sig_s[sel])))
+    return np.array(shares), np.array(radii), np.array(sigmas)
+
+
 def _end_wall_seen_through(
     cloud: PipeCloud,
     big_r: float,
@@ -116,38 +139,67 @@ def _end_wall_seen_through(
     through a reducer: a reducer then (its confidence ``conf`` halved), else None.
 
     Every return on the end wall's plane counts, whatever its class (a metre away the wall
-    tolerance takes in the outer rings). A cap fills the pipe: the rings of beams reach its
-    rim to within a beam spacing. Beams aimed past the outermost ring on the plane, short of
-    the rim, met a narrowing; returns beyond the rim, a widening. From far away (or under a
-    sensor that loses grazing returns) the reducer's own wall does not return: its start is
-    bounded by the last wall return before it (the estimate) and, for a widening, by where
-    the beams beyond the rim crossed the wall radius; its radius by the end wall's rings."""
+    tolerance takes in the outer rings), ring of beams by ring. A cap fills the pipe: a beam
+    aimed (nominally, the beam's jitter moves it by its radial noise) inside the rim returns
+    from it, one aimed outside it does not (it grazes the wall on the way). So a ring that
+    mostly returns from the plane from outside the rim (where a cap would return at most
+    ``cfg.rim_cap_share`` of it) means the pipe widens before the end wall; the ring after
+    the outermost one returning, aimed inside the rim (a cap would return most of it) and
+    hardly returning, means it narrows. From far away (or under a sensor that loses grazing
+    returns) the reducer's own wall does not return: its start is bounded by the last wall
+    return before it (the estimate) and, for a widening, by where the beams beyond the rim
+    crossed the wall radius; its radius by the end wall's rings."""
     xyz, r_all = cloud.xyz_v, cloud.r_v
     u_all = xyz[0]
     slab = np.abs(u_all - dist) <= tol_u
     if not np.any(slab) or cloud.beam_step <= 0.0:
         return None
-    r_slab = r_all[slab]
+    shares, radii, sigmas = _end_wall_rings(cloud, slab)
     off = float(np.hypot(cloud.pose.position[1], cloud.pose.position[2]))
-    spacing = dist * cloud.beam_step
-    r_out = float(r_slab.max())
-    beyond = r_slab > big_r + off + cfg.rim_margin + cfg.rim_beyond_k * cloud.sigma_v[slab]
-    share = float(np.count_nonzero(beyond)) / r_slab.size
-    narrower = big_r - r_out > cfg.rim_spacings * spacing + off + cfg.rim_margin
-    wider = share >= cfg.rim_beyond_share
-    diag.update(end_wall_rim_radius=r_out, end_wall_beyond_share=share)
+    rim = big_r - off - cfg.rim_margin  # (a beam aimed inside this meets a cap)
+    returning = shares >= cfg.rim_ring_share
+    cap_share_out = np.array(
+        [
+            _normal_cdf((big_r + off + cfg.rim_margin - r) / max(sg, 1e-6))
+            for r, sg in zip(radii, sigmas)
+        ]
+    )
+    wide = returning & (radii > big_r) & (cap_share_out <= cfg.rim_cap_share)
+    wider = bool(np.any(wide))
+    narrower = False
+    if not wider and np.any(returning):
+        j = int(np.argmax(np.where(returning, radii, -np.inf)))
+        theta_next = math.atan2(radii[j], dist) + cloud.beam_step
+        r_next = dist * math.tan(theta_next)
+        # (the next ring's share on the plane, if any of it returns there)
+        later = radii > radii[j] + 0.5 * dist * cloud.beam_step
+        s_next = float(shares[later].max()) if np.any(later) else 0.0
+        cap_next = _normal_cdf((rim - r_next) / max(float(sigmas[j]), 1e-6))
+        narrower = cap_next >= 0.5 and s_next <= cfg.rim_cap_share * cap_next
+        diag["end_wall_next_ring"] = {"radius": r_next, "share": s_next, "cap_share": cap_next}
+    diag["end_wall_rings"] = int(np.count_nonzero(returning))
     if not (narrower or wider):
         return None
-    # (the start: past the last return on the incoming wall before the end wall)
-    on_wall = (np.abs(r_all - big_r) <= cloud.sigma_v * 4.0 + cfg.rim_margin) & (u_all < dist)
+    # (the start: past the last return on the incoming wall before the end wall; a narrowing's
+    # cone, where it returns, lies inside the wall: only returns within one noise of the wall
+    # on that side count)
+    dr = r_all - big_r
+    inner = (4.0 if wider else 1.0) * cloud.sigma_v + cfg.rim_margin
+    on_wall = (dr >= -inner) & (dr <= 4.0 * cloud.sigma_v + cfg.rim_margin) & (u_all < dist - tol_u)
     start = float(partial_percentile(u_all[on_wall], 99.0)) if np.any(on_wall) else 0.0
     if wider:
-        r2 = float(partial_percentile(r_slab[beyond], 98.0))
+        r2 = float(radii[wide].max())
         # (the beams beyond the rim crossed the wall radius before the widening ended)
-        u_cross = dist * big_r / np.maximum(r_slab[beyond], 1e-9)
-        start = min(start, float(u_cross.min()))
+        start = min(start, dist * big_r / r2)
     else:
-        r2 = min(r_out + 0.5 * spacing, big_r)
+        r2 = min(float(radii[returning].max()) + 0.5 * dist * cloud.beam_step, big_r)
+        # (where the cone returns, within the wall's tolerance, the rings' medians show the
+        # kink where it leaves the wall, as for a widening's cone, mirrored)
+        noise = float(partial_percentile(cloud.sigma_v, 50.0))
+        hinge = _ring_hinge_start(xyz, big_r - r_all, noise, start, dist - tol_u, big_r - r2, cfg)
+        diag["end_wall_cone_hinge"] = hinge is not None
+        if hinge is not None:
+            start = hinge
     diag.update(end_wall_seen_through="wider" if wider else "narrower", reducer_r2=r2)
     opt = StructureOption("reducer", max(start, 0.0), 2.0 * r2, 0.0, 0.0, 0.5 * conf)
     return Detection("reducer", [opt], 0.5 * conf, diag)

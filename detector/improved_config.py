@@ -124,14 +124,14 @@ class ImprovedConfig:
         fit_anneal: the robust fits shrink their cut-off over this many iterations, then run
             to convergence ...
         fit_cost_tol: ... or until a step lowers the robust cost by less than this fraction.
-        rim_spacings, rim_margin: an end wall whose returns reach no nearer than this many
-            beam spacings (the distance times the angle between neighbouring beams, m) plus
-            ``rim_margin`` (m) to the wall radius is no cap of the incoming pipe (beams
-            aimed at its rim were stopped short, or lost, by a narrowing before it) ...
-        rim_beyond_share, rim_beyond_k: ... nor one with at least this fraction of its
-            returns beyond the wall radius by ``rim_margin`` and ``rim_beyond_k`` times their
-            radial noise (the pipe widens before it): a reducer whose start and radius only
-            bound (seen through, from too far for its own wall to return).
+        rim_ring_share, rim_cap_share, rim_margin: an end wall seen head-on is no cap of the
+            incoming pipe (:func:`detector.axisymmetric._end_wall_seen_through`) when a ring of
+            beams (at least ``rim_ring_share`` of its beams on the plane) returns from outside
+            the rim where a cap would return at most ``rim_cap_share`` of it, or the ring after
+            the outermost returning one, aimed inside the rim (a cap would return at least half
+            of it), returns at most ``rim_cap_share`` times what a cap would; the rim
+            less ``rim_margin`` (m) and the sensor's offset from the axis. It is a reducer
+            then, seen through from too far for its own wall to return.
         hole_min_step, hole_noise_k: a return enters a side hole that one ring of beams sees
             (:mod:`detector.grazing`) when it lies this far (m) beyond the wall line through
             the rings on either side, and at least ``hole_noise_k`` times its radial noise.
@@ -210,10 +210,9 @@ class ImprovedConfig:
     fit_step_tol: float = 1e-6
     fit_anneal: int = 3
     fit_cost_tol: float = 1e-4
-    rim_spacings: float = 1.0
-    rim_margin: float = 0.001
-    rim_beyond_share: float = 0.02
-    rim_beyond_k: float = 4.0
+    rim_ring_share: float = 0.3
+    rim_cap_share: float = 0.25
+    rim_margin: float = 0.0005
     hole_min_step: float = 0.00035
     hole_noise_k: float = 4.0
     hole_wall_band: float = 0.002
@@ -301,10 +300,9 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "fit_step_tol": (float, 0.0, False, 1.0, "a number in (0, 1] (m, rad)"),
     "fit_anneal": (int, 1, True, math.inf, "an integer >= 1"),
     "fit_cost_tol": (float, 0.0, True, 1.0, "a number in [0, 1]"),
-    "rim_spacings": (float, 0.0, False, 100.0, "a number in (0, 100]"),
+    "rim_ring_share": (float, 0.0, False, 1.0, "a number in (0, 1]"),
+    "rim_cap_share": (float, 0.0, True, 0.5, "a number in [0, 0.5]"),
     "rim_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
-    "rim_beyond_share": (float, 0.0, False, 1.0, "a number in (0, 1]"),
-    "rim_beyond_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
     "hole_min_step": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
     "hole_noise_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
     "hole_wall_band": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
