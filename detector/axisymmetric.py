@@ -109,20 +109,24 @@ def _normal_cdf(z: float) -> float:
 
 def _end_wall_rings(
     cloud: PipeCloud, slab: NDArray[np.bool_]
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The rings of beams (one per beam-angle column of the scan grid) that return from the
     end wall's plane (``slab``, over the compact returns): per ring, the share of its beams
-    that do, their median distance from the axis (m) and median radial noise (m)."""
+    that do, their median distance from the axis (m), its spread (m, 10th to 90th
+    percentile: small for a ring about the axis, large for one tilted or shifted off it) and
+    the median radial noise (m)."""
     g, k = cloud.shape
     cols = cloud.cell[slab] % max(k, 1)
     r_s, sig_s = cloud.r_v[slab], cloud.sigma_v[slab]
-    shares, radii, sigmas = [], [], []
+    shares, radii, spreads, sigmas = [], [], [], []
     for c in np.unique(cols):
         sel = cols == c
+        lo, med, hi = np.percentile(r_s[sel], [10.0, 50.0, 90.0])
         shares.append(float(np.count_nonzero(sel)) / max(g, 1))
-        radii.append(float(np.median(r_s[sel])))
+        radii.append(float(med))
+        spreads.append(float(hi - lo))
         sigmas.append(float(np.median(sig_s[sel])))
-    return np.array(shares), np.array(radii), np.array(sigmas)
+    return np.array(shares), np.array(radii), np.array(spreads), np.array(sigmas)
 
 
 def _end_wall_seen_through(
@@ -154,9 +158,11 @@ def _end_wall_seen_through(
     slab = np.abs(u_all - dist) <= tol_u
     if not np.any(slab) or cloud.beam_step <= 0.0:
         return None
-    shares, radii, sigmas = _end_wall_rings(cloud, slab)
+    shares, radii, spreads, sigmas = _end_wall_rings(cloud, slab)
     off = float(np.hypot(cloud.pose.position[1], cloud.pose.position[2]))
     rim = big_r - off - cfg.rim_margin  # (a beam aimed inside this meets a cap)
+    # (only rings about the axis tell: a tilted or offset sensor's rings straddle the rim)
+    round_ring = spreads <= cfg.rim_ring_spread * dist * cloud.beam_step + 2.6 * sigmas
     returning = shares >= cfg.rim_ring_share
     cap_share_out = np.array(
         [
@@ -164,7 +170,7 @@ def _end_wall_seen_through(
             for r, sg in zip(radii, sigmas)
         ]
     )
-    wide = returning & (radii > big_r) & (cap_share_out <= cfg.rim_cap_share)
+    wide = returning & round_ring & (radii > big_r) & (cap_share_out <= cfg.rim_cap_share)
     wider = bool(np.any(wide))
     narrower = False
     if not wider and np.any(returning):
@@ -175,7 +181,9 @@ def _end_wall_seen_through(
         later = radii > radii[j] + 0.5 * dist * cloud.beam_step
         s_next = float(shares[later].max()) if np.any(later) else 0.0
         cap_next = _normal_cdf((rim - r_next) / max(float(sigmas[j]), 1e-6))
-        narrower = cap_next >= 0.5 and s_next <= cfg.rim_cap_share * cap_next
+        narrower = (
+            bool(round_ring[j]) and cap_next >= 0.5 and s_next <= cfg.rim_cap_share * cap_next
+        )
         diag["end_wall_next_ring"] = {"radius": r_next, "share": s_next, "cap_share": cap_next}
     diag["end_wall_rings"] = int(np.count_nonzero(returning))
     if not (narrower or wider):

@@ -131,7 +131,9 @@ class ImprovedConfig:
             the outermost returning one, aimed inside the rim (a cap would return at least half
             of it), returns at most ``rim_cap_share`` times what a cap would; the rim
             less ``rim_margin`` (m) and the sensor's offset from the axis. It is a reducer
-            then, seen through from too far for its own wall to return.
+            then, seen through from too far for its own wall to return. Only rings spread
+            across the axis by at most ``rim_ring_spread`` beam spacings (plus their noise)
+            count: a tilted or offset sensor's rings straddle the rim.
         hole_min_step, hole_noise_k: a return enters a side hole that one ring of beams sees
             (:mod:`detector.grazing`) when it lies this far (m) beyond the wall line through
             the rings on either side, and at least ``hole_noise_k`` times its radial noise.
@@ -213,6 +215,7 @@ class ImprovedConfig:
     rim_ring_share: float = 0.3
     rim_cap_share: float = 0.25
     rim_margin: float = 0.0005
+    rim_ring_spread: float = 0.5
     hole_min_step: float = 0.00035
     hole_noise_k: float = 4.0
     hole_wall_band: float = 0.002
@@ -303,6 +306,7 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "rim_ring_share": (float, 0.0, False, 1.0, "a number in (0, 1]"),
     "rim_cap_share": (float, 0.0, True, 0.5, "a number in [0, 0.5]"),
     "rim_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "rim_ring_spread": (float, 0.0, True, 100.0, "a number in [0, 100] (beam spacings)"),
     "hole_min_step": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
     "hole_noise_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
     "hole_wall_band": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
