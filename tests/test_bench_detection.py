@@ -82,3 +82,19 @@ def test_thesis_bend_row_is_the_same_case_for_every_sensor(monkeypatch, tmp_path
     assert all(c[2] == pytest.approx(math.radians(136)) and c[3] == 13 for c in rows), rows
     (sweep,) = [c for c in calls if c[0] == group and c[4]]
     assert sweep[1:4] == ("ideal", pytest.approx(math.pi), 31)
+
+
+def test_filters_parse_and_reject_unknown_names() -> None:
+    args = bench.parse_args(["--kinds", "reducer", "--sensors", "ls02", "--parts", "accuracy"])
+    assert args.kinds == ["reducer"]
+    assert args.sensors == ["ls02"]
+    assert args.parts == {"accuracy"}
+    full = bench.parse_args([])
+    assert full.kinds == [] and full.sensors == list(bench.SENSORS)
+    assert full.parts == set(bench.PARTS)
+    for bad in (["--sensors", "lidar9"], ["--parts", "speedy"], ["--sensors", ""]):
+        with pytest.raises(SystemExit):
+            bench.parse_args(bad)
+    # (the docs take full runs only)
+    with pytest.raises(SystemExit):
+        bench.parse_args(["--write-docs", "--kinds", "reducer"])
