@@ -91,9 +91,11 @@ def _closure(
             diag["closure_curved"] = curved
         if plane_seen and spread <= 0.5 * tol_u and flat_plane:
             conf = fit_confidence(int(on_plane.sum()), spread, tol_u) * (0.5 + 0.5 * cov)
-            seen_through = _end_wall_seen_through(cloud, big_r, dist, tol_u, conf, cfg, diag)
-            if seen_through is not None:
-                return seen_through
+            # (a curved wall is a turn's far wall, wider than the pipe on the turn's side)
+            if flat:
+                seen_through = _end_wall_seen_through(cloud, big_r, dist, tol_u, conf, cfg, diag)
+                if seen_through is not None:
+                    return seen_through
             opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
             # (curved only by the quadratic test: an end wall unless the returns show a
             # turn; the caller decides)
