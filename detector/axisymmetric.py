@@ -197,6 +197,11 @@ def _end_wall_seen_through(
     inner = (4.0 if wider else 1.0) * cloud.sigma_v + cfg.rim_margin
     on_wall = (dr >= -inner) & (dr <= 4.0 * cloud.sigma_v + cfg.rim_margin) & (u_all < dist - tol_u)
     start = float(partial_percentile(u_all[on_wall], 99.0)) if np.any(on_wall) else 0.0
+    # (a wall in view up to the end wall shows a cap, or a reducer, directly: the corner's
+    # returns, on the wall beside the plane, are no view through anything)
+    diag["end_wall_wall_gap"] = dist - start
+    if dist - start < cfg.rim_wall_gap * big_r:
+        return None
     if wider:
         r2 = float(radii[wide].max())
         # (the beams beyond the rim crossed the wall radius before the widening ended)

@@ -133,7 +133,9 @@ class ImprovedConfig:
             less ``rim_margin`` (m) and the sensor's offset from the axis. It is a reducer
             then, seen through from too far for its own wall to return. Only rings spread
             across the axis by at most ``rim_ring_spread`` beam spacings (plus their noise)
-            count: a tilted or offset sensor's rings straddle the rim.
+            count: a tilted or offset sensor's rings straddle the rim; and only when the last
+            return on the incoming wall lies at least ``rim_wall_gap`` radii before the end
+            wall (a wall in view up to it shows a cap or a reducer directly).
         hole_min_step, hole_noise_k: a return enters a side hole that one ring of beams sees
             (:mod:`detector.grazing`) when it lies this far (m) beyond the wall line through
             the rings on either side, and at least ``hole_noise_k`` times its radial noise.
@@ -216,6 +218,7 @@ class ImprovedConfig:
     rim_cap_share: float = 0.25
     rim_margin: float = 0.0005
     rim_ring_spread: float = 0.5
+    rim_wall_gap: float = 1.0
     hole_min_step: float = 0.00035
     hole_noise_k: float = 4.0
     hole_wall_band: float = 0.002
@@ -307,6 +310,7 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "rim_cap_share": (float, 0.0, True, 0.5, "a number in [0, 0.5]"),
     "rim_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
     "rim_ring_spread": (float, 0.0, True, 100.0, "a number in [0, 100] (beam spacings)"),
+    "rim_wall_gap": (float, 0.0, True, 1000.0, "a number in [0, 1000] (radii)"),
     "hole_min_step": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
     "hole_noise_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
     "hole_wall_band": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
