@@ -76,7 +76,9 @@ def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, floa
     denom = 1.0 + z * z / n
     centre = (p + z * z / (2 * n)) / denom
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))
+    low = 0.0 if successes == 0 else max(0.0, centre - half)  # exact at the ends
+    high = 1.0 if successes == n else min(1.0, centre + half)
+    return (low, high)
 
 
 def mcnemar_exact(a: Sequence[bool], b: Sequence[bool]) -> tuple[int, int, float]:
@@ -94,6 +96,14 @@ def mcnemar_exact(a: Sequence[bool], b: Sequence[bool]) -> tuple[int, int, float
 def _mean(values: Iterable[float]) -> float:
     vals = list(values)
     return sum(vals) / len(vals) if vals else math.nan
+
+
+def _median(values: list[float]) -> float:
+    vals = sorted(values)
+    n = len(vals)
+    if n == 0:
+        return math.nan
+    return vals[n // 2] if n % 2 else 0.5 * (vals[n // 2 - 1] + vals[n // 2])
 
 
 # ------------------------------------------------------------------------- episodes
@@ -217,6 +227,7 @@ def summarise(episodes: list[dict[str, Any]], agents: Sequence[str]) -> dict[str
                 "jams_per_episode": _mean(e["jams"] for e in eps),
                 "decisions_per_episode": _mean(e["decisions"] for e in eps),
                 "wall_s_per_episode": _mean(e["wall_s"] for e in eps),
+                "wall_s_median": _median([e["wall_s"] for e in eps]),
             }
         fast = [by[(agent, "fast", n)]["success"] for n in nets]
         full = [by[(agent, "full", n)]["success"] for n in nets]
@@ -277,7 +288,7 @@ def markdown(figures: dict[str, Any], header: str) -> str:
     lines.append(
         "| agent | success fast [95 % Wilson] | success full [95 % Wilson] | gap fast - full "
         "(points) | fast-only / full-only | McNemar p | jams/ep fast | jams/ep full | "
-        "decisions/ep fast | decisions/ep full | s per full episode |"
+        "decisions/ep fast | decisions/ep full | s per full episode (median, mean) |"
     )
     lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
     for agent, row in figures["agents"].items():
@@ -287,7 +298,7 @@ def markdown(figures: dict[str, Any], header: str) -> str:
             f"{tr['only_fast']} / {tr['only_full']} | {tr['mcnemar_p']:.3f} | "
             f"{fa['jams_per_episode']:.2f} | {fu['jams_per_episode']:.2f} | "
             f"{fa['decisions_per_episode']:.1f} | {fu['decisions_per_episode']:.1f} | "
-            f"{fu['wall_s_per_episode']:.1f} |"
+            f"{fu['wall_s_median']:.1f}, {fu['wall_s_per_episode']:.1f} |"
         )
     against = figures.get("against_reference", {})
     if against:
