@@ -239,9 +239,22 @@ def summarise(episodes: list[dict[str, Any]], agents: Sequence[str]) -> dict[str
             "mcnemar_p": p,
         }
         out["agents"][agent] = row
+    out["identical"] = {fid: _identical(by, nets, agents, fid) for fid in FIDELITIES}
     if REFERENCE in agents:
         out["against_reference"] = _against_reference(by, nets, agents)
     return out
+
+
+def _identical(
+    by: dict[tuple[str, str, int], dict[str, Any]], nets: list[int], agents: Sequence[str], fid: str
+) -> int:
+    """On how many networks every agent's episode in ``fid`` was the same: the same outcome,
+    decisions, jams and simulated time (to the millisecond), so the same choices in effect."""
+
+    def key(e: dict[str, Any]) -> tuple[Any, ...]:
+        return (e["success"], e["decisions"], e["jams"], round(float(e["sim_s"]), 3))
+
+    return sum(1 for n in nets if len({key(by[(a, fid, n)]) for a in agents}) == 1)
 
 
 def _against_reference(
@@ -300,6 +313,15 @@ def markdown(figures: dict[str, Any], header: str) -> str:
             f"{fa['decisions_per_episode']:.1f} | {fu['decisions_per_episode']:.1f} | "
             f"{fu['wall_s_median']:.1f}, {fu['wall_s_per_episode']:.1f} |"
         )
+    same = figures.get("identical", {})
+    if same and len(figures["agents"]) > 1:
+        lines += [
+            "",
+            "Networks on which all agents' episodes were the same (outcome, decisions, jams, "
+            "simulated time): "
+            + ", ".join(f"{fid} {k} of {figures['n']}" for fid, k in same.items())
+            + ".",
+        ]
     against = figures.get("against_reference", {})
     if against:
         lines += [

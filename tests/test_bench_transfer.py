@@ -98,6 +98,8 @@ def test_summary_gaps_fractions_and_tests_on_synthetic_outcomes() -> None:
     assert against["full"]["fraction"] == pytest.approx(12 / 16)
     assert (against["full"]["only_agent"], against["full"]["only_reference"]) == (0, 4)
     assert not against["fast"]["target_met"] and not against["full"]["target_met"]
+    # the agents' full episodes differ on networks 12..15 (success) and 16..19 (jams)
+    assert fig["identical"] == {"fast": 19, "full": 12}
     text = bt.markdown(fig, "header")
     assert "| RoutePlanner | 100.0 % [83.9, 100.0] | 80.0 % [58.4, 91.9] | +20.0 |" in text
     assert "not met" in text
