@@ -453,16 +453,19 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     default = args.network_config == NETWORK_CONFIG
     nets = figures["networks"]
     span = f"networks {nets[0]}..{nets[-1]}" if nets else "no network"
+    config_arg = "" if default else f" --network-config '{json.dumps(args.network_config)}'"
     header = (
         f"{figures['n']} held-out networks ({span}; "
         f"{'the default: ' if default else ''}{json.dumps(args.network_config, sort_keys=True)}"
         f"{DEFAULT_NOTE if default else ''}"
         f"), each agent in both fidelities with the same seeds, {DETECTOR} detector, the "
         f"packaged training config's env arguments (decision budget "
-        f"{payload['env_kwargs']['full'].get('max_episode_steps')}). This run: "
-        f"{len(done)} episodes in {wall:.0f} s wall with {args.jobs} job(s) on a shared "
-        "machine. Command: `python benchmarks/bench_transfer.py --networks N` "
-        "(extend with `--first K --merge earlier.json`)."
+        f"{payload['env_kwargs']['full'].get('max_episode_steps')}). "
+        f"{len(episodes)} episodes, {sum(e['wall_s'] for e in episodes) / 60:.0f} min of "
+        f"episode wall time (this invocation: {len(done)} episodes, {wall:.0f} s, "
+        f"{args.jobs} job(s); a shared machine). Command: "
+        f"`python benchmarks/bench_transfer.py --networks N{config_arg}`; extend a run with "
+        "`--first K --networks M --merge earlier.json`."
     )
     report = markdown(figures, header)
     print("\n" + report)
