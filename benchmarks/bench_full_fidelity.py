@@ -20,7 +20,15 @@ seeds, the same detector (``improved``), the same sweep cadence. Prints:
   difference detectable at this sample size (not proof of equality: the sample size bounds the
   difference that could be detected, reported as the 95 % interval of the success difference).
 
+With ``--ticks N`` it instead profiles one seeded ``physics="contact"`` episode (held-out
+network N, seed ``EVAL_POOL_SEED + N``) per control tick (see :func:`tick_profile`): the
+executor's time per physics tick split into MuJoCo's ``mj_step`` and the rest (the executor's
+Python: targets, contact-pair selection, telemetry, checks), the contact pairs' selection rate
+and the episode's decisions/s. ``--repeat K`` runs the episode K times (the figures of the
+fastest run are printed, each run's on its own line).
+
 Usage: python benchmarks/bench_full_fidelity.py [--networks 48] [--write-docs] [--json out.json]
+       python benchmarks/bench_full_fidelity.py --ticks 0 [--repeat 3]
 """
 
 from __future__ import annotations
@@ -29,9 +37,12 @@ import argparse
 import json
 import math
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 from scipy import stats
 
@@ -74,6 +85,153 @@ def run_episode(env: gym.Env, network: Any, seed: int) -> dict[str, Any]:
         "physics_ticks": int(ex.physics_ticks),
         "kinematic_ticks": int(ex.kinematic_ticks),
     }
+
+
+class _Clock:
+    """Wall time spent in the executor's entry points (scans excluded) and in ``mj_step``."""
+
+    def __init__(self) -> None:
+        self.executor_s = 0.0
+        self.scan_s = 0.0
+        self.step_s = 0.0
+        self.steps = 0
+        self.updates = 0
+        self.depth = 0
+
+    def mj_step(self, *args: Any, **kwargs: Any) -> None:
+        t = time.perf_counter()
+        mujoco.mj_step(*args, **kwargs)
+        self.step_s += time.perf_counter() - t
+        self.steps += 1
+
+
+class _TimedMujoco:
+    """The ``mujoco`` module as the executor sees it, ``mj_step`` timed by ``clock``."""
+
+    def __init__(self, clock: _Clock) -> None:
+        self._clock = clock
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "mj_step":
+            return self._clock.mj_step
+        return getattr(mujoco, name)
+
+
+def _timed_entry(clock: _Clock, method: Callable[..., Any], attr: str) -> Callable[..., Any]:
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        clock.depth += 1
+        t = time.perf_counter()
+        try:
+            return method(*args, **kwargs)
+        finally:
+            clock.depth -= 1
+            if clock.depth == 0:
+                setattr(clock, attr, getattr(clock, attr) + time.perf_counter() - t)
+
+    return wrapper
+
+
+@contextmanager
+def _instrumented(clock: _Clock) -> Iterator[None]:
+    """Time the executor's entry points (``place``, ``run``, ``drive_until``), its sweeps and
+    ``mj_step`` while inside; count NearContacts updates."""
+    import primitives.executor as executor_module
+    from pipe_env.world import NearContacts
+    from primitives.executor import Executor
+
+    saved = {name: getattr(Executor, name) for name in ("place", "run", "drive_until", "_scan")}
+    saved_update = NearContacts.update
+    for name in ("place", "run", "drive_until"):
+        setattr(Executor, name, _timed_entry(clock, saved[name], "executor_s"))
+
+    def scan(self: Any, *args: Any, **kwargs: Any) -> Any:
+        t = time.perf_counter()
+        try:
+            return saved["_scan"](self, *args, **kwargs)
+        finally:
+            clock.scan_s += time.perf_counter() - t
+
+    def update(self: Any, *args: Any, **kwargs: Any) -> None:
+        clock.updates += 1
+        saved_update(self, *args, **kwargs)
+
+    Executor._scan = scan  # type: ignore[method-assign]
+    NearContacts.update = update  # type: ignore[method-assign]
+    executor_module.mujoco = _TimedMujoco(clock)
+    try:
+        yield
+    finally:
+        executor_module.mujoco = mujoco
+        for name, method in saved.items():
+            setattr(Executor, name, method)
+        NearContacts.update = saved_update  # type: ignore[method-assign]
+
+
+def tick_profile(index: int) -> dict[str, Any]:
+    """One RoutePlanner episode (``physics="contact"``, held-out network ``index``, seed
+    ``EVAL_POOL_SEED + index``) timed per control tick: µs of ``mj_step`` and of the rest of
+    the executor's work per physics tick (sweeps excluded), contact-pair selections per
+    physics tick, decisions/s of the episode, and the outcome (to compare runs)."""
+    cfg = NetworkConfig.from_dict(NETWORK_CONFIG)
+    net = held_out_networks(cfg, index + 1)[index]
+    env = gym.make(
+        "pipenav/PipeNav-v0",
+        fidelity="full",
+        detector="improved",
+        network_config=cfg,
+        physics="contact",
+    )
+    clock = _Clock()
+    with _instrumented(clock):
+        row = run_episode(env, net, EVAL_POOL_SEED + index)
+    base: Any = env.unwrapped
+    ex = base.plant.executor
+    near = ex.near
+    position = base.plant.pose().position.tolist()
+    env.close()
+    ticks = max(row["physics_ticks"], 1)
+    rest = clock.executor_s - clock.scan_s - clock.step_s
+    return {
+        "network": index,
+        "physics_ticks": row["physics_ticks"],
+        "kinematic_ticks": row["kinematic_ticks"],
+        "mj_step_us": 1e6 * clock.step_s / ticks,
+        "rest_us": 1e6 * rest / ticks,
+        "updates": clock.updates,
+        "selections": int(near.selections) if near is not None else 0,
+        "selection_rate": (near.selections / ticks) if near is not None else 0.0,
+        "overruns": int(near.overruns) if near is not None else 0,
+        "fallbacks": int(near.fallbacks) if near is not None else 0,
+        "decisions": row["decisions"],
+        "decisions_per_s": row["decisions"] / (row["reset_s"] + row["steps_s"]),
+        "success": row["success"],
+        "jams": row["jams"],
+        "position": position,
+        "time": float(ex.time),
+    }
+
+
+def _print_tick_profile(index: int, repeat: int) -> None:
+    runs = []
+    for k in range(repeat):
+        r = tick_profile(index)
+        runs.append(r)
+        print(
+            f"run {k}: network {r['network']}: {r['physics_ticks']} physics ticks, "
+            f"{r['kinematic_ticks']} kinematic; per physics tick mj_step {r['mj_step_us']:.0f} "
+            f"us, rest {r['rest_us']:.0f} us (rest/mj_step {r['rest_us'] / r['mj_step_us']:.2f})"
+            f"; selections {r['selections']} of {r['updates']} updates "
+            f"({100 * r['selection_rate']:.1f} % of physics ticks), overruns {r['overruns']}, "
+            f"fallbacks {r['fallbacks']}; {r['decisions']} decisions, "
+            f"{r['decisions_per_s']:.3f} decisions/s; success {r['success']}, jams {r['jams']}, "
+            f"final position {np.round(r['position'], 9).tolist()}, time {r['time']:.4f} s",
+            flush=True,
+        )
+    best = min(runs, key=lambda r: r["rest_us"] + r["mj_step_us"])
+    print(
+        f"fastest: mj_step {best['mj_step_us']:.0f} us/tick, rest {best['rest_us']:.0f} us/tick, "
+        f"{best['decisions_per_s']:.3f} decisions/s"
+    )
 
 
 def _errors(rows: list[dict[str, Any]], key: str) -> np.ndarray:
@@ -206,7 +364,14 @@ def main() -> None:
     parser.add_argument("--first", type=int, default=0, help="first held-out network index")
     parser.add_argument("--json", default=None)
     parser.add_argument("--write-docs", action="store_true")
+    parser.add_argument("--ticks", type=int, default=None, help="profile this network per tick")
+    parser.add_argument("--repeat", type=int, default=1, help="runs of the --ticks episode")
     args = parser.parse_args()
+    if args.ticks is not None:
+        if args.ticks < 0 or args.repeat < 1:
+            parser.error(f"--ticks = {args.ticks}, --repeat = {args.repeat}; allowed: >= 0, >= 1")
+        _print_tick_profile(args.ticks, args.repeat)
+        return
     if args.networks < 1:
         parser.error(f"--networks = {args.networks}; allowed: >= 1")
     cfg = NetworkConfig.from_dict(NETWORK_CONFIG)

@@ -29,6 +29,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from detector.options import StructureOption
 from pipe_env import layouts
@@ -56,9 +57,10 @@ def emit(line: str = "") -> None:
     OUTPUT.append(line)
 
 
-def survives(net: PipeNetwork, field: str, error: float) -> bool:
-    """Whether take_turn with the first true option's ``field`` off by ``error`` passes."""
-    ex = Executor.for_network(net, lidar=None)
+def survives(net: PipeNetwork, field: str, error: float, **executor_args: Any) -> bool:
+    """Whether take_turn with the first true option's ``field`` off by ``error`` passes;
+    ``executor_args`` go to :meth:`Executor.for_network` (e.g. ``timestep``, ``control_dt``)."""
+    ex = Executor.for_network(net, lidar=None, **executor_args)
     true = structures_ahead(net, ex.robot.sensor_pose(), 5.0)[0]
     value = getattr(true, field) + error
     if field == "angle" and value < 0:

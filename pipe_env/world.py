@@ -14,9 +14,11 @@ automatically, MuJoCo's midphase tests every robot geom against every piece of t
 world with contact walls therefore also holds a pool of ``CONTACT_PAIR_POOL`` predefined geom
 pairs (parked on two far-away dummy spheres). :class:`NearContacts` fills the pool with the pairs
 (robot geom, wall piece) whose pieces lie within a reach of the geoms, with MuJoCo's own mixed
-contact parameters, and switches the world body's automatic collisions off; it re-selects the
-pairs before the geoms can have moved by the reach, and falls back to automatic collisions if the
-pool is too small. The contacts are the same as the automatic ones (tests compare them).
+contact parameters, and switches the world body's automatic collisions off; it selects the
+pairs again only when a geom can have come near a piece it is not paired with (each geom's
+clearance, measured again first: moving along a pipe keeps it), and falls back to automatic
+collisions if the pool is too small. The contacts are the same as the automatic ones (tests
+compare them).
 
 The wall geoms never move: MuJoCo poses them once, not at every physics step (its sleeping is
 on, with every moving body kept awake; see :func:`_static_walls_posed_once`).
@@ -32,6 +34,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import mujoco
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -45,7 +48,13 @@ CONTACT_GROUP = 2
 #: contype bit of the contact walls; robot geoms set this bit in their conaffinity.
 CONTACT_BIT = 1
 WALL_RGBA = (0.62, 0.64, 0.68, 0.45)
+#: The physics step, s (the default of :func:`build_world`'s ``timestep``). Measured with
+#: ``benchmarks/physics_step_study.py``: 3 ms steps hold only up to 60 ms control periods (no
+#: margin) and 4 ms or more let the robot's front into a bore it must stall before; 2 ms stays.
 TIMESTEP = 0.002
+#: Physics steps a world may be built with, s (a study of larger steps: see
+#: ``benchmarks/physics_step_study.py``).
+TIMESTEP_RANGE = (0.0005, 0.01)
 #: Predefined geom pairs a world with contact walls holds for :class:`NearContacts`.
 CONTACT_PAIR_POOL = 160
 #: Names of the two far-away dummy spheres unused pairs point at.
@@ -130,6 +139,7 @@ def build_world(
     *,
     contact_walls: bool = True,
     customize: Callable[[mujoco.MjSpec], None] | None = None,
+    timestep: float = TIMESTEP,
 ) -> PipeWorld:
     """Compile ``network`` into a MuJoCo world (see module docstring).
 
@@ -137,11 +147,13 @@ def build_world(
         network: a valid network (validated here).
         contact_walls: add the contact walls (skip them for sensing-only worlds).
         customize: called with the spec before compiling, to add bodies such as a robot.
+        timestep: the physics step, s, in :data:`TIMESTEP_RANGE`.
     """
+    timestep = check_number("timestep", timestep, *TIMESTEP_RANGE, unit="s", where="build_world")
     network.validate()
     spec = mujoco.MjSpec()
     spec.modelname = f"pipenav_{network.name}"
-    spec.option.timestep = TIMESTEP
+    spec.option.timestep = timestep
     spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
     spec.visual.headlight.diffuse = [0.6, 0.6, 0.6]
     spec.stat.extent = float(np.linalg.norm(np.subtract(*network.bounds()[::-1])))
@@ -245,11 +257,21 @@ class NearContacts:
 
     Call :meth:`update` before every physics interval (e.g. a control tick) and after moving the
     geoms by hand. A piece is paired with a geom when the piece's bounding box (in its own frame)
-    lies within ``reach`` of the geom's bounding sphere. Pairs are selected again before any geom
-    can have moved by ``reach`` since the last selection, judged from the largest motion of any
-    geom over the last interval (``guard`` times it, plus ``slack``); if a geom still moved
-    further over an interval, ``overruns`` counts it (a contact could have been missed). More
-    pairs than the pool holds: automatic collisions for that interval (``fallbacks``).
+    lies within ``reach`` of the geom's bounding sphere. Every selection also notes each geom's
+    clearance: the distance from its bounding sphere to the nearest piece it is not paired with
+    (more than ``reach``; the pieces beyond the coarse selection count at their bound), less the
+    pairs' contact margin. A geom can touch an unpaired piece only after moving by its
+    clearance. Before any geom can have moved by its clearance since the last measurement,
+    judged from the largest motion of any geom over the last interval (``guard`` times it, plus
+    ``slack``), the clearances are measured again with the pairs kept (``remeasures``); only if a
+    geom has come within that guarded motion plus another ``slack`` of a piece it is not
+    paired with are the pairs selected again (``selections``). Driving along a pipe the geoms move
+    along the panels, not towards them, so pairs are selected again mostly when a new piece (a
+    fitting's) comes near. If a geom still moved further than its clearance over an interval,
+    ``overruns`` counts it (a contact could have been missed). Pairs kept from a selection
+    whose pieces have moved away change no contact (a pair of geoms apart has none). More
+    pairs than the pool holds: automatic collisions (``fallbacks``) until the geoms have moved
+    by ``reach``.
 
     Args:
         world: a world built with contact walls.
@@ -304,6 +326,12 @@ class NearContacts:
         self._anchor: NDArray[np.float64] | None = None
         self._last: NDArray[np.float64] | None = None
         self._motion = 0.0
+        #: each geom's clearance at the last selection, m (``reach`` after a fallback)
+        self._clearance = np.full(len(self.geoms), self.reach)
+        #: the largest contact margin of a (geom, piece) pair, m
+        self._margin = float(m.geom_margin[self.geoms].max(initial=0.0)) + float(
+            m.geom_margin[walls].max(initial=0.0)
+        )
         self._pairs: tuple[NDArray[np.int_], NDArray[np.int_]] | None = None
         # the coarse selection: (geom positions when made, piece indices, their centres,
         # rotations and half sizes)
@@ -317,7 +345,11 @@ class NearContacts:
             ]
             | None
         ) = None
+        #: which (geom, coarse piece) the pairs hold, (G, K)
+        self._paired: NDArray[np.bool_] | None = None
         self.n_pairs = 0
+        #: pair selections; clearances measured again with the pairs kept
+        self.remeasures = 0
         self.selections = 0
         self.fallbacks = 0
         self.overruns = 0
@@ -332,6 +364,7 @@ class NearContacts:
         self._anchor = None
         self._last = None
         self._pairs = None
+        self._paired = None
         self.n_pairs = 0
 
     def forget(self) -> None:
@@ -346,16 +379,44 @@ class NearContacts:
         """Select the pairs again if the geoms may come within reach of unpaired pieces before
         the next call (``data.geom_xpos`` must be current); always with ``force``."""
         xp = data.geom_xpos[self.geoms]
-        if self._last is not None:
-            self._motion = _moved(xp, self._last)
+        last, anchor = self._last, self._anchor
         self._last = xp
-        if self._anchor is not None and not force:
-            moved = _moved(xp, self._anchor)
-            if moved > self.reach and self.model.body_contype[0] == 0:
-                self.overruns += 1  # on pairs (not fallen back), a contact may have been missed
-            if moved + self.guard * self._motion + self.slack <= self.reach:
-                return
-        self._select(xp)
+        if last is None or anchor is None:
+            if last is not None:
+                self._motion = _moved(xp, last)
+            self._select(xp)
+            return
+        motion, overrun, select = _motion_check(
+            xp, last, anchor, self._clearance, self.guard, self.slack
+        )
+        self._motion = motion
+        if force:
+            self._select(xp)
+            return
+        on_pairs = self.model.body_contype[0] == 0
+        if overrun and on_pairs:
+            self.overruns += 1  # on pairs (not fallen back), a contact may have been missed
+        if select and not (on_pairs and self._remeasure(xp)):
+            self._select(xp)
+
+    def _remeasure(self, xp: NDArray[np.float64]) -> bool:
+        """Measure the clearances of the current pairs again at ``xp`` (the geoms moved, but
+        maybe along the pieces, not towards them); True, and the pairs kept, if every geom
+        stays further than the guarded motion plus another ``slack`` from the pieces it is not
+        paired with; False if the pairs must be selected again."""
+        if self._coarse is None or self._paired is None:
+            return False
+        if _moved(xp, self._coarse[0]) > _COARSE - self.reach:
+            return False  # the coarse pieces no longer hold every piece near the geoms
+        _, _, centre, rot, half = self._coarse
+        clearance = self._clearances(xp, _box_distances2(xp, rot, centre, half), self._paired)
+        ahead = self.guard * self._motion + self.slack
+        if not bool(np.all(clearance >= ahead + self.slack)):
+            return False
+        self._clearance = clearance
+        self._anchor = xp
+        self.remeasures += 1
+        return True
 
     def _select(self, xp: NDArray[np.float64]) -> None:
         m = self.model
@@ -370,10 +431,9 @@ class NearContacts:
             near = np.flatnonzero(((c + b[:, None] >= lo) & (c - b[:, None] <= hi)).all(axis=1))
             self._coarse = (xp, near, c[near], self._rot[near], self._half[near])
         _, near, centre, rot, half = self._coarse
-        # each geom's centre in each piece's frame: its distance from the piece's box
-        local = np.matmul(xp[None, :, :] - centre[:, None, :], rot)  # (K, G, 3)
-        out = np.maximum(np.abs(local) - half[:, None, :], 0.0)
-        ki, gi = np.nonzero(np.einsum("kgi,kgi->kg", out, out) <= r * r)
+        dist2 = _box_distances2(xp, rot, centre, half)  # (G, K)
+        paired = dist2 <= (r * r)[:, None]
+        gi, ki = np.nonzero(paired)
         pieces = near[ki]
         n = len(gi)
         if n > len(self._pool):
@@ -381,7 +441,11 @@ class NearContacts:
             self.disable()
             self._anchor = xp
             self._last = xp
+            self._clearance = np.full(len(self.geoms), self.reach)
+            self._paired = None
             return
+        self._clearance = self._clearances(xp, dist2, paired)
+        self._paired = paired
         g1 = self.geoms[gi]
         g2 = self.walls[pieces]
         # MuJoCo's order of automatic contacts: by body pair, then geom ids
@@ -404,9 +468,83 @@ class NearContacts:
         self.n_pairs = n
         self._anchor = xp
 
+    def _clearances(
+        self, xp: NDArray[np.float64], dist2: NDArray[np.float64], paired: NDArray[np.bool_]
+    ) -> NDArray[np.float64]:
+        """Each geom's distance (m) from its bounding sphere to the nearest piece it is not
+        paired with, less the contact margin: of the coarse pieces (``dist2``: squared
+        distances of the geoms' centres from their boxes, (G, K)) and, for the pieces beyond
+        them, the coarse selection's bound (more than ``reach + _COARSE`` from every geom when
+        made, less how far the geom has moved since)."""
+        assert self._coarse is not None
+        beyond = self.reach + _COARSE - _distances(xp, self._coarse[0])
+        if dist2.size:
+            unpaired = np.where(paired, np.inf, dist2).min(axis=1)
+            beyond = np.minimum(beyond, np.sqrt(unpaired) - self._radius)
+        return np.asarray(beyond - self._margin)
+
 
 #: :class:`NearContacts` narrows the pieces to those within this of the geoms first, m.
 _COARSE = 0.05
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _motion_check(
+    xp: NDArray[np.float64],
+    last: NDArray[np.float64],
+    anchor: NDArray[np.float64],
+    clearance: NDArray[np.float64],
+    guard: float,
+    slack: float,
+) -> tuple[float, bool, bool]:
+    """The geoms at ``xp`` (G, 3), at ``last`` an interval ago and at ``anchor`` at the last
+    selection: (the largest motion over the interval m, whether a geom has moved further than
+    its clearance since the selection, whether one can before the next interval ends: moved +
+    ``guard`` * motion + ``slack`` beyond its clearance)."""
+    motion2 = 0.0
+    for g in range(xp.shape[0]):
+        d0, d1, d2 = xp[g, 0] - last[g, 0], xp[g, 1] - last[g, 1], xp[g, 2] - last[g, 2]
+        motion2 = max(motion2, d0 * d0 + d1 * d1 + d2 * d2)
+    motion = math.sqrt(motion2)
+    ahead = guard * motion + slack
+    overrun, select = False, False
+    for g in range(xp.shape[0]):
+        d0, d1, d2 = xp[g, 0] - anchor[g, 0], xp[g, 1] - anchor[g, 1], xp[g, 2] - anchor[g, 2]
+        moved = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        overrun = overrun or moved > clearance[g]
+        select = select or moved + ahead > clearance[g]
+    return motion, overrun, select
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _box_distances2(
+    xp: NDArray[np.float64],
+    rot: NDArray[np.float64],
+    centre: NDArray[np.float64],
+    half: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Squared distances (G, K) of points ``xp`` (G, 3) from boxes of centres ``centre`` (K, 3),
+    rotations ``rot`` (K, 3, 3) and half sizes ``half`` (K, 3), m^2."""
+    out = np.empty((xp.shape[0], rot.shape[0]))
+    for k in range(rot.shape[0]):
+        for g in range(xp.shape[0]):
+            v0 = xp[g, 0] - centre[k, 0]
+            v1 = xp[g, 1] - centre[k, 1]
+            v2 = xp[g, 2] - centre[k, 2]
+            total = 0.0
+            for i in range(3):
+                local = v0 * rot[k, 0, i] + v1 * rot[k, 1, i] + v2 * rot[k, 2, i]
+                excess = abs(local) - half[k, i]
+                if excess > 0.0:
+                    total += excess * excess
+            out[g, k] = total
+    return out
+
+
+def _distances(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Distances between corresponding rows of two (n, 3) arrays."""
+    dv = a - b
+    return np.sqrt(np.einsum("ij,ij->i", dv, dv))
 
 
 def _moved(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:

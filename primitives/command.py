@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from detector.geometry import rotation_about
-from primitives.rotations import log_rotation
+from primitives.rotations import log_rotation, rotation_angle
 
 #: The drive target follows the front module's lateral offset beyond this, m.
 ANCHOR_POS = 0.003
@@ -78,7 +78,7 @@ class DriveCommand:
         diff = self.position - p
         axial = float(diff @ x)
         lateral = diff - axial * x
-        n = float(np.linalg.norm(lateral))
+        n = math.sqrt(float(lateral.dot(lateral)))
         if n > ANCHOR_POS:
             lateral *= ANCHOR_POS / n
         self.position = p + axial * x + lateral
@@ -87,9 +87,12 @@ class DriveCommand:
         hold = self.hold_heading and self.curvature == 0.0
         want = self.heading if hold else self.rotation
         rel = r.T @ want
-        angle, axis = log_rotation(rel)
         limit = ANCHOR_ROT if self.curvature != 0.0 or hold else ANCHOR_ROT_STRAIGHT
-        self.rotation = want if angle <= limit else r @ rotation_about(axis, limit)
+        if rotation_angle(rel) <= limit:
+            self.rotation = want
+        else:
+            _, axis = log_rotation(rel)
+            self.rotation = r @ rotation_about(axis, limit)
 
     def aim(self, direction: NDArray[np.float64], max_angle: float) -> float:
         """Turn the target's heading towards the unit world ``direction`` by at most

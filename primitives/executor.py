@@ -34,6 +34,11 @@ Physics: before every control tick the robot's collision pairs are brought up to
 wall pieces near it (:class:`pipe_env.world.NearContacts`; the same contacts as MuJoCo's
 automatic collisions against every piece, at about half the cost of a step);
 :meth:`Executor.use_near_contacts` switches back to the automatic collisions.
+
+Per control tick the executor's own work is batched: every module's target (the followers'
+driven-path poses, the V's legs, the rolls, the quaternions) in one pass over preallocated
+arrays with compiled kernels, bit for bit what the per-module helpers computed; telemetry rows
+are written in place.
 """
 
 from __future__ import annotations
@@ -45,18 +50,20 @@ from pathlib import Path
 from typing import Any
 
 import mujoco
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from detector.geometry import Pose, rotation_about
 from detector.scan import Scan
+from detector.validation import check_number
 from pipe_env.lidar import LidarSpec, RotatingLidar
 from pipe_env.network import PipeNetwork
 from pipe_env.robot import Robot, RobotConfig, quat_of
-from pipe_env.world import CONTACT_PAIR_POOL, NearContacts, PipeWorld, build_world
+from pipe_env.world import CONTACT_PAIR_POOL, TIMESTEP, NearContacts, PipeWorld, build_world
 from primitives.command import DriveCommand
 from primitives.path import DrivenPath
-from primitives.rotations import orthonormal, rx, rz
+from primitives.rotations import orthonormal, quats_into, rx, rz
 from primitives.sequences import Sequence
 from primitives.steps import (
     Bend,
@@ -77,8 +84,17 @@ from primitives.vclamp import CLAMP_SIDE, VClamp
 
 __all__ = ["Executor", "SequenceOutcome"]
 
-#: Control period, s (50 Hz).
+#: Control period, s (50 Hz; 10 physics steps of ``pipe_env.world.TIMESTEP``): the default of
+#: the executor's ``control_dt``. Everything the executor does per control tick is set in SI
+#: units (speeds, rates, durations, the jam thresholds in metres) and converted with the period
+#: in use. Measured (``benchmarks/physics_step_study.py``: tolerance cases, jam / no-jam cases
+#: and seeded RoutePlanner episodes on a grid of 2-8 ms steps and 20-100 ms periods): every
+#: outcome holds at 2 ms steps up to 100 ms periods, but from 40 ms the near-contact selection
+#: overruns its reach within a tick (the V folding at ``CLAMP_RATE`` moves its apex about
+#: 0.1 m/s, ``NEAR_REACH`` in 60 ms): contacts could be missed. 20 ms stays.
 CONTROL_DT = 0.02
+#: Control periods an executor may run at, s.
+CONTROL_DT_RANGE = (0.001, 0.2)
 #: V folding/straightening rate, rad/s.
 CLAMP_RATE = math.radians(60.0)
 #: Slow folding rate near the expected wall, rad/s.
@@ -90,8 +106,8 @@ CLAMP_SEARCH = 0.008
 CLAMP_PRELOAD = 0.001
 #: Centring probes at most this many times (a robot against a wall needs two).
 CENTRE_ROUNDS = 3
-#: Centring moves the robot sideways by at most this per control tick, m.
-SHIFT_STEP = 0.001
+#: Centring moves the robot sideways at most this fast, m/s.
+SHIFT_SPEED = 0.05
 #: Behind the robot's rear, a centring shift of the driven path fades out over this, m.
 SHIFT_BLEND = 0.1
 #: Driven-path samples are kept this far apart, m.
@@ -123,13 +139,23 @@ KINEMATIC_MARGIN = 0.0
 #: axis and its heading within ``KINEMATIC_TILT`` of it (a robot well placed in the pipe).
 KINEMATIC_OFFSET = 0.15
 KINEMATIC_TILT = math.radians(5.0)
-#: A clamped straight drive of 5 cm falls this much short of its command (measured: 0.12-0.14
-#: mm in 60-120 mm pipes), m; the executor measures it again on every such physical drive.
+#: A clamped straight drive of 5 cm falls this much short of its command, m; the executor
+#: measures it again on every such physical drive. It depends on the control period (the lag
+#: a tick leaves): measured 0.12-0.14 mm in 60-120 mm pipes at 20 ms (0-0.08 mm at 40-60 ms).
 DEFAULT_SHORTFALL = 0.00013
 #: Larger shortfalls (a drive pushing against something) are not taken as the straight's, m.
 MAX_SHORTFALL = 0.002
-#: Physics ticks after every drive (and kinematic motion) to let the robot settle.
-SETTLE_TICKS = 3
+#: Physics run this long after every drive (and kinematic motion) to let the robot settle, s.
+SETTLE_TIME = 0.06
+#: ... and this long after a roll, a bend of a joint, a clamping, an unclamping and a
+#: centring shift, s.
+ROLL_SETTLE = 0.06
+BEND_SETTLE = 0.1
+CLAMP_SETTLE = 0.16
+UNCLAMP_SETTLE = 0.04
+SHIFT_SETTLE = 0.1
+#: Clamping gives up folding the V after this long, s.
+CLAMP_TIMEOUT = 8.0
 
 #: The executor's outcome statuses as plain strings, in :class:`SequenceStatus` order.
 STATUSES: tuple[str, ...] = tuple(s.value for s in SequenceStatus)
@@ -229,6 +255,27 @@ class _Jam(Exception):
     pass
 
 
+@numba.njit(cache=True, error_model="numpy")
+def _worst_tracking(
+    xpos: NDArray[np.float64],
+    bodies: NDArray[np.intp],
+    mocap_pos: NDArray[np.float64],
+    mocap: NDArray[np.intp],
+) -> tuple[float, int]:
+    """The largest squared distance (m^2) of ``bodies`` from their mocap targets ``mocap``, and
+    its index (the first of equals); (0, -1) without bodies."""
+    worst, at = 0.0, -1
+    for i in range(bodies.shape[0]):
+        b, t = bodies[i], mocap[i]
+        d0 = xpos[b, 0] - mocap_pos[t, 0]
+        d1 = xpos[b, 1] - mocap_pos[t, 1]
+        d2 = xpos[b, 2] - mocap_pos[t, 2]
+        err2 = d0 * d0 + d1 * d1 + d2 * d2
+        if at < 0 or err2 > worst:
+            worst, at = err2, i
+    return worst, at
+
+
 class _Halt(Exception):
     def __init__(self, status: str, reason: str) -> None:
         super().__init__(reason)
@@ -247,6 +294,9 @@ class Executor:
         world: a world built with the robot (``build_world(..., customize=robot.customize)``).
         robot: the robot (bound to ``world`` here if it is not yet).
         lidar: the rotating LiDAR (its ``mount`` should be ``robot.lidar_mount``), or None.
+        physics: one of :data:`PHYSICS_MODES`.
+        control_dt: the control period, s, in :data:`CONTROL_DT_RANGE`; rounded to a whole
+            number of the world's physics steps (``control_dt`` holds the period in use).
     """
 
     def __init__(
@@ -255,7 +305,11 @@ class Executor:
         robot: Robot,
         lidar: RotatingLidar | None = None,
         physics: str = "everywhere",
+        control_dt: float = CONTROL_DT,
     ) -> None:
+        control_dt = check_number(
+            "control_dt", control_dt, *CONTROL_DT_RANGE, unit="s", where="Executor"
+        )
         if physics not in PHYSICS_MODES:
             raise ValueError(f"physics = {physics!r} is invalid; allowed: {PHYSICS_MODES}")
         if not isinstance(world, PipeWorld):
@@ -270,7 +324,10 @@ class Executor:
         self.model = world.model
         self.data = world.data
         self.config = robot.config
-        self.substeps = max(1, int(round(CONTROL_DT / self.model.opt.timestep)))
+        #: physics steps per control tick, and the control period in use (a whole number of
+        #: physics steps), s
+        self.substeps = max(1, int(round(control_dt / self.model.opt.timestep)))
+        self.control_dt = self.substeps * self.model.opt.timestep
         self.physics = physics
         #: how far the last clamped straight physical drive fell short of its command, m
         self._shortfall = DEFAULT_SHORTFALL
@@ -283,10 +340,24 @@ class Executor:
         self.odometer = 0.0
         # follower offsets behind the front module's centre along the path, m
         self._offsets = self.config.pitch * np.arange(self.config.n_modules)
+        # the per-tick targets of every module (position m, rotation, quaternion; one more
+        # row: the driven path at the V's front joint), the followers' odometers (and that
+        # joint's), which followers are behind the V, and the modules' mocap ids
+        n = self.config.n_modules
+        self._target_pos = np.zeros((n + 1, 3))
+        self._target_rot = np.zeros((n + 1, 3, 3))
+        self._target_quat = np.zeros((n, 4))
+        self._target_s = np.zeros(n)
+        self._mocap = np.asarray(robot.mocap_ids, dtype=np.intp)
+        self._follower_bodies = np.asarray(robot.body_ids[1:], dtype=np.intp)
+        self._follower_mocap = self._mocap[1:].copy()
         #: the parts of the executor's state: the drive command, the clamping V, the driven
         #: path and the current run's telemetry
         self.command = DriveCommand()
         self.vclamp = VClamp(self.config)
+        # (rows of the followers' odometers; the last row, the V's front joint, is not behind)
+        self._behind = np.array([self.vclamp.behind(i) for i in range(1, n)] + [False])
+        self._mocap_views = self._mocap_target_views()
         self.path = DrivenPath()
         self.telemetry = Telemetry()
         #: distance moved by the current run (sequence or drive), m
@@ -307,20 +378,26 @@ class Executor:
         robot_config: RobotConfig | None = None,
         lidar: LidarSpec | str | None = "ideal",
         physics: str = "everywhere",
+        timestep: float = TIMESTEP,
+        control_dt: float = CONTROL_DT,
         **lidar_kwargs: Any,
     ) -> Executor:
         """Build the world of ``network`` with the robot and the LiDAR, the robot clamped at
-        the network's start pose; ``physics`` is one of :data:`PHYSICS_MODES`."""
+        the network's start pose; ``physics`` is one of :data:`PHYSICS_MODES`; ``timestep``
+        the physics step, s (:func:`pipe_env.world.build_world`); ``control_dt`` the control
+        period, s."""
         if network.start_pose is None:
             raise ValueError("network.start_pose is None; the robot needs a start pose")
         robot = Robot(robot_config)
-        world = build_world(network, contact_walls=True, customize=robot.customize)
+        world = build_world(
+            network, contact_walls=True, customize=robot.customize, timestep=timestep
+        )
         robot.bind(world.model, world.data)
         sensor = None
         if lidar is not None:
             kwargs = {"mount": robot.lidar_mount, **lidar_kwargs}
             sensor = RotatingLidar(world, lidar, **kwargs)
-        return cls(world, robot, sensor, physics=physics)
+        return cls(world, robot, sensor, physics=physics, control_dt=control_dt)
 
     # ------------------------------------------------------------------ placing
     def place(self, pose: Pose, diameter: float) -> None:
@@ -364,31 +441,48 @@ class Executor:
 
     # ------------------------------------------------------------------ targets
     def _set_targets(self) -> None:
-        """Drive target of the front; follow-the-leader (and V) targets of the followers."""
-        d = self.data
-        ids = self.robot.mocap_ids
-        d.mocap_pos[ids[0]] = self.command.position
-        d.mocap_quat[ids[0]] = quat_of(self.command.rotation)
-        # the driven path keeps the rear half's frames; the front half (modules before the roll
-        # joint) is rolled by the commanded roll
+        """Drive target of the front; follow-the-leader (and V) targets of the followers.
+
+        All modules' targets in one pass over preallocated arrays: the followers' driven-path
+        poses in one batched lookup, the V's legs over them, the front half's commanded roll in
+        one batched product, every quaternion in one batched conversion (bit for bit
+        ``mju_mat2Quat``'s), and one write of the mocap poses."""
         cmd = self.command
-        roll_front = rx(cmd.roll) if cmd.roll != 0.0 else None
-        front_half = self.config.middle_joint
-        legs = self.vclamp.leg_poses(self.path, self.odometer)
-        shift = self.vclamp.shortening
-        for i in range(1, self.config.n_modules):
-            if i in legs:
-                pos, rot = legs[i]
-            else:
-                s_i = self.odometer - self._offsets[i]
-                pos, rot = self.path.pose(s_i + (shift if self.vclamp.behind(i) else 0.0))
-            if roll_front is not None and i < front_half:
-                rot = rot @ roll_front
-            off = cmd.bend_offsets.get(i)
-            if off:
-                rot = rot @ rotation_about([0.0, 0.0, 1.0], off)
-            d.mocap_pos[ids[i]] = pos
-            d.mocap_quat[ids[i]] = quat_of(rot)
+        pos, rot, quat = self._target_pos, self._target_rot, self._target_quat
+        pos[0] = cmd.position
+        rot[0] = cmd.rotation
+        # the driven path keeps the rear half's frames; modules behind the V follow it
+        # ``shortening`` further back; the last row: the path at the joint at the V's front
+        s = self._target_s
+        np.subtract(self.odometer, self._offsets[1:], out=s[:-1])
+        s[self._behind] += self.vclamp.shortening
+        s[-1] = self.vclamp.apex_odometer(self.odometer)
+        self.path.poses_into(s, pos[1:], rot[1:])
+        self.vclamp.leg_targets(pos[-1], rot[-1], pos, rot)
+        if cmd.roll != 0.0:  # the front half (modules before the roll joint) is rolled
+            front = slice(1, self.config.middle_joint)
+            rot[front] = rot[front] @ rx(cmd.roll)
+        n = len(quat)
+        for i, off in cmd.bend_offsets.items():
+            if off and 1 <= i < n:
+                rot[i] = rot[i] @ rotation_about([0.0, 0.0, 1.0], off)
+        quats_into(rot[:n], quat)
+        mocap_pos, mocap_quat = self._mocap_views
+        if mocap_pos is not None and mocap_quat is not None:
+            np.copyto(mocap_pos, pos[:n])
+            np.copyto(mocap_quat, quat)
+        else:
+            self.data.mocap_pos[self._mocap] = pos[:n]
+            self.data.mocap_quat[self._mocap] = quat
+
+    def _mocap_target_views(self) -> tuple[NDArray | None, NDArray | None]:
+        """Views of the modules' rows of ``data.mocap_pos`` and ``data.mocap_quat`` when their
+        mocap ids are consecutive (written in place every tick), else (None, None)."""
+        ids = self._mocap
+        if len(ids) and np.array_equal(ids, np.arange(ids[0], ids[0] + len(ids))):
+            rows = slice(int(ids[0]), int(ids[0]) + len(ids))
+            return self.data.mocap_pos[rows], self.data.mocap_quat[rows]
+        return None, None
 
     # ------------------------------------------------------------------ stepping
     def use_near_contacts(self, on: bool) -> None:
@@ -420,19 +514,21 @@ class Executor:
         d = self.data
         front = d.xpos[self.robot.body_ids[0]]
         diff = self.command.position - front
-        lag = float(diff @ lag_axis) if lag_axis is not None else float(np.linalg.norm(diff))
+        lag = float(diff @ lag_axis) if lag_axis is not None else math.sqrt(diff.dot(diff))
         self.telemetry.record(self.time, self.data, self.robot, lag)
-        if not np.all(np.isfinite(d.qpos)):
+        if not np.isfinite(d.qpos).all():
             raise _Jam("the simulation diverged")
         if lag > self.config.jam_lag:
             raise _Jam(f"stalled: the front lags its drive target by {lag * 1000:.1f} mm")
-        ids = self.robot.mocap_ids
-        bodies = self.robot.body_ids
-        err = np.linalg.norm(d.xpos[bodies[1:]] - d.mocap_pos[ids[1:]], axis=1)
-        if err.size and float(err.max()) > self.config.jam_tracking:
-            k = int(np.argmax(err)) + 1
-            raise _Jam(f"module {k} is pushed {err.max() * 1000:.1f} mm off its path")
+        self._check_tracking()
         return lag
+
+    def _check_tracking(self) -> None:
+        """Jam if a follower module is further than ``jam_tracking`` off its target."""
+        d = self.data
+        err2, k = _worst_tracking(d.xpos, self._follower_bodies, d.mocap_pos, self._follower_mocap)
+        if math.sqrt(err2) > self.config.jam_tracking:
+            raise _Jam(f"module {k + 1} is pushed {math.sqrt(err2) * 1000:.1f} mm off its path")
 
     def _front_pose(self) -> tuple[NDArray, NDArray]:
         b = self.robot.body_ids[0]
@@ -459,7 +555,7 @@ class Executor:
         straight = cmd.curvature == 0.0 and self.vclamp.alpha > 0.0 and not cmd.hold_heading
         self.command.position, self.command.rotation = p.copy(), orthonormal(self.command.rotation)
         remaining = step.distance
-        ds_tick = step.speed * CONTROL_DT
+        ds_tick = step.speed * self.control_dt
         complying = False
         while remaining > 1e-9:
             ds = min(ds_tick, remaining)
@@ -492,7 +588,7 @@ class Executor:
                 self._travelled -= max(lag, 0.0)
                 self.path.truncate(self.odometer)
                 raise
-        self._settle(SETTLE_TICKS)
+        self._settle(self._ticks(SETTLE_TIME))
         if straight and step.distance >= 0.01:
             # what a clamped straight drive falls short of its command (the drive's lag not
             # recovered when the next drive starts from where the front is): kinematic
@@ -506,7 +602,7 @@ class Executor:
             self._glide(-distance, speed, axis)
             return
         remaining = distance
-        ds_tick = speed * CONTROL_DT
+        ds_tick = speed * self.control_dt
         while remaining > 1e-9:
             ds = min(ds_tick, remaining)
             remaining -= ds
@@ -519,7 +615,7 @@ class Executor:
             self._set_targets()
             self._tick(None)
         self.command.heading = self.command.rotation.copy()
-        self._settle(SETTLE_TICKS)
+        self._settle(self._ticks(SETTLE_TIME))
 
     # ------------------------------------------------------------ kinematic motion
     def free_straight(self, distance: float) -> NDArray[np.float64] | None:
@@ -583,7 +679,7 @@ class Executor:
         by the drive's duration, and the robot settles for ``SETTLE_TICKS`` physics ticks."""
         m, d = self.model, self.data
         step = abs(distance)
-        n_ticks = max(1, int(math.ceil(step / (speed * CONTROL_DT) - 1e-9)))
+        n_ticks = max(1, int(math.ceil(step / (speed * self.control_dt) - 1e-9)))
         q = self.robot.free_qpos
         if distance > 0:
             # the robot advances what a physical drive of this length does (see ``_drive``)
@@ -608,12 +704,16 @@ class Executor:
         mujoco.mj_kinematics(m, d)
         if self.near is not None:
             self.near.update(d, force=True)
-        self.time += n_ticks * CONTROL_DT
+        self.time += n_ticks * self.control_dt
         self.kinematic_ticks += n_ticks
         if self.on_tick is not None:  # (one frame of the glide for videos)
             self.on_tick(self.time)
         self.telemetry.record(self.time, self.data, self.robot, 0.0)
-        self._settle(SETTLE_TICKS)
+        self._settle(self._ticks(SETTLE_TIME))
+
+    def _ticks(self, duration: float) -> int:
+        """Control ticks (at least one) that last about ``duration`` s."""
+        return max(1, int(round(duration / self.control_dt)))
 
     def _settle(self, ticks: int) -> None:
         for _ in range(ticks):
@@ -623,7 +723,7 @@ class Executor:
         total = step.angle
         if abs(total) < 1e-9:
             return
-        n_ticks = max(1, int(math.ceil(abs(total) / (step.rate * CONTROL_DT))))
+        n_ticks = max(1, int(math.ceil(abs(total) / (step.rate * self.control_dt))))
         inc = total / n_ticks
         for _ in range(n_ticks):
             turn = rx(inc)
@@ -632,7 +732,7 @@ class Executor:
             self.command.roll += inc
             self._set_targets()
             self._tick(None)
-        self._settle(3)
+        self._settle(self._ticks(ROLL_SETTLE))
 
     def _roll_home(self) -> None:
         """Roll the front half back in line with the rear half (the V needs both halves in
@@ -652,7 +752,7 @@ class Executor:
         else:
             self.command.bend_offsets[step.joint] = step.angle
             self._set_targets()
-            self._settle(5)
+            self._settle(self._ticks(BEND_SETTLE))
 
     def _clamp(self, diameter: float) -> None:
         """Fold the V: fast to ``CLAMP_SEARCH`` short of ``diameter``, then slowly until the
@@ -669,7 +769,7 @@ class Executor:
         a_fast = c.clamp_angle(diameter - CLAMP_SEARCH)
         self.vclamp.alpha = min(self.vclamp.alpha, a_fast)
         touched = False
-        for _ in range(400):
+        for _ in range(self._ticks(CLAMP_TIMEOUT)):
             self._set_targets()
             self._tick(None)
             if self.robot.apex_force(CLAMP_SIDE) >= c.clamp_force:
@@ -678,19 +778,19 @@ class Executor:
             if self.vclamp.alpha >= a_goal:
                 break
             rate = CLAMP_RATE if self.vclamp.alpha < a_fast else CLAMP_RATE_SLOW
-            self.vclamp.alpha = min(self.vclamp.alpha + rate * CONTROL_DT, a_goal)
+            self.vclamp.alpha = min(self.vclamp.alpha + rate * self.control_dt, a_goal)
         if touched:
             self.vclamp.alpha = c.clamp_angle(self.robot.clamped_diameter() + CLAMP_PRELOAD)
             self._set_targets()
-        self._settle(8)
+        self._settle(self._ticks(CLAMP_SETTLE))
 
     def _unclamp(self) -> None:
-        rate = CLAMP_RATE * CONTROL_DT
+        rate = CLAMP_RATE * self.control_dt
         while self.vclamp.alpha > 0:
             self.vclamp.alpha = max(0.0, self.vclamp.alpha - rate)
             self._set_targets()
             self._tick(None)
-        self._settle(2)
+        self._settle(self._ticks(UNCLAMP_SETTLE))
 
     def _probe(self, side: int, rng: np.random.Generator) -> float | None:
         """Fold the V towards ``side`` (see :data:`primitives.vclamp.V_SIDES`) until its apex
@@ -703,7 +803,7 @@ class Executor:
         a_max = math.radians(75.0)
         h = None
         while self.vclamp.alpha < a_max:
-            self.vclamp.alpha = min(self.vclamp.alpha + CLAMP_RATE * CONTROL_DT, a_max)
+            self.vclamp.alpha = min(self.vclamp.alpha + CLAMP_RATE * self.control_dt, a_max)
             self._set_targets()
             self._tick(None)
             if self.robot.apex_force(side) >= c.clamp_force:
@@ -745,19 +845,20 @@ class Executor:
         rear = self.odometer - self._offsets[-1] - 0.5 * c.pitch
         w = np.clip((hs - (rear - SHIFT_BLEND)) / SHIFT_BLEND, 0.0, 1.0)
         sel = np.nonzero(w > 0)[0]
-        n_ticks = max(1, int(math.ceil(float(np.linalg.norm(move)) / SHIFT_STEP)))
+        shift_step = SHIFT_SPEED * self.control_dt
+        n_ticks = max(1, int(math.ceil(float(np.linalg.norm(move)) / shift_step)))
         inc = move / n_ticks
         for _ in range(n_ticks):
             self.path.shift(sel, w[sel], inc)
             self.command.position = self.command.position + inc
             self._set_targets()
             self._tick(None)
-        self._settle(5)
+        self._settle(self._ticks(SHIFT_SETTLE))
 
     def _steer_error(self) -> float:
         """Angle between the front's heading and the commanded heading, rad."""
-        _, r = self._front_pose()
-        return math.acos(float(np.clip(r[:, 0] @ self.command.heading[:, 0], -1.0, 1.0)))
+        r = self.data.xmat[self.robot.body_ids[0]].reshape(3, 3)
+        return math.acos(max(-1.0, min(1.0, float(r[:, 0] @ self.command.heading[:, 0]))))
 
     def _check_steer(self) -> None:
         """Steering: jam if the walls force the front too far off its commanded heading."""
@@ -851,7 +952,7 @@ class Executor:
         if isinstance(step, Drive):
             self._drive(step)
         elif isinstance(step, Stop):
-            self._settle(max(1, int(round(step.duration / CONTROL_DT))))
+            self._settle(self._ticks(step.duration))
         elif isinstance(step, Roll):
             self._roll(step)
         elif isinstance(step, Bend):

@@ -10,6 +10,7 @@ an odometer (driving forward again after reversing, or after a stall).
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -107,6 +108,43 @@ class DrivenPath:
         p = (1 - w) * self._hp[k - 1] + w * self._hp[k]
         return p, self._hr[k if w > 0.5 else k - 1]
 
+    def poses_into(
+        self, s: NDArray[np.float64], positions: NDArray[np.float64], rotations: NDArray[np.float64]
+    ) -> None:
+        """:meth:`pose` at every odometer of ``s`` (K,) m in one call: positions (K, 3) m and
+        rotations (K, 3, 3) are written into the given arrays (the same arithmetic as
+        :meth:`pose`, bit for bit)."""
+        _poses_into(self._hs, self._hp, self._hr, self._n, s, positions, rotations)
+
     def shift(self, indices: NDArray[np.intp], weights: NDArray, move: NDArray) -> None:
         """Move the samples ``indices`` by ``weights[:, None] * move`` (m)."""
         self._hp[indices] += weights[:, None] * move[None, :]
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _poses_into(
+    hs: NDArray[np.float64],
+    hp: NDArray[np.float64],
+    hr: NDArray[np.float64],
+    n: int,
+    s: NDArray[np.float64],
+    positions: NDArray[np.float64],
+    rotations: NDArray[np.float64],
+) -> None:
+    """:meth:`DrivenPath.pose` of the first ``n`` samples at every odometer of ``s``."""
+    first, last = hs[0], hs[n - 1]
+    for i in range(s.shape[0]):
+        si = s[i]
+        if si <= first or si >= last:
+            k = 0 if si <= first else n - 1
+            ds = si - hs[k]
+            for j in range(3):
+                positions[i, j] = hp[k, j] + ds * hr[k, j, 0]
+            rotations[i] = hr[k]
+            continue
+        k = np.searchsorted(hs[:n], si)
+        s0, s1 = hs[k - 1], hs[k]
+        w = (si - s0) / (s1 - s0) if s1 > s0 else 0.0
+        for j in range(3):
+            positions[i, j] = (1 - w) * hp[k - 1, j] + w * hp[k, j]
+        rotations[i] = hr[k if w > 0.5 else k - 1]

@@ -37,21 +37,23 @@ class Telemetry:
         return int(self._rows.shape[0])
 
     def record(self, time: float, data: mujoco.MjData, robot: Robot, lag: float) -> None:
-        """Append the row of simulated time ``time`` (s) with the front's ``lag`` (m)."""
+        """Append the row of simulated time ``time`` (s) with the front's ``lag`` (m): written
+        in place into the preallocated buffer (no per-row arrays)."""
         b = robot.body_ids[0]
-        p = data.xpos[b]
-        sensor = p + robot.config.lidar_offset * data.xmat[b].reshape(3, 3)[:, 0]
-        joints = robot.joint_angles()
-        width = 13 + joints.size
+        joints = robot.joint_qpos
+        width = 13 + len(joints)
         if self._n >= self._rows.shape[0] or self._rows.shape[1] != width:
             self._grow(width)
         row = self._rows[self._n]
+        p = data.xpos[b]
         row[0] = time
-        row[1:4] = sensor
+        # the sensor: lidar_offset along the front's axis (the first column of its rotation)
+        np.multiply(data.xmat[b, 0::3], robot.config.lidar_offset, out=row[1:4])
+        row[1:4] += p
         row[4:7] = p
         row[7:11] = data.xquat[b]
         row[11] = robot.contact_force()
-        row[12:-1] = joints
+        row[12:-1] = data.qpos[joints]
         row[-1] = lag
         self._n += 1
 

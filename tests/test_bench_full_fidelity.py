@@ -10,6 +10,7 @@ import pytest
 
 _PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_full_fidelity.py"
 _spec = importlib.util.spec_from_file_location("bench_full_fidelity", _PATH)
+assert _spec is not None and _spec.loader is not None
 bench = importlib.util.module_from_spec(_spec)
 sys.modules["bench_full_fidelity"] = bench
 _spec.loader.exec_module(bench)
@@ -48,3 +49,24 @@ def test_summary_reports_both_modes_the_ratio_and_the_pose_difference() -> None:
     assert figures["first_pose"]["median_mm"] == pytest.approx(2.0)
     assert figures["tests"]["success_mcnemar_p"] == 1.0
     assert "| contact |" in text and "| everywhere |" in text and "McNemar" in text
+
+
+def test_the_tick_profile_times_mj_step_and_restores_the_executor() -> None:
+    from pipe_env import layouts
+    from pipe_env.world import NearContacts
+    from primitives.executor import Executor
+    from primitives.sequences import go_straight
+
+    methods = (Executor.run, Executor.place, Executor._scan, NearContacts.update)
+    clock = bench._Clock()
+    with bench._instrumented(clock):
+        ex = Executor.for_network(layouts.straight(0.1), lidar=None)
+        ticks = ex.physics_ticks
+        ex.run(go_straight(0.05))
+    assert clock.steps == ex.physics_ticks > ticks > 0
+    assert clock.updates >= ex.physics_ticks
+    assert 0.0 < clock.step_s < clock.executor_s
+    assert (Executor.run, Executor.place, Executor._scan, NearContacts.update) == methods
+    import primitives.executor as executor_module
+
+    assert executor_module.mujoco is bench.mujoco

@@ -192,3 +192,110 @@ def test_static_walls_posed_once_change_nothing_in_the_robot_drive() -> None:
     assert s0 == s1 == "done" and t0 == t1
     assert np.array_equal(q0, q1)
     assert np.array_equal(g0, g1)  # the walls too (and the robot's geoms)
+
+
+def _unpaired_clearances(near: NearContacts, data: mujoco.MjData) -> np.ndarray:
+    """Each geom's distance from its bounding sphere to the nearest contact piece (of all of
+    them) it is not paired with, by brute force, m."""
+    m = near.model
+    paired = {(int(a), int(b)) for a, b in zip(m.pair_geom1, m.pair_geom2)}
+    xp = data.geom_xpos[near.geoms]
+    local = np.einsum("gki,kij->gkj", xp[:, None, :] - near._centre[None, :, :], near._rot)
+    out = np.maximum(np.abs(local) - near._half[None, :, :], 0.0)
+    dist = np.sqrt(np.einsum("gki,gki->gk", out, out)) - near._radius[:, None]
+    for gi, g in enumerate(near.geoms):
+        for k, w in enumerate(near.walls):
+            if (int(g), int(w)) in paired:
+                dist[gi, k] = np.inf
+    return dist.min(axis=1)
+
+
+def test_pairs_are_selected_again_only_when_a_geom_can_reach_an_unpaired_piece() -> None:
+    """The clearances (how far each geom may move before it can touch a piece it is not paired
+    with) never exceed the true distances to every unpaired piece, whether from a selection
+    (then they exceed the reach) or measured again with the pairs kept; through a straight
+    drive and a mitre turn the pairs are selected again on a small fraction of the ticks (the
+    fixed-reach rule: about a third), with no overrun, and the robot drives exactly as with
+    the pairs selected on every tick."""
+    net = layouts.mitre_bend(0.06, math.pi / 2, math.pi / 2)
+    ex = Executor.for_network(net, lidar=None)
+    near = ex.near
+    assert near is not None
+    select, remeasure = near._select, near._remeasure
+    checked: list[bool] = []
+
+    def check(selected: bool) -> None:
+        true = _unpaired_clearances(near, ex.data)
+        checked.append(bool(np.all(near._clearance <= true + 1e-12)))
+        if selected:
+            checked.append(bool(np.all(near._clearance > near.reach - near._margin)))
+
+    def checking_select(xp: np.ndarray) -> None:
+        select(xp)
+        if near.n_pairs:
+            check(True)
+
+    def checking_remeasure(xp: np.ndarray) -> bool:
+        kept = remeasure(xp)
+        if kept:
+            check(False)
+        return kept
+
+    near._select = checking_select  # type: ignore[method-assign]
+    near._remeasure = checking_remeasure  # type: ignore[method-assign]
+    ticks0 = ex.physics_ticks
+    ex.run(go_straight(0.1))
+    assert _turn(ex, net) == "done"
+    ticks = ex.physics_ticks - ticks0
+    assert len(checked) >= 20 and all(checked)
+    assert near.remeasures >= 10
+    assert near.overruns == 0 and near.fallbacks == 0
+    assert near.selections < 0.15 * ticks, (near.selections, ticks)
+    # the same drive selecting on every tick (the contacts of automatic collisions, see above)
+    ref = Executor.for_network(net, lidar=None)
+    assert ref.near is not None
+    ref.near.slack = 1.0  # every update selects
+    ref.run(go_straight(0.1))
+    assert _turn(ref, net) == "done"
+    assert ref.near.selections >= ticks
+    assert np.array_equal(ref.data.qpos, ex.data.qpos)
+
+
+def test_an_approach_within_the_clearance_measures_again() -> None:
+    """Moving one geom (by hand) until it can reach an unpaired piece makes the next update
+    measure (or select) again; a geom moved beyond its clearance in one interval is counted an
+    overrun."""
+    net = layouts.mitre_bend(0.06, math.pi / 2, math.pi / 2)
+    ex = Executor.for_network(net, lidar=None)
+    near = ex.near
+    assert near is not None
+    d = ex.data
+    near.update(d, force=True)
+    before = near.selections
+
+    def measured() -> int:
+        return near.selections + near.remeasures
+
+    near.update(d)  # nothing moved: no selection
+    assert near.selections == before and measured() == before + near.remeasures
+    g = int(np.argmin(near._clearance))
+    gid = int(near.geoms[g])
+    saved = d.geom_xpos[gid].copy()
+    try:
+        # moved m, with the guard's 2 m + slack ahead still short of the clearance: nothing
+        count = measured()
+        step = (near._clearance[g] - near.slack) / 3.0 - 1e-6
+        d.geom_xpos[gid] = saved + [step, 0.0, 0.0]
+        near.update(d)
+        assert measured() == count
+        # the last interval's motion makes the next one's reach: measured again
+        d.geom_xpos[gid] = saved + [near._clearance[g] - 0.5 * near.slack, 0.0, 0.0]
+        near.update(d)
+        assert measured() == count + 1 and near.overruns == 0
+        # beyond the clearance (of the new selection) within one interval: an overrun
+        d.geom_xpos[gid] = saved + [3.0 * near._clearance[g] + 0.05, 0.0, 0.0]
+        near.update(d)
+        assert near.overruns == 1
+    finally:
+        d.geom_xpos[gid] = saved
+        near.update(d, force=True)

@@ -127,6 +127,8 @@ class PhysicalPlant:
             fittings move the clamped robot kinematically, see
             :meth:`primitives.executor.Executor.free_straight`) or ``"everywhere"`` (contact
             physics for every motion: the reference).
+        timestep: the physics step, s (None: ``pipe_env.world.TIMESTEP``).
+        control_dt: the executor's control period, s (None: ``primitives.executor.CONTROL_DT``).
     """
 
     fidelity = Fidelity.FULL.value
@@ -144,6 +146,8 @@ class PhysicalPlant:
         robot_config: Any = None,
         physics: str = "contact",
         sparse_interval: float = SPARSE_INTERVAL,
+        timestep: float | None = None,
+        control_dt: float | None = None,
     ) -> None:
         from primitives.executor import PHYSICS_MODES
 
@@ -179,6 +183,11 @@ class PhysicalPlant:
             "physics": physics,
             **lidar_kwargs,
         }
+        # the physics step and control period: the executor's defaults unless given
+        if timestep is not None:
+            self._executor_args["timestep"] = timestep
+        if control_dt is not None:
+            self._executor_args["control_dt"] = control_dt
         self._build()
         self.reset(np.random.default_rng(0))
 
