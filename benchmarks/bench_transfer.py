@@ -415,6 +415,15 @@ def _save(path: str | None, payload: dict[str, Any]) -> None:
         atomic_write_text(path, json.dumps(finite_json(payload), indent=1, allow_nan=False))
 
 
+def _code_commit() -> str:
+    """The commit the episodes run on (``+changes`` when the code differs from it)."""
+    try:
+        from benchmarks.report import _commit
+    except ImportError:  # run without the repository root on the path
+        return "unknown"
+    return _commit()
+
+
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Run (and merge) the episodes; prints the table and returns the figures."""
     args = parse_args(argv)
@@ -430,7 +439,10 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         "episodes": earlier,
     }
 
+    commit = _code_commit()
+
     def progress(e: dict[str, Any]) -> None:
+        e["commit"] = commit
         done.append(e)
         payload["episodes"] = merge_episodes(earlier, done)
         _save(args.json, payload)
@@ -463,7 +475,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         f"{payload['env_kwargs']['full'].get('max_episode_steps')}). "
         f"{len(episodes)} episodes, {sum(e['wall_s'] for e in episodes) / 60:.0f} min of "
         f"episode wall time (this invocation: {len(done)} episodes, {wall:.0f} s, "
-        f"{args.jobs} job(s); a shared machine). Command: "
+        f"{args.jobs} job(s); a shared machine); episodes run on commit(s) "
+        f"{', '.join(sorted({str(e.get('commit', 'unknown')) for e in episodes}))}. Command: "
         f"`python benchmarks/bench_transfer.py --networks N{config_arg}`; extend a run with "
         "`--first K --networks M --merge earlier.json`."
     )
