@@ -167,7 +167,13 @@ _BUILT: list[Executor] = []
 
 
 def _executor(net: PipeNetwork, point: Point) -> Executor:
-    ex = Executor.for_network(net, lidar=None, **point.args)
+    ex = Executor.for_network(
+        net,
+        lidar=None,
+        timestep=point.timestep,
+        control_dt=point.period,
+        time_compression=point.speedup,
+    )
     _BUILT.append(ex)
     return ex
 

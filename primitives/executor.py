@@ -35,6 +35,11 @@ wall pieces near it (:class:`pipe_env.world.NearContacts`; the same contacts as 
 automatic collisions against every piece, at about half the cost of a step);
 :meth:`Executor.use_near_contacts` switches back to the automatic collisions.
 
+Time compression (``time_compression``, k; see :data:`TIME_COMPRESSION`): the quasi-static
+motions run k times faster in physics while the clock keeps the robot's nominal speeds; the
+executor's default is k = 1, the full-fidelity plant's for ``physics="contact"`` is set in
+:mod:`pipe_env.envs.plant_full`.
+
 Per control tick the executor's own work is batched: every module's target (the followers'
 driven-path poses, the V's legs, the rolls, the quaternions) in one pass over preallocated
 arrays with compiled kernels, bit for bit what the per-module helpers computed; telemetry rows
