@@ -111,8 +111,9 @@ CONTROL_DT_RANGE = (0.001, 0.2)
 #: walls set the front's heading, a contact-dynamic motion (measured: compressed 1.5 times, turns
 #: in 57-60 mm pipes stall their steering). Durations that bound a motion (``CLAMP_TIMEOUT``) are
 #: nominal. The jam lag keeps its meaning (see :attr:`Executor.jam_lag`); the near contacts are
-#: selected as often per metre moved (see :attr:`Executor.near_steps`). The executor's default is 1 (no compression); the plant's
-#: default for ``physics="contact"`` is ``pipe_env.envs.plant_full.TIME_COMPRESSION``.
+#: selected as often per metre moved (see :attr:`Executor.near_steps`). The executor's default
+#: is 1 (no compression); the plant's default for ``physics="contact"`` is
+#: ``pipe_env.envs.plant_full.TIME_COMPRESSION``.
 TIME_COMPRESSION = 1.0
 #: A driven front trails its drive target by about this much time of travel at its physical
 #: speed (the weld's tracking delay; measured right after a 20 ms tick, 2 ms steps, a clamped
