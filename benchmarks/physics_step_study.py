@@ -28,7 +28,8 @@ defaults before this study):
 
 Per grid point it prints pass/fail of each check, control ticks (physics / kinematic) and
 physics steps per decision, decisions/s and their ratio to the reference measured in the same
-run (episodes interleaved point by point, so load drifts hit every point alike).
+run (episodes interleaved point by point, so load drifts hit every point alike), and the same
+per second of the process's CPU time (steadier than the wall clock on a shared machine).
 
 The margin: a grid point is adopted only if it passes everything and the next larger physics
 step at its period passes checks 1 and 2 too (one grid step of margin in the step, where the
@@ -447,7 +448,7 @@ def run_episode(env: gym.Env, network: PipeNetwork, seed: int) -> dict[str, Any]
     base: Any = env.unwrapped
     agent = make_agent("route_planner", env)
     notes: list[str] = []
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     obs, info = env.reset(seed=seed, options={"network": network})
     agent.reset()
     done = bool(base.terminated or base.truncated)
@@ -455,13 +456,14 @@ def run_episode(env: gym.Env, network: PipeNetwork, seed: int) -> dict[str, Any]
         obs, _, term, trunc, info = env.step(agent.act(obs, info))
         notes += [str(v) for k, v in info.items() if k.endswith("_note")]
         done = term or trunc
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     ex = base.plant.executor
     return {
         "success": bool(info["is_success"]),
         "jams": int(info["jams"]),
         "decisions": int(info["decisions"]),
         "wall_s": wall,
+        "cpu_s": cpu,
         "physics_ticks": int(ex.physics_ticks),
         "kinematic_ticks": int(ex.kinematic_ticks),
         "mj_steps": int(ex.physics_ticks * ex.substeps),
@@ -510,6 +512,7 @@ def episode_figures(res: Result) -> dict[str, float]:
     eps = res.episodes
     dec = max(1, sum(e["decisions"] for e in eps))
     wall = sum(e["wall_s"] for e in eps)
+    cpu = sum(e.get("cpu_s", math.nan) for e in eps)
     return {
         "success": sum(e["success"] for e in eps),
         "jams": sum(e["jams"] for e in eps),
@@ -518,6 +521,7 @@ def episode_figures(res: Result) -> dict[str, float]:
         "kinematic_ticks_per_decision": sum(e["kinematic_ticks"] for e in eps) / dec,
         "mj_steps_per_decision": sum(e["mj_steps"] for e in eps) / dec,
         "decisions_per_s": dec / wall if wall > 0 else math.nan,
+        "decisions_per_cpu_s": dec / cpu if cpu > 0 else math.nan,
         "unstable": sum(len(e["unstable"]) for e in eps),
         "overruns": sum(e.get("overruns", 0) for e in eps),
     }
@@ -634,9 +638,10 @@ def print_speed(results: list[Result], ref: Result) -> None:
     emit()
     emit(
         "| step/period ms | cases | case ticks | case wall / ref | episodes | success | jams "
-        "| physics ticks/dec | kinematic ticks/dec | mj_steps/dec | decisions/s | / ref |"
+        "| physics ticks/dec | kinematic ticks/dec | mj_steps/dec | decisions/s | / ref "
+        "| decisions/CPU-s | / ref |"
     )
-    emit("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    emit("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     rf = episode_figures(ref) if ref.episodes else None
     for r in results:
         row = (
@@ -650,9 +655,11 @@ def print_speed(results: list[Result], ref: Result) -> None:
                 f"{len(r.episodes)} | {f['jams']} | {f['physics_ticks_per_decision']:.0f} | "
                 f"{f['kinematic_ticks_per_decision']:.0f} | {f['mj_steps_per_decision']:.0f} | "
                 f"{f['decisions_per_s']:.3f} | {f['decisions_per_s'] / rf['decisions_per_s']:.2f} |"
+                f" {f['decisions_per_cpu_s']:.3f} |"
+                f" {f['decisions_per_cpu_s'] / rf['decisions_per_cpu_s']:.2f} |"
             )
         else:
-            row += " - | - | - | - | - | - | - | - |"
+            row += " - | - | - | - | - | - | - | - | - | - |"
         emit(row)
 
 
