@@ -7,13 +7,13 @@ the same decisions, detection log, motion and clock as before. The digests were 
 code before the split; floats are rounded to 9 decimals so that the digest pins behaviour, not
 the last bit of a platform's arithmetic.
 
-The digests were recorded again when the plant's default time compression became 2
-(``pipe_env.envs.plant_full.TIME_COMPRESSION``: drives, rolls, the V and centring run twice as
-fast in physics, the clock keeps the nominal speeds), after confirming that every run's outcome
+The digests were recorded again when the plant's default time compression became 1.5
+(``pipe_env.envs.plant_full.TIME_COMPRESSION``: drives, rolls, the V and centring run 1.5 times
+as fast in physics, the clock keeps the nominal speeds), after confirming that every run's outcome
 is unchanged: each seeded run reaches its goal with the same options and statuses, the episode
 takes the same eight actions with the same termination, success and jams; poses, clocks and
 rewards differ in the last millimetres and seconds (the thesis run's confirmation sweeps add
-22 s to its clock), and the physics ticks fall (the episode's from 16115 to 9005).
+22 s to its clock), and the physics ticks fall (the episode's from 16115 to 11466).
 """
 
 from __future__ import annotations
@@ -28,11 +28,11 @@ from pipe_env import layouts
 from pipe_env.envs.plant_full import PhysicalPlant
 from pipe_env.routing import EdgePosition, edge_length
 
-#: detector -> digest of :func:`seeded_run` (recorded at time compression 2, see above).
+#: detector -> digest of :func:`seeded_run` (recorded at time compression 1.5, see above).
 DIGESTS = {
-    "improved": "c7b41f7b4493be48ae645ef107d101c66eb28240f22f91ed7586187a38d5f313",
-    "ground_truth": "2cb5430e0e9da4e7676b56ae3f72ae972d14e25c8c80770064ac0f9bd3f537ad",
-    "thesis": "c2db7113d873781c6b66190e882c146cc554e64ee9757207964f83cb5d3183bc",
+    "improved": "08c61638adbbb08e89a30255298f7c5624de2ddb3ee5d7859eff1db24f2584a8",
+    "ground_truth": "0f3ea3f17799fd06820e6aca9323d17bb848c0b1ab1848ebe1e7825317f23df1",
+    "thesis": "012523540894b1878b584f45bf44681f5eb5b47bfc01ecdd5bfec6cb528db803",
 }
 
 
@@ -123,8 +123,8 @@ def seeded_episode() -> dict[str, object]:
     return record
 
 
-#: digest of :func:`seeded_episode` (recorded at time compression 2, see above).
-EPISODE_DIGEST = "3da970d217c5017709e1c0e58448fd1dcad3ee835e8bde426c1828062aff07bd"
+#: digest of :func:`seeded_episode` (recorded at time compression 1.5, see above).
+EPISODE_DIGEST = "1414b0faffc24d7b0a736cf67a7bb3c97873ce480aa9a96e84825dc0a78ff1eb"
 
 
 @pytest.mark.slow
