@@ -152,6 +152,11 @@ MAX_RESCANS = 4
 #: 585, bit-identical poses) but overflows the 160-pair pool in a mitre turn (automatic
 #: collisions then, slower), and the physics step costs the same; 6 mm stays.
 NEAR_REACH = 0.006
+#: The near contacts are selected again at least every this much nominal motion within a
+#: control period (a long or time-compressed period is stepped in chunks), s: at 20 ms periods
+#: the selection never overruns its reach, at 40 ms in one chunk it does (the V folding at
+#: ``CLAMP_RATE``).
+NEAR_INTERVAL = 0.025
 #: Physics modes. ``"contact"``: a clamped robot driving straight (forward or back) in a run,
 #: away from fittings (see :meth:`Executor.free_straight`), moves kinematically along the pipe
 #: axis with the shape, clamp, sag and roll physics gave it, then settles physically; contact
@@ -366,16 +371,15 @@ class Executor:
         #: of physics, s
         self.time_compression = float(time_compression)
         self.motion_dt = self.time_compression * self.control_dt
-        #: physics steps between two near-contact selections: the largest divisor of
-        #: ``substeps`` no more than ``substeps / time_compression`` (a compressed motion moves
-        #: the robot's geoms no further between two selections than it does uncompressed in
-        #: one control period, which the selection's reach is set for; equal chunks, so each
-        #: interval's motion predicts the next's; the whole period at k = 1)
-        self.near_steps = max(
-            n
-            for n in range(1, self.substeps + 1)
-            if self.substeps % n == 0 and n <= self.substeps / self.time_compression + 1e-9
-        )
+        #: physics steps between two near-contact selections within a control period: the
+        #: period split as evenly as possible into the fewest chunks of at most
+        #: ``NEAR_INTERVAL`` of nominal motion each (a motion moves the robot's geoms no further
+        #: between two selections than in one uncompressed 20-25 ms period, which the
+        #: selection's reach is set for; the whole period at the defaults)
+        chunks = max(1, math.ceil(self.motion_dt / NEAR_INTERVAL - 1e-9))
+        chunks = min(chunks, self.substeps)
+        base, extra = divmod(self.substeps, chunks)
+        self.near_steps = tuple(base + (i < extra) for i in range(chunks))
         self.physics = physics
         #: the extra tracking lag of the drive running now (see :attr:`jam_lag`), m
         self._lag_allowance = 0.0
@@ -557,14 +561,14 @@ class Executor:
             self.near = None
 
     def _physics(self) -> None:
-        """One control period of physics steps, in chunks of ``near_steps`` steps with the
-        pairs near the robot selected before each (see :attr:`near_steps`)."""
+        """One control period of physics steps, in the chunks of ``near_steps`` with the pairs
+        near the robot selected before each."""
         if self.near is None:
             mujoco.mj_step(self.model, self.data, nstep=self.substeps)
         else:
-            for _ in range(self.substeps // self.near_steps):
+            for n in self.near_steps:
                 self.near.update(self.data)
-                mujoco.mj_step(self.model, self.data, nstep=self.near_steps)
+                mujoco.mj_step(self.model, self.data, nstep=n)
         self.physics_ticks += 1
 
     def _tick(self, lag_axis: NDArray | None = None, clock: float | None = None) -> float:

@@ -14,7 +14,7 @@ import pytest
 from detector.validation import ArgumentError
 from pipe_env import layouts
 from pipe_env.world import TIMESTEP, build_world
-from primitives.executor import CONTROL_DT, TRACKING_DELAY, Executor
+from primitives.executor import CONTROL_DT, NEAR_INTERVAL, TRACKING_DELAY, Executor
 from primitives.sequences import Sequence
 from primitives.steps import Drive, Stop, Unclamp
 
@@ -132,12 +132,28 @@ def test_a_bad_time_compression_names_the_field(value: object) -> None:
         Executor.for_network(net, lidar=None, time_compression=value)  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize(("k", "steps"), [(1.0, 10), (1.5, 5), (2.0, 5), (3.0, 2), (4.0, 2)])
-def test_near_contacts_are_selected_as_often_per_metre_moved(k: float, steps: int) -> None:
-    ex = Executor.for_network(layouts.straight(0.09, 1.0), lidar=None, time_compression=k)
-    assert ex.near_steps == steps and ex.substeps % steps == 0
-    # the robot moves no further between two selections than uncompressed in one period
-    assert k * steps <= ex.substeps
+@pytest.mark.parametrize(
+    ("k", "period", "chunks"),
+    [
+        (1.0, 0.02, (10,)),
+        (1.5, 0.02, (5, 5)),
+        (2.0, 0.02, (5, 5)),
+        (3.0, 0.02, (4, 3, 3)),
+        (4.0, 0.02, (3, 3, 2, 2)),
+        (1.0, 0.04, (10, 10)),
+        (1.0, 0.06, (10, 10, 10)),
+        (1.5, 0.04, (7, 7, 6)),
+    ],
+)
+def test_near_contacts_are_selected_as_often_per_metre_moved(
+    k: float, period: float, chunks: tuple[int, ...]
+) -> None:
+    ex = Executor.for_network(
+        layouts.straight(0.09, 1.0), lidar=None, time_compression=k, control_dt=period
+    )
+    assert ex.near_steps == chunks and sum(chunks) == ex.substeps
+    # the robot moves no further between two selections than in NEAR_INTERVAL uncompressed
+    assert max(chunks) * ex.model.opt.timestep * k <= NEAR_INTERVAL + 1e-9
 
 
 def test_a_compressed_drive_keeps_the_nominal_clock_in_fewer_physics_ticks() -> None:
