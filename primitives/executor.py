@@ -110,8 +110,10 @@ CONTROL_DT_RANGE = (0.001, 0.2)
 #: A turn's arc and the drive holding the turn's heading after it are not compressed: there the
 #: walls set the front's heading, a contact-dynamic motion (measured: compressed 1.5 times, turns
 #: in 57-60 mm pipes stall their steering). Durations that bound a motion (``CLAMP_TIMEOUT``) are
-#: nominal. The jam lag keeps its meaning (see :attr:`Executor.jam_lag`); the near contacts are
-#: selected as often per metre moved (see :attr:`Executor.near_steps`). The executor's default
+#: nominal. A motion's clock is its ticks times their nominal time (uncompressed, a motion is
+#: rounded up to whole control periods; compressed, up to k periods). The jam lag keeps its
+#: meaning (see :attr:`Executor.jam_lag`); the near contacts are selected as often per metre
+#: moved (see :attr:`Executor.near_steps`). The executor's default
 #: is 1 (no compression); the plant's default for ``physics="contact"`` is
 #: ``pipe_env.envs.plant_full.TIME_COMPRESSION``.
 TIME_COMPRESSION = 1.0
