@@ -18,16 +18,21 @@ The reference measured in the same run is the fast environment's throughput, so 
 speed is also printed as a ratio to it.
 
 Usage: python benchmarks/bench_agents.py [--episodes 200] [--model runs/ppo/best/best_model.zip]
-       [--train-minutes 28] [--full-episodes 20] [--parts agents,throughput,full]
+       [--train-minutes 28] [--full-episodes 20] [--parts agents,throughput,full] [--json F]
+       [--write-docs]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import math
+import sys
 import time
 from pathlib import Path
+from typing import TextIO
 
 import gymnasium as gym
 import numpy as np
@@ -137,12 +142,52 @@ def main() -> None:
         "full (part 2 full fidelity and part 3)",
     )
     parser.add_argument("--json", default=None)
+    parser.add_argument(
+        "--write-docs", action="store_true", help="write the tables into docs/benchmarks.md"
+    )
     args = parser.parse_args()
-    parts = {p.strip() for p in args.parts.split(",") if p.strip()}
-    unknown = parts - {"agents", "throughput", "full"}
+    unknown = {p.strip() for p in args.parts.split(",") if p.strip()} - {
+        "agents",
+        "throughput",
+        "full",
+    }
     if unknown:
         parser.error(f"--parts has {sorted(unknown)}; allowed: agents, throughput, full")
+    if args.write_docs:
+        tee = _Tee(sys.stdout)
+        with contextlib.redirect_stdout(tee):
+            run(args)
+        from benchmarks.report import write_section
 
+        command = "python benchmarks/bench_agents.py " + " ".join(sys.argv[1:])
+        write_section("agents", f"`{command.replace(' --write-docs', '')}`\n\n" + tee.markdown())
+    else:
+        run(args)
+
+
+class _Tee(io.StringIO):
+    """Writes through to ``out`` and keeps the text (progress lines dropped) for the docs."""
+
+    def __init__(self, out: TextIO) -> None:
+        super().__init__()
+        self.out = out
+
+    def write(self, text: str) -> int:
+        self.out.write(text)
+        return super().write(text)
+
+    def flush(self) -> None:
+        self.out.flush()
+
+    def markdown(self) -> str:
+        lines = self.getvalue().splitlines()
+        keep = [ln for ln in lines if not ln.startswith(("evaluated ", "trained MaskablePPO"))]
+        return "\n".join(keep).strip() + "\n"
+
+
+def run(args: argparse.Namespace) -> None:
+    """Every part asked for in ``args.parts``."""
+    parts = {p.strip() for p in args.parts.split(",") if p.strip()}
     cfg = TrainConfig.from_yaml(DEFAULT_CONFIG)
     env_kwargs = {k: v for k, v in cfg.env_kwargs.items() if k not in ("network_pool", "pool_seed")}
     report: dict = {"episodes": args.episodes, "eval_pool_seed": EVAL_POOL_SEED, "env": env_kwargs}

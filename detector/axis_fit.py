@@ -17,12 +17,11 @@ from numpy.typing import NDArray
 
 from detector.detection import Detection
 from detector.fit_kernels import MODEL_CYLINDER, wall_distances, wall_fit
-from detector.grid import label_grid
 from detector.improved_config import ImprovedConfig
 from detector.pipe_cloud import (
     PipeCloud,
     covers_azimuth,
-    even_subsample,
+    even_indices,
     partial_percentile,
     wall_tolerance,
 )
@@ -71,7 +70,7 @@ def refine_wall_axis(
     sub = _axis_returns(xyz, cloud.r_v, big_r, gate, math.nan if u_max is None else u_max)
     if sub.shape[1] == 0:
         return cloud.pose, info
-    sub = np.ascontiguousarray(sub[:, even_subsample(np.arange(sub.shape[1]), cfg.axis_points)])
+    sub = np.ascontiguousarray(sub[:, even_indices(sub.shape[1], cfg.axis_points)])
     # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
     # gentle taper would pass for a tilted wall), so it is held at the prior
     span = float(partial_percentile(sub[0], 95) - partial_percentile(sub[0], 5))
@@ -209,13 +208,26 @@ def wall_consistent(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig, u_max: 
     1 % of them within the wall tolerance under the current pose?"""
     if u_max < 0.15:  # (a short stretch of wall: the first pass's wider view helps)
         return False
-    near = cloud.xyz_v[0] < u_max
-    n_near = int(np.count_nonzero(near))
+    n_near, n_off = _near_off_wall(
+        cloud.xyz_v[0], cloud.r_v, wall_tolerance(cloud, cfg), big_r, u_max
+    )
     if n_near < 200:
         return False
-    e = cloud.r_v - big_r
-    n_off = int(np.count_nonzero(near & (np.abs(e) > wall_tolerance(cloud, cfg))))
     return n_off <= 0.01 * n_near
+
+
+@njit(cache=True)
+def _near_off_wall(u, r, tol, big_r, u_max):
+    """How many returns lie nearer than ``u_max`` along the axis, and how many of those lie
+    off the wall of radius ``big_r`` by more than their tolerance ``tol`` (m)."""
+    n_near = 0
+    n_off = 0
+    for i in range(u.size):
+        if u[i] < u_max:
+            n_near += 1
+            if abs(r[i] - big_r) > tol[i]:
+                n_off += 1
+    return n_near, n_off
 
 
 def scatter_floor(cfg: ImprovedConfig, rms: float) -> float:
@@ -343,30 +355,73 @@ def structure_start(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> floa
 @njit(cache=True)
 def _off_wall_entries(cell, g, k, wraps, u, r, tol, big_r, min_points):
     """How many returns lie off the wall by more than twice their tolerance, and for those in
-    regions (:func:`detector.grid.label_grid`) of at least ``min_points`` of them, where along
-    the axis each entered the structure: ``min(u, u R / r)``, where its beam crossed the wall
-    radius (sensor near the axis)."""
+    regions (8-neighbourhood on the grid, joined across the row seam when ``wraps``: as
+    :func:`detector.grid.label_grid`) of at least ``min_points`` of them, where along the axis
+    each entered the structure: ``min(u, u R / r)``, where its beam crossed the wall radius
+    (sensor near the axis). The regions are found among the returns off the wall alone
+    (union-find over them, not over the whole grid)."""
     n = cell.size
     off = np.empty(n, dtype=np.bool_)
-    mask = np.zeros((g, k), dtype=np.bool_)
     n_off = 0
     for i in range(n):
         off[i] = abs(r[i] - big_r) > 2.0 * tol[i]
         if off[i]:
             n_off += 1
-            mask[cell[i] // k, cell[i] % k] = True
     if n_off < min_points:
         return n_off, np.empty(0)
-    labels, n_lab = label_grid(mask, wraps)
-    counts = np.zeros(n_lab + 1, dtype=np.int64)
-    for i in range(n):
-        if off[i]:
-            counts[labels[cell[i] // k, cell[i] % k]] += 1
-    out = np.empty(n_off)
+    # the off-wall returns (grid cells) and, per grid cell, which of them it holds
+    which = np.full(g * k, -1, dtype=np.int64)
+    idx = np.empty(n_off, dtype=np.int64)
     m = 0
     for i in range(n):
-        if off[i] and counts[labels[cell[i] // k, cell[i] % k]] >= min_points:
+        if off[i]:
+            which[cell[i]] = m
+            idx[m] = i
+            m += 1
+    parent = np.arange(n_off)
+    for j in range(n_off):
+        c = cell[idx[j]]
+        row = c // k
+        col = c - row * k
+        # (the neighbours before it in raster order: left, and the row above; the first row
+        # also joins the last one when the grid wraps)
+        if col > 0 and which[c - 1] >= 0:
+            _union_roots(parent, j, which[c - 1])
+        for prev in (row - 1, g - 1 if (wraps and row == 0 and g > 1) else -1):
+            if prev < 0:
+                continue
+            for dc in (-1, 0, 1):
+                cc = col + dc
+                if 0 <= cc < k and which[prev * k + cc] >= 0:
+                    _union_roots(parent, j, which[prev * k + cc])
+    counts = np.zeros(n_off, dtype=np.int64)
+    for j in range(n_off):
+        counts[_root(parent, j)] += 1
+    out = np.empty(n_off)
+    m = 0
+    for j in range(n_off):
+        if counts[_root(parent, j)] >= min_points:
+            i = idx[j]
             uc = u[i] * big_r / max(r[i], 1e-9)
             out[m] = min(u[i], uc)
             m += 1
     return n_off, out[:m]
+
+
+@njit(cache=True)
+def _root(parent, x):
+    """The root of ``x`` in the union-find forest ``parent`` (halving the path)."""
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]
+        x = parent[x]
+    return x
+
+
+@njit(cache=True)
+def _union_roots(parent, a, b):
+    """Join the sets of ``a`` and ``b`` (the smaller root becomes the parent)."""
+    ra, rb = _root(parent, a), _root(parent, b)
+    if ra < rb:
+        parent[rb] = ra
+    elif rb < ra:
+        parent[ra] = rb

@@ -21,7 +21,7 @@ from detector.options import StructureOption
 from detector.pipe_cloud import (
     PipeCloud,
     azimuth_coverage,
-    even_subsample,
+    even_indices,
     fit_confidence,
     partial_percentile,
     radius_mode,
@@ -58,7 +58,7 @@ def _closure(
         # within the range noise, where the far wall of a pipe seen head-on is curved
         # (an even sample of the wall: a few hundred returns pin a plane and a quadric)
         on_idx = np.flatnonzero(on_plane)
-        pick = on_idx[even_subsample(np.arange(on_idx.size), 2 * cfg.fit_points)]
+        pick = on_idx[even_indices(on_idx.size, 2 * cfg.fit_points)]
         pp = p[pick]
         uq = pp[:, 0]
         design = np.stack([np.ones(uq.size), pp[:, 1], pp[:, 2]], axis=1)
@@ -212,7 +212,7 @@ def detect_axisymmetric(
     u_first = float(partial_percentile(u_cross, 1))
     r2 = radius_mode(r)
     # the start of a taper is one kink in r(u): it needs a denser sample than the other fits
-    sub = even_subsample(np.arange(u.size), 2 * cfg.fit_points)
+    sub = even_indices(u.size, 2 * cfg.fit_points)
     us, rs = u[sub], r[sub]
     n_lead = 0
     if contraction:
@@ -220,7 +220,7 @@ def detect_axisymmetric(
         # tolerance only some way past its start, and the kink needs both sides
         pw = cloud.points(wall)
         lead = np.flatnonzero((pw[:, 0] > u_first - 0.15) & (pw[:, 0] < u_first))
-        lead = lead[even_subsample(np.arange(lead.size), cfg.fit_points // 2)]
+        lead = lead[even_indices(lead.size, cfg.fit_points // 2)]
         n_lead = int(lead.size)
         us = np.concatenate([us, pw[lead, 0]])
         rs = np.concatenate([rs, np.hypot(pw[lead, 1], pw[lead, 2])])

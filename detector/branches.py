@@ -29,6 +29,7 @@ from detector.pipe_cloud import (
     PipeCloud,
     axis_direction,
     azimuth_coverage,
+    even_indices,
     even_subsample,
     fit_confidence,
     partial_percentile,
@@ -66,10 +67,10 @@ def find_lobes(
     lobes: list[Lobe] = []
     counts, row_span = region_sizes(labels, n_lab)
     cand = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
-    regions = [(labels == k, int(counts[k])) for k in cand[cand > 0].tolist()]
-    regions = [part for m, n in regions for part in _split_all_round(cloud, m, n, big_r, cfg)]
-    for m, n in regions:
-        p = cloud.points(m)
+    found = [(labels == k, int(counts[k])) for k in cand[cand > 0].tolist()]
+    regions = [part for m, n in found for part in _split_all_round(cloud, m, n, big_r, cfg)]
+    for m, n, p_m in regions:
+        p = cloud.points(m) if p_m is None else p_m
         depth = (
             float(partial_percentile(np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2])), 90)) - big_r
         )
@@ -100,27 +101,28 @@ def find_lobes(
 
 def _split_all_round(
     cloud: PipeCloud, mask: NDArray[np.bool_], n: int, big_r: float, cfg: ImprovedConfig
-) -> list[tuple[NDArray[np.bool_], int]]:
+) -> list[tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]]:
     """A region of returns beyond the wall that goes all round the axis, split into its deep
     parts when there are two or more: entering a wider run from a tee's stem, the run's wall
     lies a step beyond the stem's all round and joins the two ways on into one region; only
     along the run do the returns reach deep (beyond half the region's 90th-percentile depth).
-    Otherwise the region as it is (``(mask, n)``)."""
+    Otherwise the region as it is (``(mask, n)``). Each part comes with its points
+    (:meth:`PipeCloud.points`) when they were gathered, else ``None``."""
     p = cloud.points(mask)
     if azimuth_coverage(p) < cfg.all_round:
-        return [(mask, n)]
+        return [(mask, n, p)]
     depth = np.hypot(cloud.xyz[1][mask], cloud.xyz[2][mask]) - big_r
     deep = np.zeros_like(mask)
     deep[mask] = depth > 0.5 * float(partial_percentile(depth, 90.0))
     labels, n_lab = label_regions(deep, cloud.wraps)
     if n_lab < 2:
-        return [(mask, n)]
+        return [(mask, n, p)]
     counts, row_span = region_sizes(labels, n_lab)
     parts = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
     parts = parts[parts > 0]
     if parts.size < 2:
-        return [(mask, n)]
-    return [(labels == k, int(counts[k])) for k in parts.tolist()]
+        return [(mask, n, p)]
+    return [(labels == k, int(counts[k]), None) for k in parts.tolist()]
 
 
 # --------------------------------------------------------------------------- outgoing pipes
@@ -271,7 +273,7 @@ def _outgoing_returns(
     u_edge = math.inf
     for lb in lobes:
         lp = cloud.points(lb.mask)
-        lp = lp[even_subsample(np.arange(lp.shape[0]), 200)]
+        lp = lp[even_indices(lp.shape[0], 200)]
         lobe_pts.append(lp)
         # where the beams left the incoming cylinder (sensor near the axis)
         rr = np.sqrt(np.square(lp[:, 1]) + np.square(lp[:, 2]))
@@ -297,6 +299,19 @@ def _outgoing_returns(
     )
 
 
+#: The coarse start's deflections (rad) with their cosines and sines: up to 100 deg for a bend
+#: (``True``), 150 deg otherwise.
+_COARSE_THETAS = {
+    only: (t, np.cos(t), np.sin(t))
+    for only, t in (
+        (True, np.radians(np.arange(30.0, 101.0, 7.5))),
+        (False, np.radians(np.arange(30.0, 151.0, 7.5))),
+    )
+}
+#: The coarse start's rolls (rad) of a far wall seen head-on (its roll unknown).
+_COARSE_ROLLS = np.radians(np.arange(0.0, 360.0, 20.0))
+
+
 def _coarse_start(
     bp: BranchProblem,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -307,7 +322,7 @@ def _coarse_start(
     # one way on and no run going on: a bend, deflecting up to 90 deg (wye branches at 135 deg
     # come with a second way)
     bend_only = bp.n_l == 1 and not bp.straight_on
-    thetas = np.radians(np.arange(30.0, 101.0 if bend_only else 151.0, 7.5))
+    thetas, cos_t, sin_t = _COARSE_THETAS[bend_only]
     l_grid = bp.u_edge + np.linspace(0.0, 3.0 * big_r, 13)
     if bp.any_roll:
         # the far wall of a turn lies past the turn's reference point
@@ -317,17 +332,13 @@ def _coarse_start(
     per_lobe = []
     rolls_of = []
     for lb, lp in zip(bp.lobes, bp.lobe_pts):
-        rolls = np.radians(np.arange(0.0, 360.0, 20.0)) if bp.any_roll else np.array([lb.roll])
+        rolls = _COARSE_ROLLS if bp.any_roll else np.array([lb.roll])
         rolls_of.append(rolls)
-        st = np.sin(thetas)
-        dirs = np.stack(
-            [
-                np.tile(np.cos(thetas), rolls.size),
-                (np.cos(rolls)[:, None] * st).reshape(-1),
-                (np.sin(rolls)[:, None] * st).reshape(-1),
-            ]
-        )  # (3, RT)
-        lq = lp[even_subsample(np.arange(lp.shape[0]), 50 if bp.any_roll else 60)]
+        dirs = np.empty((3, rolls.size * thetas.size))  # (3, RT): roll-major
+        dirs[0] = np.tile(cos_t, rolls.size)
+        dirs[1] = (np.cos(rolls)[:, None] * sin_t).reshape(-1)
+        dirs[2] = (np.sin(rolls)[:, None] * sin_t).reshape(-1)
+        lq = lp[even_indices(lp.shape[0], 50 if bp.any_roll else 60)]
         # the mean squared distance of the returns from the pipe's wall, capped; the sensor
         # sees every wall from inside its pipe: a cylinder behind the returns (the same patch
         # seen from outside) is penalised like an outlier
@@ -953,7 +964,7 @@ def _hole_prior(
         # is seen, scored by the returns through the opening and by the hole length (returns
         # at the edges fall off the wall, so a hole may look longer, never shorter)
         ell_t = centre - big_r * cos_t / sin_t  # (T,)
-        lq = lp[even_subsample(np.arange(lp.shape[0]), 100)]
+        lq = lp[even_indices(lp.shape[0], 100)]
         qx = lq[None, :, 0] - ell_t[:, None]  # (T, n)
         lat = lq[:, 1] * math.cos(lb.roll) + lq[:, 2] * math.sin(lb.roll)  # (n,)
         t = qx * cos_t[:, None] + lat[None, :] * sin_t[:, None]

@@ -29,7 +29,16 @@ def clean_diagnostics(value: Any) -> Any:
     if kind is int or kind is str or kind is bool or value is None:
         return value
     if isinstance(value, dict):
-        return {str(k): clean_diagnostics(v) for k, v in value.items()}
+        out = {}
+        for k, v in value.items():
+            t = type(v)  # (plain entries inline: most of a detector's diagnostics)
+            if t is float:
+                out[str(k)] = v if math.isfinite(v) else None
+            elif t is int or t is str or t is bool or v is None:
+                out[str(k)] = v
+            else:
+                out[str(k)] = clean_diagnostics(v)
+        return out
     if isinstance(value, (list, tuple)):
         return [clean_diagnostics(v) for v in value]
     if isinstance(value, np.ndarray):

@@ -490,6 +490,76 @@ def gauss_newton(
 
 
 @njit(cache=True)
+def robust_fit_kernel(
+    model,
+    data,
+    ipar,
+    fpar,
+    x0,
+    c,
+    c_final,
+    iterations,
+    n_anneal,
+    step_tol,
+    cost_tol,
+    prior_sigma,
+    prior_mean,
+    data_sigma,
+    lower,
+    upper,
+):
+    """:func:`gauss_newton` with the prior, bounds and pinned parameters of
+    :func:`detector.robust.robust_fit` set up here and Tukey's weights at the solution (cut-off
+    ``c_final``): returns ``(x, residuals, weights)``. An empty ``prior_sigma``: no prior; an
+    empty ``prior_mean``: the prior is centred on ``x0``; an empty ``lower`` or ``upper``: no
+    bound on that side (parameters are pinned only when both are given)."""
+    n_p = x0.size
+    inv = np.zeros(n_p)
+    pm = np.zeros(n_p)
+    if prior_sigma.size:
+        for p in range(n_p):
+            pm[p] = prior_mean[p] if prior_mean.size else x0[p]
+            q = data_sigma / prior_sigma[p]
+            inv[p] = q * q if math.isfinite(prior_sigma[p]) else 0.0
+    lo = np.full(n_p, -np.inf)
+    up = np.full(n_p, np.inf)
+    fixed = np.zeros(n_p, dtype=np.bool_)
+    if lower.size:
+        lo[:] = lower
+    if upper.size:
+        up[:] = upper
+    if lower.size and upper.size:
+        for p in range(n_p):
+            fixed[p] = lo[p] >= up[p]
+    x, r = gauss_newton(
+        model,
+        data,
+        ipar,
+        fpar,
+        x0,
+        c,
+        c_final,
+        iterations,
+        n_anneal,
+        step_tol,
+        cost_tol,
+        inv,
+        pm,
+        lo,
+        up,
+        fixed,
+    )
+    w = np.empty(r.size)
+    k = 1.0 / (c_final * c_final)
+    for i in range(r.size):
+        wi = 1.0 - (r[i] * r[i]) * k
+        if wi < 0.0:
+            wi = 0.0
+        w[i] = wi * wi
+    return x, r, w
+
+
+@njit(cache=True)
 def coarse_branch_cost(lq, l_grid, dirs, big_r, c0):
     """The coarse start of an outgoing pipe: for each reference point ``l_grid[l]`` (m along the
     incoming axis) and direction ``dirs[:, j]`` (unit, (3, M)), the mean over the returns ``lq``
@@ -614,3 +684,5 @@ def residuals_jacobian(
 #: ``ipar`` and ``fpar`` of a model that reads none.
 NO_INTS = np.zeros(0, dtype=np.intp)
 NO_FLOATS = np.zeros(1)
+#: An empty array: an argument of :func:`robust_fit_kernel` not given.
+NOT_GIVEN = np.zeros(0)

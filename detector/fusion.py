@@ -18,9 +18,17 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
   an edge or a reference point grows with the square of the distance. A scan at 20 cm counts
   16 times as much as one at 40 cm (with the square, a few scans from 45 cm placed a 60 mm tee
   4 mm too far, enough for the turn into its branch to jam).
+- **Reports the ways on that enough scans saw.** A way is reported when the scans that saw it
+  number at least ``way_min_hits`` (all of the track's scans if it has fewer) and carry at least
+  ``way_share`` of the track's trust weight, or number ``way_keep_hits`` from within
+  ``way_keep_reach`` (unless it lies within twice ``direction_gate`` of a way reported for its
+  weight: another reading of the same way). A single near scan outweighs several far ones, so
+  alone it decided which ways exist: a phantom way in the last scan turned a long bend into a
+  junction, a misread branch turned a tee into a bend. Close up the detector loses a tee's
+  branch seen from its stem more often than it invents one consistently over three scans.
 - **Associates** a detection with the track when its kind family (closure, reducer, bend or
-  junction) agrees and its reference point lies within ``gate`` (+ 10 % of the distance) of the
-  track's. Ways on are matched by direction (within ``direction_gate``).
+  junction) agrees and its reference point lies within ``gate`` (+ ``gate_growth`` times the
+  distance) of the track's. Ways on are matched by direction (within ``direction_gate``).
 - **Confirms with hysteresis.** Each consistent detection adds its confidence to the track's
   evidence, each inconsistent or straight detection (while the structure should be visible)
   removes ``miss_penalty``. A track is *confirmed* once its evidence reaches ``confirm_evidence``
@@ -61,15 +69,22 @@ from numpy.typing import ArrayLike, NDArray
 
 from detector.detection import Detection
 from detector.options import StructureOption, option_order
+from detector.validation import check_int, check_number
 from detector.vocab import Kind
 
 #: Ways on deflected less than this count as straight on (their direction is 0), radians.
 STRAIGHT_ON = math.radians(2.0)
 
+#: A scan's trust weight (geometry) is its confidence over its distance to this power
+#: (dimensionless): an inverse-variance weight, see the module docstring.
+TRUST_POWER = 4
+#: Confidences below this (dimensionless) count as this in the trust weight.
+MIN_CONFIDENCE = 1e-3
+
 _FAMILY = {"closure": "end", "reducer": "reducer", "bend": "turn", "junction": "turn"}
 
 
-@dataclass
+@dataclass(eq=False)
 class _Way:
     """One way on of a track, in the world frame, as weighted sums."""
 
@@ -77,14 +92,19 @@ class _Way:
     diam_sum: float
     weight: float
     hits: int
+    #: scans within ``way_keep_reach`` that saw this way
+    near_hits: int = 0
     radius_sum: float = 0.0  # weighted sum of long-bend radii, over the scans that gave one
     radius_weight: float = 0.0
 
-    def add(self, v: NDArray[np.float64], diameter: float, radius: float, w: float) -> None:
+    def add(
+        self, v: NDArray[np.float64], diameter: float, radius: float, w: float, near: bool
+    ) -> None:
         self.vec_sum = self.vec_sum + v * w
         self.diam_sum += diameter * w
         self.weight += w
         self.hits += 1
+        self.near_hits += int(near)
         if radius > 0.0:
             self.radius_sum += radius * w
             self.radius_weight += w
@@ -106,9 +126,14 @@ class _Way:
         return self.radius_sum / self.radius_weight
 
 
-def _new_way(v: NDArray[np.float64], diameter: float, radius: float, w: float) -> _Way:
+def _separation(a: _Way, b: _Way) -> float:
+    """Angle between the directions of two ways, radians."""
+    return math.acos(max(-1.0, min(1.0, float(a.direction @ b.direction))))
+
+
+def _new_way(v: NDArray[np.float64], diameter: float, radius: float, w: float, near: bool) -> _Way:
     way = _Way(np.zeros(3), 0.0, 0.0, 0)
-    way.add(v, diameter, radius, w)
+    way.add(v, diameter, radius, w, near)
     return way
 
 
@@ -178,7 +203,8 @@ class StructureTracker:
         confirm_count: consistent detections needed to confirm.
         confirm_evidence: evidence (sum of confidences minus penalties) needed to confirm.
         miss_penalty: evidence lost per inconsistent or straight detection.
-        gate: association distance of reference points, metres (+ 10 % of the distance).
+        gate: association distance of reference points, metres (+ ``gate_growth`` times the
+            distance).
         direction_gate: association angle of ways on, radians.
         near_distance: distances below this weigh like this one, metres.
         handover_distance: closer than this, disagreeing detections are ignored, metres.
@@ -188,6 +214,15 @@ class StructureTracker:
         place_spacing: sensor positions closer than this count as one place, m.
         contest_range: earlier scans contest a new track with structures they saw at most this
             far ahead, m.
+        way_min_hits: scans that must have seen a way on for it to be reported (fewer if the
+            track has fewer scans).
+        way_share: share of the track's trust weight (0-1] the scans that saw a way must carry.
+        way_keep_hits: a way seen by this many scans is reported whatever its share.
+        way_keep_reach: only scans of a structure at most this far ahead count towards
+            ``way_keep_hits``, m: from farther, a mitre bend's far wall can read as a second
+            way on for several scans in a row (a bend at the end of a long straight, swept
+            from 1.2 m).
+        gate_growth: the association gates grow by this many metres per metre of distance.
     """
 
     def __init__(
@@ -203,27 +238,34 @@ class StructureTracker:
         contested_places: int = 2,
         place_spacing: float = 0.01,
         contest_range: float = 0.5,
+        way_min_hits: int = 2,
+        way_share: float = 0.5,
+        way_keep_hits: int = 3,
+        way_keep_reach: float = 0.5,
+        gate_growth: float = 0.1,
     ) -> None:
-        for name, value in (
-            ("confirm_evidence", confirm_evidence),
-            ("miss_penalty", miss_penalty),
-            ("gate", gate),
-            ("direction_gate", direction_gate),
-            ("near_distance", near_distance),
-            ("handover_distance", handover_distance),
-            ("pass_margin", pass_margin),
-            ("place_spacing", place_spacing),
-            ("contest_range", contest_range),
+        where = "StructureTracker"
+        for name, value, unit in (
+            ("confirm_evidence", confirm_evidence, ""),
+            ("miss_penalty", miss_penalty, ""),
+            ("gate", gate, "m"),
+            ("direction_gate", direction_gate, "rad"),
+            ("near_distance", near_distance, "m"),
+            ("handover_distance", handover_distance, "m"),
+            ("pass_margin", pass_margin, "m"),
+            ("place_spacing", place_spacing, "m"),
+            ("contest_range", contest_range, "m"),
+            ("gate_growth", gate_growth, "m/m"),
+            ("way_keep_reach", way_keep_reach, "m"),
         ):
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"StructureTracker.{name} must be positive, got {value!r}")
-        if int(confirm_count) < 1:
-            raise ValueError(f"StructureTracker.confirm_count must be >= 1, got {confirm_count}")
-        if int(contested_places) < 1:
-            raise ValueError(
-                f"StructureTracker.contested_places must be >= 1, got {contested_places}"
-            )
-        self.confirm_count = int(confirm_count)
+            check_number(name, value, 0.0, None, unit, open_low=True, where=where)
+        self.confirm_count = check_int("confirm_count", confirm_count, 1, where=where)
+        self.way_min_hits = check_int("way_min_hits", way_min_hits, 1, where=where)
+        self.way_keep_hits = check_int("way_keep_hits", way_keep_hits, 1, where=where)
+        self.way_share = check_number("way_share", way_share, 0.0, 1.0, open_low=True, where=where)
+        self.gate_growth = float(gate_growth)
+        self.way_keep_reach = float(way_keep_reach)
+        contested_places = check_int("contested_places", contested_places, 1, where=where)
         self.contested_places = int(contested_places)
         self.place_spacing = float(place_spacing)
         self.contest_range = float(contest_range)
@@ -346,7 +388,8 @@ class StructureTracker:
                 math.cos(o.direction) * e_y + math.sin(o.direction) * e_z
             )
             ways.append((rot @ v, o.diameter, o.bend_radius))
-        w = max(det.confidence, 1e-3) / max(abs(dist), self.near_distance) ** 4
+        conf = max(det.confidence, MIN_CONFIDENCE)
+        w = conf / max(abs(dist), self.near_distance) ** TRUST_POWER
         return {
             "family": _FAMILY.get(det.kind, det.kind),
             "kind": det.kind,
@@ -364,7 +407,7 @@ class StructureTracker:
     def _contested(self, obs: dict[str, Any]) -> bool:
         """True unless scans from another place saw a structure where this one is and none
         saw one beyond it."""
-        gate = self.gate + 0.1 * abs(obs["distance"])
+        gate = self.gate + self.gate_growth * abs(obs["distance"])
         elsewhere = [
             float((ref - obs["near_ref"]) @ obs["axis"])
             for p, ref in self._seen
@@ -379,7 +422,7 @@ class StructureTracker:
             ref_sum=obs["ref"] * w,
             axis_sum=obs["axis"] * w,
             weight=w,
-            ways=[_new_way(v, d, rb, w) for v, d, rb in obs["ways"]],
+            ways=[_new_way(v, d, rb, w, self._near(obs)) for v, d, rb in obs["ways"]],
             kind_weight={obs["kind"]: w},
             evidence=obs["confidence"],
             hits=1,
@@ -390,7 +433,7 @@ class StructureTracker:
     def _consistent(self, tr: _Track, obs: dict[str, Any]) -> bool:
         if tr.family != obs["family"]:
             return False
-        gate = self.gate + 0.1 * abs(obs["distance"])
+        gate = self.gate + self.gate_growth * abs(obs["distance"])
         return float(np.linalg.norm(obs["ref"] - tr.reference)) <= gate
 
     def _fuse(self, tr: _Track, obs: dict[str, Any]) -> None:
@@ -409,9 +452,38 @@ class StructureTracker:
                 if ang < best_ang:
                     best, best_ang = way, ang
             if best is not None and best_ang <= self.direction_gate:
-                best.add(v, d, rb, w)
+                best.add(v, d, rb, w, self._near(obs))
             else:
-                tr.ways.append(_new_way(v, d, rb, w))
+                tr.ways.append(_new_way(v, d, rb, w, self._near(obs)))
+
+    def _near(self, obs: dict[str, Any]) -> bool:
+        """Whether a scan is near enough for its ways to count towards ``way_keep_hits``."""
+        return abs(float(obs["distance"])) <= self.way_keep_reach
+
+    def _kept_ways(self, tr: _Track) -> list[_Way]:
+        """The ways on a track reports: those seen by at least ``way_min_hits`` of its scans
+        (all of them if it has fewer) whose scans carry at least ``way_share`` of the track's
+        trust weight, and those seen by ``way_keep_hits`` scans within ``way_keep_reach``
+        however many missed them
+        (unless within twice ``direction_gate`` of a way kept for its weight). A way
+        glimpsed from far away is dropped once nearer scans disagree; a way one near scan
+        invents is dropped while the other scans do not see it; a branch seen consistently
+        is kept when the detector loses it close up (a tee seen from its stem). If none
+        qualifies, the way with the most weight."""
+        if len(tr.ways) == 1:
+            return list(tr.ways)
+        need = min(self.way_min_hits, tr.hits)
+        weighty = [w for w in tr.ways if w.weight >= self.way_share * tr.weight and w.hits >= need]
+        # a way kept for its hits alone must not be another reading of a weighty one (a branch
+        # seen at 60 deg from far, at 90 deg from near: the nearer reading supersedes)
+        seen = [
+            w
+            for w in tr.ways
+            if w not in weighty
+            and w.near_hits >= self.way_keep_hits
+            and all(_separation(w, v) > 2.0 * self.direction_gate for v in weighty)
+        ]
+        return weighty + seen or [max(tr.ways, key=lambda w: w.weight)]
 
     def _distance(self, tr: _Track, pos: NDArray) -> float:
         return float((tr.reference - pos) @ tr.axis)
@@ -422,11 +494,7 @@ class StructureTracker:
             return TrackState(False, Detection.straight(confidence=0.5), 0.0, 0, False, None)
         pos, rot = self._last_pose
         dist = self._distance(tr, pos)
-        # keep the ways that carry at least half of the track's trust weight (a way glimpsed
-        # from far away is dropped once nearer, better scans disagree)
-        ways = [w for w in tr.ways if w.weight * 2 >= tr.weight or len(tr.ways) == 1]
-        if not ways:
-            ways = [max(tr.ways, key=lambda w: w.weight)]
+        ways = self._kept_ways(tr)
         kind = tr.kind
         if kind in (Kind.BEND, Kind.JUNCTION):
             kind = "junction" if len(ways) > 1 else "bend"

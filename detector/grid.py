@@ -171,11 +171,12 @@ def label_grid(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32],
 def region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
     """(cells, grid rows spanned) of each label 0..n_lab of a labelled grid (both (n_lab + 1,)
     integers; 0 for the background, label 0)."""
-    return _region_stats(np.ascontiguousarray(labels, dtype=np.int32), int(n_lab))
+    return label_stats(np.ascontiguousarray(labels, dtype=np.int32), int(n_lab))
 
 
 @njit(cache=True)
-def _region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
+def label_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
+    """:func:`region_stats` compiled (callable from other compiled code)."""
     g, k = labels.shape
     counts = np.zeros(n_lab + 1, dtype=np.int64)
     rows = np.zeros(n_lab + 1, dtype=np.int64)

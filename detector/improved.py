@@ -129,6 +129,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from detector.axis_fit import (
@@ -147,7 +148,6 @@ from detector.axisymmetric import detect_axisymmetric
 from detector.branches import Lobe, detect_branches, find_lobes
 from detector.detection import Detection
 from detector.grazing import find_ring_holes
-from detector.grid import label_regions
 from detector.improved_config import DEFAULT_CONFIG, ImprovedConfig
 from detector.options import StructureOption, option_order
 from detector.pipe_cloud import (
@@ -155,11 +155,11 @@ from detector.pipe_cloud import (
     axis_direction,
     azimuth_coverage,
     azimuth_uniformity,
-    classify_returns,
+    classify_counted,
     fit_confidence,
     partial_percentile,
     prepare_cloud,
-    region_sizes,
+    significant_regions,
 )
 from detector.robust import mad_sigma
 from detector.scan import Scan
@@ -409,8 +409,8 @@ def _with_ring_holes(
     fitting angle (90, 45 or 135 deg) whose far side fits the bump best; the run goes on past
     them (the rings beyond lie on its wall)."""
     # (cheap tests first: too few returns beyond the wall at all, or nearer than the limit)
-    beyond = cloud.r_v - big_r > np.maximum(0.00035, 4.0 * cloud.sigma_v)
-    if np.count_nonzero(beyond) < 6:
+    beyond, n_beyond = _beyond_bump(cloud.r_v, cloud.sigma_v, big_r)
+    if n_beyond < 6:
         return det
     support = det.diagnostics.get("fit_support")
     weak = (
@@ -491,6 +491,19 @@ def _with_ring_holes(
         replaced_kind=det.kind,
     )
     return Detection("junction", options, conf, diag)
+
+
+@njit(cache=True)
+def _beyond_bump(r, sigma, big_r):
+    """Which returns at distances ``r`` from the axis lie beyond the wall of radius ``big_r``
+    by more than 0.35 mm and four times their radial noise ``sigma`` (m), and how many."""
+    out = np.empty(r.size, dtype=np.bool_)
+    n = 0
+    for i in range(r.size):
+        out[i] = r[i] - big_r > max(0.00035, 4.0 * sigma[i])
+        if out[i]:
+            n += 1
+    return out, n
 
 
 # --------------------------------------------------------------------------- the pose again
@@ -843,41 +856,23 @@ def _detect_in_pipe_frame(
     diag["pipe_axis_sensor"] = [float(v) for v in cloud.pose.rotation[0]]
     diag["sensor_offset_pipe"] = [float(v) for v in cloud.pose.position[1:]]
     # (the tolerance: the residual axis error grows with the distance along the axis)
-    tol, wall, beyond, inside = classify_returns(cloud, big_r, cfg)
+    tol, wall, beyond, inside, n_wall, n_beyond, n_inside = classify_counted(cloud, big_r, cfg)
     n_valid = cloud.n
-    n_wall = int(np.count_nonzero(wall))
-    diag.update(
-        n_wall=n_wall,
-        n_beyond=int(np.count_nonzero(beyond)),
-        n_inside=int(np.count_nonzero(inside)),
-    )
+    diag.update(n_wall=n_wall, n_beyond=n_beyond, n_inside=n_inside)
     if n_valid < cfg.min_anomaly_points:
         diag["reason"] = "too few returns"
         return Detection.straight(confidence=0.0, **diag)
-    # significant anomaly regions
-    anomaly = beyond | inside
-    labels, n_lab = label_regions(anomaly, cloud.wraps)
-    keep = np.zeros_like(anomaly)
-    if n_lab:
-        counts, row_span = region_sizes(labels, n_lab)
-        good = (counts >= cfg.min_anomaly_points) & (row_span >= cfg.min_region_rows)
-        good[0] = False
-        keep = good[labels] & anomaly
-    n_keep = int(np.count_nonzero(keep))
+    # significant anomaly regions (regions with no inside returns keep their labels among the
+    # returns beyond the wall: ``pre``)
+    _, n_lab, keep, n_keep, beyond_k, inside_k, pre_labels = significant_regions(
+        beyond, inside, cloud.wraps, cfg.min_anomaly_points, cfg.min_region_rows
+    )
     diag["n_anomaly"] = n_keep
     wall_frac = float(n_wall) / max(n_valid, 1)
     if n_keep < cfg.min_anomaly_points:
         conf = min(1.0, float(n_wall) / 200.0) * wall_frac
         return Detection.straight(confidence=conf, **diag)
-    beyond_k = beyond & keep
-    inside_k = inside & keep
-    # regions with no inside returns keep their labels among the returns beyond the wall
-    pre = None
-    if n_lab:
-        mixed = np.zeros(n_lab + 1, dtype=bool)
-        mixed[labels[inside_k]] = True
-        if not mixed[labels[beyond_k]].any():
-            pre = (np.where(beyond_k, labels, 0), n_lab)
+    pre = None if pre_labels is None else (pre_labels, n_lab)
     lobes = find_lobes(cloud, beyond_k, big_r, cfg, pre)
     diag["n_lobes"] = len(lobes)
     if lobes:

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from detector.fit_kernels import MODEL_TORUS, torus_distance
 from detector.improved_config import ImprovedConfig
 from detector.outgoing import BranchFit
-from detector.pipe_cloud import even_subsample, partial_percentile
+from detector.pipe_cloud import even_indices, partial_percentile
 from detector.robust import robust_fit, tukey_cost
 
 
@@ -57,7 +57,7 @@ def fit_torus(
     polished on the returns ``p_fit`` when given. Returns (x, rms, support, largest arc angle
     seen): ``x`` polished, the rms (m) and support of the fit before the polish, the arc angle
     (rad) of the polished bend; the last three over ``p``."""
-    sub = p[even_subsample(np.arange(p.shape[0]), 300)]
+    sub = p[even_indices(p.shape[0], 300)]
     data = np.ascontiguousarray(sub.T)
 
     lower = np.array([-0.5, math.radians(5.0), -10.0, 0.5 * big_r, 0.2 * big_r])
@@ -116,7 +116,7 @@ def fit_torus(
         # only: under range noise those few far returns scatter by millimetres, and weighing
         # them as much as the wall near the sensor adds more scatter to the angle than it
         # takes bias out of it.
-        spread = p_fit[even_subsample(np.arange(p_fit.shape[0]), 300)]
+        spread = p_fit[even_indices(p_fit.shape[0], 300)]
 
         def spread_cost(xx: NDArray) -> float:
             return tukey_cost(_torus_dist(spread, xx[0], xx[1], xx[2], xx[4]) - xx[3], c_fin)
@@ -163,9 +163,5 @@ def spread_along_axis(
             left -= int(take[b])
             sharing -= 1
     starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    picked = [
-        order[s0 + even_subsample(np.arange(c), int(k))]
-        for s0, c, k in zip(starts, counts, take)
-        if k
-    ]
+    picked = [order[s0 + even_indices(c, int(k))] for s0, c, k in zip(starts, counts, take) if k]
     return idx[np.sort(np.concatenate(picked))]

@@ -31,6 +31,9 @@ from numpy.typing import NDArray
 from detector.geometry import clamp, direction_from_angles, wrap_angle
 from detector.vocab import Kind
 
+#: The numeric fields of a :class:`StructureOption` (each a finite float once built).
+_NUMBER_FIELDS = ("distance", "diameter", "direction", "angle", "confidence", "bend_radius")
+
 #: The structure kinds as plain strings, in :class:`~detector.vocab.Kind` order.
 KINDS: tuple[str, ...] = tuple(k.value for k in Kind)
 
@@ -50,8 +53,10 @@ class StructureOption:
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
             raise ValueError(f"StructureOption.kind must be one of {KINDS}, got {self.kind!r}")
-        for name in ("distance", "diameter", "direction", "angle", "confidence", "bend_radius"):
+        for name in _NUMBER_FIELDS:
             value = getattr(self, name)
+            if type(value) is float and math.isfinite(value):
+                continue  # (a finite float already: the common case, kept cheap)
             ok = isinstance(value, numbers.Real) and not isinstance(value, bool)
             if not ok or not math.isfinite(value):
                 raise ValueError(

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from detector.grid import build_grid, region_stats
+from detector.grid import build_grid, label_grid, label_stats, region_stats
 from detector.improved_config import ImprovedConfig
 from detector.robust import mad_sigma, tukey_weights
 from detector.scan import Scan, radial_noise
@@ -59,13 +59,8 @@ class PipeCloud:
     def _grid(self, values: NDArray, fill: float | bool) -> NDArray:
         g, k = self.shape
         if values.ndim == 1:
-            out = np.full(g * k, fill, dtype=values.dtype)
-            out[self.cell] = values
-            return out.reshape(g, k)
-        out = np.full((values.shape[0], g * k), fill, dtype=values.dtype)
-        for row, vals in zip(out, values):  # (row by row: a faster scatter)
-            row[self.cell] = vals
-        return out.reshape(values.shape[0], g, k)
+            return _scatter(values[None, :], self.cell, g * k, fill).reshape(g, k)
+        return _scatter(values, self.cell, g * k, fill).reshape(values.shape[0], g, k)
 
     @property
     def valid(self) -> NDArray[np.bool_]:
@@ -94,9 +89,16 @@ class PipeCloud:
         return self.xyz.transpose(1, 2, 0)
 
     def sigma_percentile(self, q: float) -> float:
-        """The ``q``-th percentile of the returns' radial noise (m; computed once)."""
+        """The ``q``-th percentile of the returns' radial noise (m; computed once; the
+        percentiles of :data:`SIGMA_PERCENTILES` in one partial sort)."""
         v = self._sigma_pct.get(q)
         if v is None:
+            if q in SIGMA_PERCENTILES and not self._sigma_pct:
+                for qq, vq in zip(
+                    SIGMA_PERCENTILES, partial_percentiles(self.sigma_v, SIGMA_PERCENTILES)
+                ):
+                    self._sigma_pct[qq] = vq
+                return self._sigma_pct[q]
             v = self._sigma_pct[q] = partial_percentile(self.sigma_v, q)
         return v
 
@@ -105,9 +107,9 @@ class PipeCloud:
         return per_return[np.flatnonzero(mask.reshape(-1)[self.cell])]
 
     def points(self, mask: NDArray[np.bool_]) -> NDArray[np.float64]:
-        """(n, 3) pipe-frame points of the grid cells in ``mask`` (in grid order)."""
-        idx = np.flatnonzero(mask.reshape(-1)[self.cell])
-        return np.take(self.xyz_v, idx, axis=1).T
+        """(n, 3) pipe-frame points of the grid cells in ``mask`` (in grid order; a view of a
+        ``(3, n)`` array)."""
+        return _masked_columns(np.ascontiguousarray(mask).reshape(-1), self.cell, self.xyz_v).T
 
     def points_at(self, flat_cells: NDArray[np.intp]) -> NDArray[np.float64]:
         """(n, 3) pipe-frame points of the given flat grid cells."""
@@ -122,13 +124,54 @@ class PipeCloud:
     def r_v(self) -> NDArray[np.float64]:
         """(N,) distance of each return from the pipe axis under the current pose."""
         if self._r_v is None:
-            self._r_v = np.sqrt(np.square(self.xyz_v[1]) + np.square(self.xyz_v[2]))
+            self._r_v = _radii(self.xyz_v)
         return self._r_v
 
     def restore(self, pose: SensorInPipe, xyz_v: NDArray[np.float64]) -> None:
         """Go back to a pose whose points were computed before."""
         self.pose, self.xyz_v = pose, xyz_v
         self._xyz = self._r_v = self._tol_v = None
+
+
+@njit(cache=True)
+def _scatter(values, cell, size, fill):
+    """``(rows, size)`` of ``fill`` with ``values[:, i]`` at column ``cell[i]``."""
+    rows = values.shape[0]
+    out = np.empty((rows, size), dtype=values.dtype)
+    out[:] = fill
+    for r in range(rows):
+        for i in range(cell.size):
+            out[r, cell[i]] = values[r, i]
+    return out
+
+
+@njit(cache=True)
+def _radii(xyz):
+    """Distance of each ``(3, N)`` point from the x axis: ``sqrt(y^2 + z^2)``."""
+    n = xyz.shape[1]
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = math.sqrt(xyz[1, i] * xyz[1, i] + xyz[2, i] * xyz[2, i])
+    return out
+
+
+@njit(cache=True)
+def _masked_columns(mask, cell, xyz):
+    """The columns ``i`` of ``xyz`` ((3, N)) whose grid cell ``cell[i]`` is set in the flat
+    ``mask``, in their order: ``(3, n)``."""
+    n = 0
+    for i in range(cell.size):
+        if mask[cell[i]]:
+            n += 1
+    out = np.empty((3, n))
+    j = 0
+    for i in range(cell.size):
+        if mask[cell[i]]:
+            out[0, j] = xyz[0, i]
+            out[1, j] = xyz[1, i]
+            out[2, j] = xyz[2, i]
+            j += 1
+    return out
 
 
 def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -191,19 +234,26 @@ def prepare_cloud(
     scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig
 ) -> PipeCloud:
     wraps, k_cols, src, dirs, trig, src_missing, beam_step = _pattern(scan)
-    # (missing cells point at a copy of a real one and are dropped)
-    cell, pb, ranges, local = _gather_returns(
-        scan.valid.reshape(-1), scan.ranges.reshape(-1), src, src_missing, dirs, range_bias
-    )
+    g = src.size // max(k_cols, 1)
+    valid, ranges_in = scan.valid.reshape(-1), scan.ranges.reshape(-1)
     if _moves(scan):
+        # (missing cells point at a copy of a real one and are dropped)
+        cell, pb, ranges, local = _gather_returns(
+            valid, ranges_in, src, src_missing, dirs, range_bias
+        )
         # continuous sweep: express every plane in the last plane's sensor frame (odometry)
         plane = pb // scan.n_beams
         world = np.einsum("nij,jn->in", scan.nominal_rotations[plane], local)
         world += scan.nominal_positions[plane].T
         local = scan.nominal_rotations[-1].T @ (world - scan.nominal_positions[-1][:, None])
-    # (the returns within the horizon, on the grid cropped to the columns that hold returns)
-    g = src.size // max(k_cols, 1)
-    cell, ranges, local, tr, k = _crop(cell, ranges, local, trig, k_cols, cfg.horizon)
+        # (the returns within the horizon, on the grid cropped to the columns that hold
+        # returns)
+        cell, ranges, local, tr, k = _crop(cell, ranges, local, trig, k_cols, cfg.horizon)
+    else:
+        # (both steps in one pass: the sensor frame is the one frame of the sweep)
+        cell, ranges, local, tr, k = _gather_cropped(
+            valid, ranges_in, src, src_missing, dirs, trig, range_bias, k_cols, cfg.horizon
+        )
     shape = (g, k)
     sigma_range, sigma_r = radial_noise(scan.spec, ranges, tr[0], tr[1])
     cloud = PipeCloud(
@@ -285,12 +335,78 @@ def _crop(cell, ranges, local, trig, k_cols, horizon):
 
 def _moves(scan: Scan) -> bool:
     """Does the believed (nominal) sensor pose change during the sweep (position or
-    orientation)? Then the planes are motion-compensated into the last plane's frame."""
+    orientation, by more than 1e-9)? Then the planes are motion-compensated into the last
+    plane's frame."""
     if scan.n_planes < 2:
         return False
-    if float(np.ptp(scan.nominal_positions, axis=0).max()) > 1e-9:
-        return True
-    return float(np.ptp(scan.nominal_rotations, axis=0).max()) > 1e-9
+    return _spread_exceeds(
+        scan.nominal_positions.reshape(scan.n_planes, -1), 1e-9
+    ) or _spread_exceeds(scan.nominal_rotations.reshape(scan.n_planes, -1), 1e-9)
+
+
+@njit(cache=True)
+def _spread_exceeds(values, tol):
+    """Does any column of the (n, m) ``values`` span more than ``tol`` (``np.ptp`` along the
+    first axis)?"""
+    n, m = values.shape
+    for j in range(m):
+        lo = values[0, j]
+        hi = values[0, j]
+        for i in range(1, n):
+            v = values[i, j]
+            if v < lo:
+                lo = v
+            if v > hi:
+                hi = v
+        if hi - lo > tol:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _gather_cropped(valid, ranges, src, missing, dirs, trig, bias, k_cols, horizon):
+    """:func:`_gather_returns` then :func:`_crop` in one pass over the grid (a sweep whose
+    planes share one sensor frame): the returns nearer than ``horizon`` along the sensor's
+    axis, their cells on the grid cropped to the columns that hold them, ranges, points
+    ``(3, n)`` and ``|sin|, |cos|`` of their beam angles ``(2, n)``; and the cropped grid's
+    width."""
+    m = src.size
+    keep = np.ones(m, dtype=np.bool_)
+    for c in missing:
+        keep[c] = False
+    kept = np.empty(m, dtype=np.intp)
+    r_kept = np.empty(m)
+    n = 0
+    k0 = k_cols
+    k1 = -1
+    for c in range(m):
+        if keep[c] and valid[src[c]]:
+            r = max(ranges[src[c]] - bias, 0.0)
+            if dirs[0, c] * r <= horizon:
+                kept[n] = c
+                r_kept[n] = r
+                n += 1
+                col = c % k_cols
+                k0 = min(k0, col)
+                k1 = max(k1, col)
+    if n == 0:
+        k0, k1 = 0, 0
+    width = k1 + 1 - k0
+    out_cell = np.empty(n, dtype=np.intp)
+    out_local = np.empty((3, n))
+    out_trig = np.empty((2, n))
+    for j in range(n):
+        c = kept[j]
+        r = r_kept[j]
+        row = c // k_cols
+        out_cell[j] = row * width + (c - row * k_cols - k0)
+        out_local[0, j] = dirs[0, c] * r
+        out_local[1, j] = dirs[1, c] * r
+        out_local[2, j] = dirs[2, c] * r
+        out_trig[0, j] = trig[0, c]
+        out_trig[1, j] = trig[1, c]
+    out_range = r_kept[:n].copy()
+    return out_cell, out_range, out_local, out_trig, width
 
 
 def classify_returns(
@@ -302,6 +418,16 @@ def classify_returns(
     floor where there is no return) and the masks of ``-tol_in <= e <= tol``, ``e > tol`` and
     ``e < -tol_in``, where ``tol_in`` is ``tol`` less any lowering of the floor (a lowered
     floor serves the openings only: returns beyond the wall)."""
+    return classify_counted(cloud, big_r, cfg)[:4]
+
+
+def classify_counted(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
+) -> tuple[
+    NDArray[np.float64], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_], int, int, int
+]:
+    """:func:`classify_returns` and how many returns lie on the wall, beyond it and inside it:
+    ``(tol, wall, beyond, inside, n_wall, n_beyond, n_inside)``."""
     floor = cfg.tol_floor if cloud.floor is None else cloud.floor
     lift = 0.0 if cloud.floor is None else cfg.tol_floor - cloud.floor
     g, k = cloud.shape
@@ -317,6 +443,9 @@ def _classify_kernel(cell, g, k, r_v, sigma_v, u_v, big_r, floor, noise_k, slope
     wall = np.zeros((g, k), dtype=np.bool_)
     beyond = np.zeros((g, k), dtype=np.bool_)
     inside = np.zeros((g, k), dtype=np.bool_)
+    n_wall = 0
+    n_beyond = 0
+    n_inside = 0
     for i in range(cell.size):
         row = cell[i] // k
         col = cell[i] - row * k
@@ -326,11 +455,88 @@ def _classify_kernel(cell, g, k, r_v, sigma_v, u_v, big_r, floor, noise_k, slope
         t_in = t + lift
         if e > t:
             beyond[row, col] = True
+            n_beyond += 1
         elif e < -t_in:
             inside[row, col] = True
+            n_inside += 1
         elif e <= t and e >= -t_in:
             wall[row, col] = True
-    return tol, wall, beyond, inside
+            n_wall += 1
+    return tol, wall, beyond, inside, n_wall, n_beyond, n_inside
+
+
+def significant_regions(
+    beyond: NDArray[np.bool_],
+    inside: NDArray[np.bool_],
+    wraps: bool,
+    min_points: int,
+    min_rows: int,
+) -> tuple[
+    NDArray[np.int32],
+    int,
+    NDArray[np.bool_],
+    int,
+    NDArray[np.bool_],
+    NDArray[np.bool_],
+    NDArray[np.int32] | None,
+]:
+    """The regions of returns off the wall (``beyond | inside``, (G, K) masks) large enough to
+    be a structure: at least ``min_points`` cells spanning at least ``min_rows`` rows of the
+    grid (8-neighbourhood, joined across the row seam when the grid ``wraps`` and has three
+    rows or more: :func:`detector.grid.label_regions`). Returns ``(labels, n, keep, n_keep,
+    beyond_kept, inside_kept, labels_beyond)``: the labelling of every region (1..n), the
+    cells of the significant ones and their count, those beyond and inside the wall, and the
+    labels of the cells beyond the wall (0 elsewhere) when no significant region holds cells
+    both beyond and inside it (else ``None``). One compiled pass."""
+    labels, n_lab, keep, n_keep, beyond_k, inside_k, pre, unmixed = _significant_regions(
+        np.ascontiguousarray(beyond),
+        np.ascontiguousarray(inside),
+        bool(wraps) and beyond.shape[0] >= 3,
+        int(min_points),
+        int(min_rows),
+    )
+    return labels, int(n_lab), keep, int(n_keep), beyond_k, inside_k, (pre if unmixed else None)
+
+
+@njit(cache=True)
+def _significant_regions(beyond, inside, wraps, min_points, min_rows):
+    g, k = beyond.shape
+    anomaly = np.empty((g, k), dtype=np.bool_)
+    for r in range(g):
+        for c in range(k):
+            anomaly[r, c] = beyond[r, c] or inside[r, c]
+    labels, n_lab = label_grid(anomaly, wraps)
+    keep = np.zeros((g, k), dtype=np.bool_)
+    beyond_k = np.zeros((g, k), dtype=np.bool_)
+    inside_k = np.zeros((g, k), dtype=np.bool_)
+    pre = np.zeros((g, k), dtype=np.int32)
+    n_keep = 0
+    if n_lab == 0:
+        return labels, n_lab, keep, n_keep, beyond_k, inside_k, pre, False
+    counts, rows = label_stats(labels, n_lab)
+    good = np.zeros(n_lab + 1, dtype=np.bool_)
+    for lab in range(1, n_lab + 1):
+        good[lab] = counts[lab] >= min_points and rows[lab] >= min_rows
+    mixed = np.zeros(n_lab + 1, dtype=np.bool_)
+    for r in range(g):
+        for c in range(k):
+            lab = labels[r, c]
+            if good[lab]:
+                keep[r, c] = True
+                n_keep += 1
+                if inside[r, c]:
+                    inside_k[r, c] = True
+                    mixed[lab] = True
+                elif beyond[r, c]:
+                    beyond_k[r, c] = True
+    unmixed = True
+    for r in range(g):
+        for c in range(k):
+            if beyond_k[r, c]:
+                if mixed[labels[r, c]]:
+                    unmixed = False
+                pre[r, c] = labels[r, c]
+    return labels, n_lab, keep, n_keep, beyond_k, inside_k, pre, unmixed
 
 
 def wall_tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]:
@@ -338,8 +544,17 @@ def wall_tolerance(cloud: PipeCloud, cfg: ImprovedConfig) -> NDArray[np.float64]
     if cloud.tol0 is None:
         cloud.tol0 = cfg.tol_floor + cfg.noise_k * cloud.sigma_v
     if cloud._tol_v is None:
-        cloud._tol_v = cloud.tol0 + cfg.axis_slope * np.abs(cloud.xyz_v[0])
+        cloud._tol_v = _sloped_tolerance(cloud.tol0, cfg.axis_slope, cloud.xyz_v[0])
     return cloud._tol_v
+
+
+@njit(cache=True)
+def _sloped_tolerance(tol0, slope, u):
+    """``tol0 + slope |u|`` (m), elementwise."""
+    out = np.empty(u.size)
+    for i in range(u.size):
+        out[i] = tol0[i] + slope * abs(u[i])
+    return out
 
 
 def even_subsample(idx: NDArray[np.intp], n: int) -> NDArray[np.intp]:
@@ -347,6 +562,14 @@ def even_subsample(idx: NDArray[np.intp], n: int) -> NDArray[np.intp]:
         return idx
     step = idx.size / n
     return idx[(np.arange(n) * step).astype(np.intp)]
+
+
+def even_indices(m: int, n: int) -> NDArray[np.intp]:
+    """``even_subsample(np.arange(m), n)`` without the ``m`` indices: the positions of ``n``
+    of ``m`` items spread evenly (all ``m`` when there are no more than ``n``)."""
+    if m <= n:
+        return np.arange(m)
+    return (np.arange(n) * (m / n)).astype(np.intp)
 
 
 def partial_percentile(x: NDArray[np.float64], q: float) -> float:
@@ -358,8 +581,37 @@ def partial_percentile(x: NDArray[np.float64], q: float) -> float:
     lo = min(int(h), n - 1)
     if lo + 1 >= n:
         return float(np.partition(x, lo)[lo])
-    part = np.partition(x, (lo, lo + 1))
+    part = x.copy()  # (np.partition's copy and sort, without its wrappers)
+    part.partition((lo, lo + 1))
     return float(part[lo] + (h - lo) * (part[lo + 1] - part[lo]))
+
+
+def partial_percentiles(x: NDArray[np.float64], qs: tuple[float, ...]) -> list[float]:
+    """:func:`partial_percentile` of ``x`` at each of ``qs`` (the same numbers), from one
+    partial sort."""
+    n = x.size
+    if n == 0:
+        return [0.0 for _ in qs]
+    spots = []
+    for q in qs:
+        h = (n - 1) * q / 100.0
+        lo = min(int(h), n - 1)
+        spots.append((h, lo))
+    kth = sorted({k for _, lo in spots for k in (lo, lo + 1) if k < n})
+    part = x.copy()
+    part.partition(kth)
+    out = []
+    for h, lo in spots:
+        if lo + 1 >= n:
+            out.append(float(part[lo]))
+        else:
+            out.append(float(part[lo] + (h - lo) * (part[lo + 1] - part[lo])))
+    return out
+
+
+#: The percentiles of the returns' radial noise the detector reads
+#: (:meth:`PipeCloud.sigma_percentile`).
+SIGMA_PERCENTILES = (50.0, 90.0)
 
 
 def axis_direction(theta: float, phi: float) -> NDArray[np.float64]:
@@ -385,10 +637,22 @@ def covers_azimuth(xyz: NDArray, idx: NDArray[np.intp], fraction: float, bins: i
 
 
 def _yz_coverage(y: NDArray, z: NDArray, bins: int) -> float:
-    """Fraction of ``bins`` azimuth sectors occupied by points at cross-section ``(y, z)``."""
-    phi = np.arctan2(z, y)
-    k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
-    return float(np.count_nonzero(np.bincount(k, minlength=bins))) / bins
+    """Fraction of ``bins`` azimuth sectors occupied by points at cross-section ``(y, z)``
+    (numpy's arctan2, whose last bits differ from the C library's, then one compiled pass)."""
+    return float(_phi_coverage(np.arctan2(z, y), bins))
+
+
+@njit(cache=True)
+def _phi_coverage(phi, bins):
+    """Fraction of ``bins`` sectors of ``[-pi, pi]`` that the angles ``phi`` occupy."""
+    occupied = np.zeros(bins, dtype=np.bool_)
+    n_occupied = 0
+    for i in range(phi.size):
+        k = int(math.floor((phi[i] + math.pi) / (2 * math.pi) * bins)) % bins
+        if not occupied[k]:
+            occupied[k] = True
+            n_occupied += 1
+    return n_occupied / bins
 
 
 def azimuth_coverage(p: NDArray, bins: int = 36) -> float:

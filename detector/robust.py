@@ -37,7 +37,8 @@ def median(x: NDArray[np.float64]) -> float:
     h = n // 2
     if n % 2:
         return float(np.partition(x, h)[h])
-    part = np.partition(x, (h - 1, h))
+    part = x.copy()  # (np.partition's copy and sort, without its wrappers)
+    part.partition((h - 1, h))
     return float((part[h - 1] + part[h]) / 2.0)
 
 
@@ -247,24 +248,13 @@ def robust_fit(
     """:func:`robust_gauss_newton` on the compiled residual model ``model`` (one of
     ``detector.fit_kernels.MODEL_*``, with its returns ``data`` (rows, N), per-return integers
     ``ipar`` and constants ``fpar``; see :mod:`detector.fit_kernels`). The other arguments are
-    those of :func:`robust_gauss_newton`. Returns ``(x, residuals, weights)``."""
+    those of :func:`robust_gauss_newton`. Returns ``(x, residuals, weights)``: one compiled
+    call (:func:`detector.fit_kernels.robust_fit_kernel`)."""
     x0 = np.asarray(x0, dtype=float)
-    n_p = x0.size
     cf = c if c_final is None else c_final
-    inv = np.zeros(n_p)
-    pm = np.zeros(n_p)
-    if prior_sigma is not None:
-        pm = x0 if prior_mean is None else np.asarray(prior_mean, dtype=float)
-        inv = np.where(
-            np.isfinite(prior_sigma), np.square(data_sigma / np.asarray(prior_sigma)), 0.0
-        )
-    lo = np.full(n_p, -np.inf) if lower is None else np.asarray(lower, dtype=float)
-    up = np.full(n_p, np.inf) if upper is None else np.asarray(upper, dtype=float)
-    fixed = np.zeros(n_p, dtype=np.bool_)
-    if lower is not None and upper is not None:
-        fixed = lo >= up
     n_anneal = max(1, iterations - 1 if anneal is None else anneal)
-    x, r = fit_kernels.gauss_newton(
+    given = fit_kernels.NOT_GIVEN
+    return fit_kernels.robust_fit_kernel(
         model,
         np.ascontiguousarray(data, dtype=float),
         fit_kernels.NO_INTS if ipar is None else np.ascontiguousarray(ipar, dtype=np.intp),
@@ -276,13 +266,12 @@ def robust_fit(
         int(n_anneal),
         float(step_tol),
         float(cost_tol),
-        inv,
-        pm,
-        lo,
-        up,
-        fixed,
+        given if prior_sigma is None else np.asarray(prior_sigma, dtype=float),
+        given if prior_mean is None else np.asarray(prior_mean, dtype=float),
+        float(data_sigma),
+        given if lower is None else np.asarray(lower, dtype=float),
+        given if upper is None else np.asarray(upper, dtype=float),
     )
-    return x, r, tukey_weights(r, cf)
 
 
 def _solve_spd(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64] | None:

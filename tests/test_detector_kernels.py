@@ -14,7 +14,23 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from detector import fit_kernels as fk
+from detector.axis_fit import _off_wall_entries
 from detector.grid import label_regions
+from detector.pipe_cloud import (
+    _crop,
+    _gather_cropped,
+    _gather_returns,
+    _masked_columns,
+    _radii,
+    _scatter,
+    _sloped_tolerance,
+    _spread_exceeds,
+    azimuth_coverage,
+    partial_percentile,
+    partial_percentiles,
+    region_sizes,
+    significant_regions,
+)
 from detector.robust import mad_sigma, median, robust_fit, robust_gauss_newton
 
 
@@ -325,3 +341,160 @@ def test_median_is_numpys(values: list[float]) -> None:
     x = np.array(values)
     assert median(x) == float(np.median(x))
     assert mad_sigma(x) == float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+# --------------------------------------------------------------------------- cloud kernels
+@settings(max_examples=60, deadline=None)
+@given(seeds, st.integers(1, 30), st.integers(1, 30), st.floats(0.05, 0.6), st.booleans())
+def test_significant_regions_match_numpy(
+    seed: int, rows: int, cols: int, density: float, wraps: bool
+) -> None:
+    """The compiled regions of returns off the wall against the numpy steps they replace."""
+    rng = np.random.default_rng(seed)
+    off = rng.random((rows, cols)) < density
+    beyond = off & (rng.random((rows, cols)) < 0.7)
+    inside = off & ~beyond
+    min_points, min_rows = 4, 2
+    labels, n, keep, n_keep, beyond_k, inside_k, pre = significant_regions(
+        beyond, inside, wraps, min_points, min_rows
+    )
+    ref, n_ref = label_regions(beyond | inside, wraps)
+    assert n == n_ref
+    np.testing.assert_array_equal(labels, ref)
+    keep_ref = np.zeros_like(off)
+    if n_ref:
+        counts, row_span = region_sizes(ref, n_ref)
+        good = (counts >= min_points) & (row_span >= min_rows)
+        good[0] = False
+        keep_ref = good[ref] & off
+    np.testing.assert_array_equal(keep, keep_ref)
+    assert n_keep == int(keep_ref.sum())
+    np.testing.assert_array_equal(beyond_k, beyond & keep_ref)
+    np.testing.assert_array_equal(inside_k, inside & keep_ref)
+    mixed = np.zeros(n_ref + 1, dtype=bool)
+    mixed[ref[inside & keep_ref]] = True
+    if n_ref and not mixed[ref[beyond & keep_ref]].any():
+        assert pre is not None
+        np.testing.assert_array_equal(pre, np.where(beyond & keep_ref, ref, 0))
+    else:
+        assert pre is None or not n_ref
+
+
+def off_wall_entries_np(cell, g, k, wraps, u, r, tol, big_r, min_points):
+    """Reference of :func:`detector.axis_fit._off_wall_entries`: the whole grid labelled."""
+    off = np.abs(r - big_r) > 2.0 * tol
+    n_off = int(off.sum())
+    if n_off < min_points:
+        return n_off, np.empty(0)
+    mask = np.zeros(g * k, dtype=bool)
+    mask[cell[off]] = True
+    labels, n = label_regions(mask.reshape(g, k), wraps)
+    lab = labels.reshape(-1)[cell]
+    counts = np.bincount(lab[off], minlength=n + 1)
+    big = off & (counts[lab] >= min_points)
+    return n_off, np.minimum(u[big], u[big] * big_r / np.maximum(r[big], 1e-9))
+
+
+@settings(max_examples=60, deadline=None)
+@given(seeds, st.integers(1, 25), st.integers(1, 25), st.booleans(), st.integers(1, 8))
+def test_off_wall_entries_match_the_whole_grid_labelled(
+    seed: int, rows: int, cols: int, wraps: bool, min_points: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    cell = np.flatnonzero(rng.random(rows * cols) < 0.8)
+    n = cell.size
+    u = rng.uniform(0.0, 1.0, n)
+    r = 0.05 + rng.normal(0.0, 0.004, n)
+    tol = np.full(n, 0.002)
+    got = _off_wall_entries(cell, rows, cols, wraps and rows >= 3, u, r, tol, 0.05, min_points)
+    ref = off_wall_entries_np(cell, rows, cols, wraps and rows >= 3, u, r, tol, 0.05, min_points)
+    assert got[0] == ref[0]
+    np.testing.assert_array_equal(got[1], ref[1])
+
+
+@settings(max_examples=40, deadline=None)
+@given(seeds, st.floats(0.0, 0.01), st.floats(0.05, 3.0))
+def test_gather_cropped_matches_gather_then_crop(seed: int, bias: float, horizon: float) -> None:
+    rng = np.random.default_rng(seed)
+    g, k = 12, 9
+    m = g * k
+    src = rng.permutation(m)
+    missing = np.flatnonzero(rng.random(m) < 0.1)
+    valid = rng.random(m) < 0.8
+    ranges = rng.uniform(0.0, 2.0, m)
+    dirs = rng.normal(size=(3, m))
+    dirs /= np.linalg.norm(dirs, axis=0)
+    trig = rng.random((2, m))
+    cell, _, rng_v, local = _gather_returns(valid, ranges, src, missing, dirs, bias)
+    ref = _crop(cell, rng_v, local, trig, k, horizon)
+    got = _gather_cropped(valid, ranges, src, missing, dirs, trig, bias, k, horizon)
+    for a, b in zip(got[:4], ref[:4]):
+        np.testing.assert_array_equal(a, b)
+    assert got[4] == ref[4]
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-1e3, 1e3), min_size=0, max_size=80))
+def test_partial_percentiles_are_numpys(values: list[float]) -> None:
+    x = np.array(values, dtype=float)
+    qs = (1.0, 50.0, 90.0, 100.0)
+    got = partial_percentiles(x, qs)
+    for q, v in zip(qs, got):
+        assert v == partial_percentile(x, q)
+        if x.size:
+            assert v == pytest.approx(float(np.percentile(x, q)), rel=1e-12, abs=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seeds, st.integers(1, 6), st.floats(0.0, 1e-8))
+def test_spread_exceeds_is_ptp(seed: int, n: int, spread: float) -> None:
+    v = np.random.default_rng(seed).normal(size=(n, 9)) * spread
+    assert _spread_exceeds(v, 1e-9) == bool(np.ptp(v, axis=0).max() > 1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seeds, st.integers(0, 300), st.sampled_from([12, 36, 72]))
+def test_azimuth_coverage_matches_numpy(seed: int, n: int, bins: int) -> None:
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(n, 3))
+    p[: n // 3, 1] = 0.0  # (angles on the sector edges: +-pi/2, 0, pi)
+    phi = np.arctan2(p[:, 2], p[:, 1])
+    k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
+    ref = float(np.count_nonzero(np.bincount(k, minlength=bins))) / bins
+    assert azimuth_coverage(p, bins) == ref
+
+
+@settings(max_examples=40, deadline=None)
+@given(seeds, st.floats(0.0, 1.0))
+def test_masked_columns_are_numpys(seed: int, density: float) -> None:
+    rng = np.random.default_rng(seed)
+    cell = np.flatnonzero(rng.random(200) < 0.7)
+    xyz = rng.normal(size=(3, cell.size))
+    mask = rng.random(200) < density
+    ref = np.take(xyz, np.flatnonzero(mask[cell]), axis=1)
+    np.testing.assert_array_equal(_masked_columns(mask, cell, xyz), ref)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seeds, st.integers(0, 200))
+def test_radii_and_sloped_tolerance_are_numpys(seed: int, n: int) -> None:
+    rng = np.random.default_rng(seed)
+    xyz = rng.normal(size=(3, n))
+    tol0 = rng.random(n)
+    np.testing.assert_array_equal(_radii(xyz), np.sqrt(np.square(xyz[1]) + np.square(xyz[2])))
+    np.testing.assert_array_equal(
+        _sloped_tolerance(tol0, 0.002, xyz[0]), tol0 + 0.002 * np.abs(xyz[0])
+    )
+
+
+@settings(max_examples=30, deadline=None)
+@given(seeds, st.integers(1, 3))
+def test_scatter_is_numpys(seed: int, rows: int) -> None:
+    rng = np.random.default_rng(seed)
+    cell = np.flatnonzero(rng.random(100) < 0.6)
+    values = rng.normal(size=(rows, cell.size))
+    ref = np.full((rows, 100), 0.0)
+    ref[:, cell] = values
+    np.testing.assert_array_equal(_scatter(values, cell, 100, 0.0), ref)
+    flags = _scatter(np.ones((1, cell.size), dtype=bool), cell, 100, False)
+    np.testing.assert_array_equal(flags[0], np.isin(np.arange(100), cell))

@@ -218,3 +218,111 @@ def test_a_long_bends_radius_is_fused_and_kept_only_when_most_scans_give_it():
         r = 0.3 if x == 0.5 else 0.0
         s = tr.update(_long_bend(r)(1.0 - x), np.array([x, 0.0, 0.0]), EYE)
     assert s.detection.options[0].bend_radius == 0.0
+
+
+def _junction(distance, ways, conf=0.9, diameter=0.08):
+    """A junction detection with one way per (angle, direction) in ``ways``, radians."""
+    opts = [StructureOption("junction", distance, diameter, dr, a, conf) for a, dr in ways]
+    return Detection("junction", opts, conf)
+
+
+def test_one_near_scan_inventing_a_way_does_not_turn_a_bend_into_a_junction():
+    # calibration case (long bend, 111 mm, X4): five scans from 42 to 26 cm agree on a 60 deg
+    # bend; the last one, from 17 cm, adds a phantom way at 150 deg. Weighted 1/d^4 that one
+    # scan outweighed the other five on the kind and kept its phantom way.
+    tr = StructureTracker()
+    for x in (0.58, 0.62, 0.67, 0.70, 0.74):
+        s = tr.update(
+            bend(1.0 - x, angle=math.radians(60), direction=1.1), np.array([x, 0, 0]), EYE
+        )
+    assert s.confirmed and s.detection.kind == "bend"
+    near = _junction(0.17, [(math.radians(150), -2.3), (math.radians(50), 1.1)])
+    s = tr.update(near, np.array([0.83, 0, 0]), EYE)
+    assert s.confirmed and s.detection.kind == "bend"
+    assert len(s.detection.options) == 1
+    assert s.detection.options[0].direction == pytest.approx(1.1, abs=0.01)
+
+
+def test_one_near_scan_missing_a_branch_does_not_drop_the_junction():
+    # calibration case (tee from its stem, 77 mm, X4): four scans from 47 to 30 cm see both
+    # branches; one from 21 cm reads a bend with a wrong direction. Weighted 1/d^4 it alone
+    # decided the kind (bend) and its way replaced both branches.
+    tr = StructureTracker()
+    branches = [(math.pi / 2, -0.92), (math.pi / 2, 2.22)]
+    for x in (0.53, 0.60, 0.65, 0.70):
+        s = tr.update(_junction(1.0 - x, branches), np.array([x, 0, 0]), EYE)
+    assert s.confirmed and s.detection.kind == "junction"
+    s = tr.update(bend(0.21, direction=-2.81), np.array([0.75, 0, 0]), EYE)
+    assert s.detection.kind == "junction"
+    dirs = sorted(o.direction for o in s.detection.options)
+    assert dirs == pytest.approx([-0.92, 2.22], abs=0.05)
+
+
+def test_a_branch_the_far_scans_missed_is_kept_once_near_scans_see_it():
+    # the counterpart: three far scans read a tee's branch at 50 deg, two nearer ones at
+    # 90 deg: the nearer reading supersedes the far one (which, seen three times, would be
+    # kept were it not another reading of the same branch); a way seen by one scan only is
+    # kept while the track has one scan
+    tr = StructureTracker()
+    run = (0.0, 0.0)
+    branch = (math.pi / 2, 0.5)
+    s = tr.update(_junction(0.45, [run, branch]), np.array([0.0, 0, 0]), EYE)
+    assert len(s.detection.options) == 2
+    tr.reset()
+    for x in (0.55, 0.6, 0.65):  # the branch read at 50 deg: a way of its own (gate 25 deg)
+        tr.update(_junction(1.0 - x, [run, (math.radians(50), 0.5)]), np.array([x, 0, 0]), EYE)
+    for x in (0.75, 0.8):
+        s = tr.update(_junction(1.0 - x, [run, branch]), np.array([x, 0, 0]), EYE)
+    angles = sorted(round(math.degrees(o.angle)) for o in s.detection.options)
+    assert angles == [0, 90]
+
+
+def test_way_parameters_are_validated():
+    with pytest.raises(ValueError, match="way_min_hits"):
+        StructureTracker(way_min_hits=0)
+    with pytest.raises(ValueError, match="way_keep_hits"):
+        StructureTracker(way_keep_hits=0)
+    with pytest.raises(ValueError, match="way_share"):
+        StructureTracker(way_share=1.5)
+
+
+def test_a_branch_seen_consistently_is_kept_when_near_scans_lose_it():
+    # calibration case (tee from its stem, 85 mm, X4): scans from 47, 40 and 35 cm see both
+    # branches, those from 30, 25 and 20 cm only one (the detector loses the other close up).
+    # Three consistent sightings keep the branch: the tee stays a junction.
+    tr = StructureTracker()
+    branches = [(math.pi / 2, -1.03), (math.pi / 2, 2.13)]
+    for x in (0.53, 0.60, 0.65):
+        tr.update(_junction(1.0 - x, branches), np.array([x, 0, 0]), EYE)
+    for x in (0.70, 0.75, 0.80):
+        s = tr.update(bend(1.0 - x, direction=2.13), np.array([x, 0, 0]), EYE)
+    assert s.confirmed and s.detection.kind == "junction"
+    dirs = sorted(o.direction for o in s.detection.options)
+    assert dirs == pytest.approx([-1.03, 2.13], abs=0.01)
+    tr = StructureTracker(way_keep_hits=4)  # without the rule: a bend
+    for x in (0.53, 0.60, 0.65):
+        tr.update(_junction(1.0 - x, branches), np.array([x, 0, 0]), EYE)
+    for x in (0.70, 0.75, 0.80):
+        s = tr.update(bend(1.0 - x, direction=2.13), np.array([x, 0, 0]), EYE)
+    assert s.detection.kind == "bend"
+
+
+def test_a_second_way_only_far_scans_saw_is_dropped_when_near_scans_see_a_bend():
+    # closed-loop case (100 mm mitre bend at the end of an 8 m straight, ideal sensor): the
+    # sparse sweeps from 1.16 to 0.71 m read the bend's far wall as a second way on, four times
+    # in a row; every scan from 0.66 m on sees the bend alone. Far sightings do not count
+    # towards ``way_keep_hits``, so the bend stays a bend.
+    tr = StructureTracker()
+    ways = [(math.pi / 2, 0.0), (math.pi / 2, math.pi)]
+    for x in (0.0, 0.15, 0.30, 0.45):
+        tr.update(_junction(1.16 - x, ways), np.array([x, 0, 0]), EYE)
+    for x in (0.50, 0.65, 0.70, 0.75, 0.80, 0.85, 0.90, 0.95):
+        s = tr.update(bend(1.16 - x, direction=0.0), np.array([x, 0, 0]), EYE)
+    assert s.confirmed and s.detection.kind == "bend"
+    assert [round(o.direction, 3) for o in s.detection.options] == [0.0]
+    tr = StructureTracker(way_keep_reach=2.0)  # every sighting counted: the phantom stays
+    for x in (0.0, 0.15, 0.30, 0.45):
+        tr.update(_junction(1.16 - x, ways), np.array([x, 0, 0]), EYE)
+    for x in (0.50, 0.65, 0.70, 0.75, 0.80, 0.85, 0.90, 0.95):
+        s = tr.update(bend(1.16 - x, direction=0.0), np.array([x, 0, 0]), EYE)
+    assert len(s.detection.options) == 2

@@ -4,8 +4,9 @@ The ``fast`` fidelity of the environments does not ray-cast or run the detector;
 true options of the structure ahead, perturbed the way a detector errs: gaussian errors on
 distance, diameter, angle and direction, a missed way on, a phantom way on, a wrong kind. The
 models for ``"improved"`` and ``"thesis"`` are measured per LiDAR preset by
-``benchmarks/calibrate_sensing.py`` (the real detector on ray-cast scans, fused over the approach
-exactly as the full fidelity does, compared with ground truth at the trigger distance) and stored
+``benchmarks/calibrate_sensing.py`` (the real detector on ray-cast scans, swept and fused over
+the approach as the full fidelity does, rescans included, compared with ground truth at the
+decision point) and stored
 in ``pipe_env/data/sensing_models.json``; :func:`error_model_for` picks the entry of a detector
 and a sensor. ``"ground_truth"`` is exact (the oracle ablation).
 """
