@@ -28,7 +28,8 @@ defaults before this study):
 
 Per grid point it prints pass/fail of each check, control ticks (physics / kinematic) and
 physics steps per decision, decisions/s and their ratio to the reference measured in the same
-run (episodes interleaved point by point, so load drifts hit every point alike).
+run (episodes interleaved point by point, so load drifts hit every point alike), and the same
+per second of the process's CPU time (steadier than the wall clock on a shared machine).
 
 The margin: a grid point is adopted only if it passes everything and the next larger physics
 step at its period passes checks 1 and 2 too (one grid step of margin in the step, where the
@@ -36,9 +37,15 @@ cases fail gradually: the front stalls nearer and nearer a bore's mouth). The pe
 is the near-contact reach, a sharp one (the V folding at its full rate moves its apex about
 0.1 m/s: 6 mm, the reach, in 60 ms); the adopted period is the longest without an overrun.
 
+Time compression (``--speedups 1 1.5 2 3 4``): every grid point is also run at each time
+compression k (``Executor(time_compression=k)``, ``PhysicalPlant(time_compression=k)``: the
+quasi-static motions run k times faster in physics, the clock keeps the robot's nominal speeds;
+the rule is at ``primitives.executor.TIME_COMPRESSION``). The checks are the same; the margin
+is then one grid step in k: a k is adopted only if the next larger k passes checks 1 and 2 too.
+
 Usage: python benchmarks/physics_step_study.py [--timesteps 0.002 0.003 ...]
-       [--periods 0.02 0.04 ...] [--episodes 3] [--candidates 2] [--episodes-everywhere]
-       [--quick] [--json out.json] [--write-docs]
+       [--periods 0.02 0.04 ...] [--speedups 1 2 ...] [--episodes 3] [--candidates 2]
+       [--episodes-everywhere] [--quick] [--json out.json] [--write-docs]
        (--quick: two grid points, one tolerance cell, three jam cases, no episodes: a smoke
        test of the study itself)
 """
@@ -75,6 +82,8 @@ TIMESTEPS = (0.002, 0.003, 0.004, 0.005, 0.006, 0.008)
 PERIODS = (0.02, 0.04, 0.06, 0.1)
 #: The defaults before this study (physics step, control period), s.
 REFERENCE = (0.002, 0.02)
+#: Time compressions (``--speedups``; the reference runs at 1).
+SPEEDUPS = (1.0,)
 #: Tolerance cells: (diameter m, roll direction deg, field, sign); bisection steps at the
 #: reference.
 TOLERANCE_CELLS = (
@@ -99,15 +108,20 @@ def emit(line: str = "") -> None:
 
 @dataclass(frozen=True)
 class Point:
-    """A grid point: physics step and nominal control period, s."""
+    """A grid point: physics step and nominal control period, s; time compression k."""
 
     timestep: float
     period: float
+    speedup: float = 1.0
 
     @property
     def args(self) -> dict[str, float]:
         """The executor's arguments."""
-        return {"timestep": self.timestep, "control_dt": self.period}
+        return {
+            "timestep": self.timestep,
+            "control_dt": self.period,
+            "time_compression": self.speedup,
+        }
 
     @property
     def substeps(self) -> int:
@@ -120,7 +134,8 @@ class Point:
         return self.substeps * self.timestep
 
     def label(self) -> str:
-        return f"{self.timestep * 1000:g}/{self.period_used * 1000:g}"
+        base = f"{self.timestep * 1000:g}/{self.period_used * 1000:g}"
+        return base if self.speedup == 1.0 else f"{base} x{self.speedup:g}"
 
 
 @dataclass
@@ -153,7 +168,13 @@ _BUILT: list[Executor] = []
 
 
 def _executor(net: PipeNetwork, point: Point) -> Executor:
-    ex = Executor.for_network(net, lidar=None, timestep=point.timestep, control_dt=point.period)
+    ex = Executor.for_network(
+        net,
+        lidar=None,
+        timestep=point.timestep,
+        control_dt=point.period,
+        time_compression=point.speedup,
+    )
     _BUILT.append(ex)
     return ex
 
@@ -408,6 +429,7 @@ def _episode_env(point: Point) -> gym.Env:
                 physics=c.physics,
                 timestep=point.timestep,
                 control_dt=point.period,
+                time_compression=point.speedup,
             )
 
     env = TimedEnv(
@@ -426,7 +448,7 @@ def run_episode(env: gym.Env, network: PipeNetwork, seed: int) -> dict[str, Any]
     base: Any = env.unwrapped
     agent = make_agent("route_planner", env)
     notes: list[str] = []
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     obs, info = env.reset(seed=seed, options={"network": network})
     agent.reset()
     done = bool(base.terminated or base.truncated)
@@ -434,13 +456,14 @@ def run_episode(env: gym.Env, network: PipeNetwork, seed: int) -> dict[str, Any]
         obs, _, term, trunc, info = env.step(agent.act(obs, info))
         notes += [str(v) for k, v in info.items() if k.endswith("_note")]
         done = term or trunc
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     ex = base.plant.executor
     return {
         "success": bool(info["is_success"]),
         "jams": int(info["jams"]),
         "decisions": int(info["decisions"]),
         "wall_s": wall,
+        "cpu_s": cpu,
         "physics_ticks": int(ex.physics_ticks),
         "kinematic_ticks": int(ex.kinematic_ticks),
         "mj_steps": int(ex.physics_ticks * ex.substeps),
@@ -489,6 +512,7 @@ def episode_figures(res: Result) -> dict[str, float]:
     eps = res.episodes
     dec = max(1, sum(e["decisions"] for e in eps))
     wall = sum(e["wall_s"] for e in eps)
+    cpu = sum(e.get("cpu_s", math.nan) for e in eps)
     return {
         "success": sum(e["success"] for e in eps),
         "jams": sum(e["jams"] for e in eps),
@@ -497,6 +521,7 @@ def episode_figures(res: Result) -> dict[str, float]:
         "kinematic_ticks_per_decision": sum(e["kinematic_ticks"] for e in eps) / dec,
         "mj_steps_per_decision": sum(e["mj_steps"] for e in eps) / dec,
         "decisions_per_s": dec / wall if wall > 0 else math.nan,
+        "decisions_per_cpu_s": dec / cpu if cpu > 0 else math.nan,
         "unstable": sum(len(e["unstable"]) for e in eps),
         "overruns": sum(e.get("overruns", 0) for e in eps),
     }
@@ -516,43 +541,71 @@ def judge_episodes(res: Result, ref: Result) -> None:
 
 
 # ---------------------------------------------------------------- the study
-def grid(timesteps: list[float], periods: list[float]) -> list[Point]:
+def grid(
+    timesteps: list[float],
+    periods: list[float],
+    speedups: tuple[float, ...] | list[float] = SPEEDUPS,
+) -> list[Point]:
     """Grid points, the reference first; periods shorter than the step are skipped."""
     pts = [Point(*REFERENCE)]
-    seen = {(pts[0].timestep, pts[0].substeps)}
+    seen = {(pts[0].timestep, pts[0].substeps, 1.0)}
     for ts in timesteps:
         for cp in periods:
-            p = Point(ts, cp)
-            if cp >= ts and (ts, p.substeps) not in seen:
-                seen.add((ts, p.substeps))
-                pts.append(p)
+            for k in speedups:
+                p = Point(ts, cp, k)
+                if cp >= ts and (ts, p.substeps, k) not in seen:
+                    seen.add((ts, p.substeps, k))
+                    pts.append(p)
     return pts
 
 
 def larger_step(p: Point, timesteps: list[float]) -> Point | None:
     """The next larger physics step of the grid at ``p``'s control period (None: none)."""
     bigger = [t for t in timesteps if t > p.timestep]
-    return Point(min(bigger), p.period) if bigger else None
+    return Point(min(bigger), p.period, p.speedup) if bigger else None
 
 
-def margin_ok(res: Result, by_point: dict[Point, Result], timesteps: list[float]) -> bool:
+def larger_speedup(p: Point, speedups: list[float]) -> Point | None:
+    """The next larger time compression of the grid at ``p``'s step and period (None:
+    none)."""
+    bigger = [k for k in speedups if k > p.speedup]
+    return Point(p.timestep, p.period, min(bigger)) if bigger else None
+
+
+def margin_ok(
+    res: Result,
+    by_point: dict[Point, Result],
+    timesteps: list[float],
+    speedups: list[float] | None = None,
+) -> bool:
     """``res`` passes its cases and so does the next larger physics step at its period (one
     grid step of margin in the step, where the cases fail gradually: the robot's front stalls
-    nearer and nearer a bore's mouth). The period's limit is the near-contact selection's
-    reach, a sharp one: a period passes it (no overrun) or not."""
-    near = larger_step(res.point, timesteps)
+    nearer and nearer a bore's mouth); studying time compressions (``speedups``, more than
+    one), the next larger k at its step and period instead. The period's limit is the
+    near-contact selection's reach, a sharp one: a period passes it (no overrun) or not."""
+    if speedups is not None and len(speedups) > 1:
+        near = larger_speedup(res.point, speedups)
+    else:
+        near = larger_step(res.point, timesteps)
     return res.cases_pass and near in by_point and by_point[near].cases_pass
 
 
-def _size(r: Result) -> tuple[float, float]:
-    return (r.point.period_used, r.point.timestep)
+def _size(r: Result) -> tuple[float, float, float]:
+    return (r.point.period_used * r.point.speedup, r.point.period_used, r.point.timestep)
 
 
-def adopt(results: list[Result], timesteps: list[float]) -> Result | None:
-    """The largest point (control period, then physics step) that passes everything, the
-    episodes included, with one grid step of margin in the step (see :func:`margin_ok`)."""
+def adopt(
+    results: list[Result], timesteps: list[float], speedups: list[float] | None = None
+) -> Result | None:
+    """The largest point (nominal time per tick, control period, then physics step) that
+    passes everything, the episodes included, with one grid step of margin in the step (or in
+    k, see :func:`margin_ok`)."""
     by_point = {r.point: r for r in results}
-    ok = [r for r in results if r.all_pass and r.episodes and margin_ok(r, by_point, timesteps)]
+    ok = [
+        r
+        for r in results
+        if r.all_pass and r.episodes and margin_ok(r, by_point, timesteps, speedups)
+    ]
     return max(ok, key=_size) if ok else None
 
 
@@ -562,14 +615,14 @@ def print_checks(results: list[Result]) -> None:
     emit("Checks per grid point (P pass, F fail; columns below)")
     emit("```")
     emit(
-        f"{'step/period ms':>15s} {'steps/tick':>10s}  "
+        f"{'step/period ms':>20s} {'steps/tick':>10s}  "
         + " ".join(f"{i + 1:>2d}" for i in range(len(names)))
     )
     for r in results:
         marks = {True: "P", False: "F", None: "-"}
         cells = " ".join(f"{marks[r.checks.get(n)]:>2s}" for n in names)
         cells += f"   episodes {marks[r.checks.get('episodes')]}"
-        emit(f"{r.point.label():>15s} {r.point.substeps:10d}  {cells}")
+        emit(f"{r.point.label():>20s} {r.point.substeps:10d}  {cells}")
     for i, n in enumerate(names):
         emit(f"  {i + 1:2d}: {n}")
     emit("  (-: not run: a point's cases stop at its first failure)")
@@ -585,9 +638,10 @@ def print_speed(results: list[Result], ref: Result) -> None:
     emit()
     emit(
         "| step/period ms | cases | case ticks | case wall / ref | episodes | success | jams "
-        "| physics ticks/dec | kinematic ticks/dec | mj_steps/dec | decisions/s | / ref |"
+        "| physics ticks/dec | kinematic ticks/dec | mj_steps/dec | decisions/s | / ref "
+        "| decisions/CPU-s | / ref |"
     )
-    emit("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    emit("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     rf = episode_figures(ref) if ref.episodes else None
     for r in results:
         row = (
@@ -601,9 +655,11 @@ def print_speed(results: list[Result], ref: Result) -> None:
                 f"{len(r.episodes)} | {f['jams']} | {f['physics_ticks_per_decision']:.0f} | "
                 f"{f['kinematic_ticks_per_decision']:.0f} | {f['mj_steps_per_decision']:.0f} | "
                 f"{f['decisions_per_s']:.3f} | {f['decisions_per_s'] / rf['decisions_per_s']:.2f} |"
+                f" {f['decisions_per_cpu_s']:.3f} |"
+                f" {f['decisions_per_cpu_s'] / rf['decisions_per_cpu_s']:.2f} |"
             )
         else:
-            row += " - | - | - | - | - | - | - | - |"
+            row += " - | - | - | - | - | - | - | - | - | - |"
         emit(row)
 
 
@@ -611,6 +667,9 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--timesteps", type=float, nargs="+", default=list(TIMESTEPS))
     parser.add_argument("--periods", type=float, nargs="+", default=list(PERIODS))
+    parser.add_argument(
+        "--speedups", type=float, nargs="+", default=list(SPEEDUPS), help="time compressions k"
+    )
     parser.add_argument("--episodes", type=int, default=3, help="networks per point")
     parser.add_argument("--candidates", type=int, default=2, help="points given episodes")
     parser.add_argument("--episodes-everywhere", action="store_true")
@@ -621,6 +680,8 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--json", default=None)
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args(argv)
+    if any(not 1.0 <= k <= 8.0 for k in args.speedups):
+        parser.error(f"--speedups = {args.speedups}; allowed: each in [1, 8]")
     if args.episodes < 0 or args.candidates < 0:
         parser.error(
             f"--episodes = {args.episodes}, --candidates = {args.candidates}; allowed: >= 0"
@@ -645,7 +706,7 @@ def study(args: argparse.Namespace) -> tuple[list[Result], Result | None]:
         flush=True,
     )
     results = []
-    for p in grid(args.timesteps, args.periods):
+    for p in grid(args.timesteps, args.periods, args.speedups):
         results.append(check_point(p, bounds, cases, not args.all_cases))
         r = results[-1]
         print(
@@ -662,7 +723,7 @@ def study(args: argparse.Namespace) -> tuple[list[Result], Result | None]:
         run_episodes([ref, *chosen], args.episodes)
         for r in [ref, *chosen]:
             judge_episodes(r, ref)
-    return results, adopt(results, args.timesteps)
+    return results, adopt(results, args.timesteps, args.speedups)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -677,7 +738,8 @@ def main(argv: list[str] | None = None) -> int:
     else:
         emit(
             f"adopted: physics step {chosen.point.timestep * 1000:g} ms, control period "
-            f"{chosen.point.period_used * 1000:g} ms ({chosen.point.substeps} steps per tick)"
+            f"{chosen.point.period_used * 1000:g} ms ({chosen.point.substeps} steps per tick), "
+            f"time compression {chosen.point.speedup:g}"
         )
     print(f"total wall time {time.perf_counter() - t0:.0f} s")
     if args.json:
@@ -688,6 +750,7 @@ def main(argv: list[str] | None = None) -> int:
                     {
                         "timestep": r.point.timestep,
                         "period": r.point.period_used,
+                        "speedup": r.point.speedup,
                         "checks": r.checks,
                         "notes": r.notes,
                         "case_wall": r.case_wall,
@@ -708,7 +771,8 @@ def main(argv: list[str] | None = None) -> int:
             del given[k : k + 2]
         argv_ = [a for a in given if a != "--write-docs"]
         command = " ".join(["python benchmarks/physics_step_study.py", *argv_])
-        write_section("physics step", "\n".join([f"`{command}`", "", *OUTPUT]))
+        name = "time compression" if len(args.speedups) > 1 else "physics step"
+        write_section(name, "\n".join([f"`{command}`", "", *OUTPUT]))
     return 0 if results and all(r.cases_pass for r in results[:1]) else 1
 
 

@@ -19,13 +19,13 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
   16 times as much as one at 40 cm (with the square, a few scans from 45 cm placed a 60 mm tee
   4 mm too far, enough for the turn into its branch to jam).
 - **Reports the ways on that enough scans saw.** A way is reported when the scans that saw it
-  number at least ``way_min_hits`` (all of the track's scans if it has fewer) and carry at
-  least ``way_share`` of the track's trust weight, or number ``way_keep_hits`` (unless it lies
-  within twice ``direction_gate`` of a way reported for its weight: another reading of the
-  same way). A single near scan outweighs several far ones, so alone it decided which ways
-  exist: a phantom way in the last scan turned a long bend into a junction, a misread branch
-  turned a tee into a bend. Close up the detector loses a tee's branch seen from its stem more
-  often than it invents one consistently over three scans.
+  number at least ``way_min_hits`` (all of the track's scans if it has fewer) and carry at least
+  ``way_share`` of the track's trust weight, or number ``way_keep_hits`` from within
+  ``way_keep_reach`` (unless it lies within twice ``direction_gate`` of a way reported for its
+  weight: another reading of the same way). A single near scan outweighs several far ones, so
+  alone it decided which ways exist: a phantom way in the last scan turned a long bend into a
+  junction, a misread branch turned a tee into a bend. Close up the detector loses a tee's
+  branch seen from its stem more often than it invents one consistently over three scans.
 - **Associates** a detection with the track when its kind family (closure, reducer, bend or
   junction) agrees and its reference point lies within ``gate`` (+ ``gate_growth`` times the
   distance) of the track's. Ways on are matched by direction (within ``direction_gate``).
@@ -92,14 +92,19 @@ class _Way:
     diam_sum: float
     weight: float
     hits: int
+    #: scans within ``way_keep_reach`` that saw this way
+    near_hits: int = 0
     radius_sum: float = 0.0  # weighted sum of long-bend radii, over the scans that gave one
     radius_weight: float = 0.0
 
-    def add(self, v: NDArray[np.float64], diameter: float, radius: float, w: float) -> None:
+    def add(
+        self, v: NDArray[np.float64], diameter: float, radius: float, w: float, near: bool
+    ) -> None:
         self.vec_sum = self.vec_sum + v * w
         self.diam_sum += diameter * w
         self.weight += w
         self.hits += 1
+        self.near_hits += int(near)
         if radius > 0.0:
             self.radius_sum += radius * w
             self.radius_weight += w
@@ -126,9 +131,9 @@ def _separation(a: _Way, b: _Way) -> float:
     return math.acos(max(-1.0, min(1.0, float(a.direction @ b.direction))))
 
 
-def _new_way(v: NDArray[np.float64], diameter: float, radius: float, w: float) -> _Way:
+def _new_way(v: NDArray[np.float64], diameter: float, radius: float, w: float, near: bool) -> _Way:
     way = _Way(np.zeros(3), 0.0, 0.0, 0)
-    way.add(v, diameter, radius, w)
+    way.add(v, diameter, radius, w, near)
     return way
 
 
@@ -213,6 +218,10 @@ class StructureTracker:
             track has fewer scans).
         way_share: share of the track's trust weight (0-1] the scans that saw a way must carry.
         way_keep_hits: a way seen by this many scans is reported whatever its share.
+        way_keep_reach: only scans of a structure at most this far ahead count towards
+            ``way_keep_hits``, m: from farther, a mitre bend's far wall can read as a second
+            way on for several scans in a row (a bend at the end of a long straight, swept
+            from 1.2 m).
         gate_growth: the association gates grow by this many metres per metre of distance.
     """
 
@@ -232,6 +241,7 @@ class StructureTracker:
         way_min_hits: int = 2,
         way_share: float = 0.5,
         way_keep_hits: int = 3,
+        way_keep_reach: float = 0.5,
         gate_growth: float = 0.1,
     ) -> None:
         where = "StructureTracker"
@@ -246,6 +256,7 @@ class StructureTracker:
             ("place_spacing", place_spacing, "m"),
             ("contest_range", contest_range, "m"),
             ("gate_growth", gate_growth, "m/m"),
+            ("way_keep_reach", way_keep_reach, "m"),
         ):
             check_number(name, value, 0.0, None, unit, open_low=True, where=where)
         self.confirm_count = check_int("confirm_count", confirm_count, 1, where=where)
@@ -253,6 +264,7 @@ class StructureTracker:
         self.way_keep_hits = check_int("way_keep_hits", way_keep_hits, 1, where=where)
         self.way_share = check_number("way_share", way_share, 0.0, 1.0, open_low=True, where=where)
         self.gate_growth = float(gate_growth)
+        self.way_keep_reach = float(way_keep_reach)
         contested_places = check_int("contested_places", contested_places, 1, where=where)
         self.contested_places = int(contested_places)
         self.place_spacing = float(place_spacing)
@@ -410,7 +422,7 @@ class StructureTracker:
             ref_sum=obs["ref"] * w,
             axis_sum=obs["axis"] * w,
             weight=w,
-            ways=[_new_way(v, d, rb, w) for v, d, rb in obs["ways"]],
+            ways=[_new_way(v, d, rb, w, self._near(obs)) for v, d, rb in obs["ways"]],
             kind_weight={obs["kind"]: w},
             evidence=obs["confidence"],
             hits=1,
@@ -440,14 +452,19 @@ class StructureTracker:
                 if ang < best_ang:
                     best, best_ang = way, ang
             if best is not None and best_ang <= self.direction_gate:
-                best.add(v, d, rb, w)
+                best.add(v, d, rb, w, self._near(obs))
             else:
-                tr.ways.append(_new_way(v, d, rb, w))
+                tr.ways.append(_new_way(v, d, rb, w, self._near(obs)))
+
+    def _near(self, obs: dict[str, Any]) -> bool:
+        """Whether a scan is near enough for its ways to count towards ``way_keep_hits``."""
+        return abs(float(obs["distance"])) <= self.way_keep_reach
 
     def _kept_ways(self, tr: _Track) -> list[_Way]:
         """The ways on a track reports: those seen by at least ``way_min_hits`` of its scans
         (all of them if it has fewer) whose scans carry at least ``way_share`` of the track's
-        trust weight, and those seen by ``way_keep_hits`` scans however many missed them
+        trust weight, and those seen by ``way_keep_hits`` scans within ``way_keep_reach``
+        however many missed them
         (unless within twice ``direction_gate`` of a way kept for its weight). A way
         glimpsed from far away is dropped once nearer scans disagree; a way one near scan
         invents is dropped while the other scans do not see it; a branch seen consistently
@@ -463,7 +480,7 @@ class StructureTracker:
             w
             for w in tr.ways
             if w not in weighty
-            and w.hits >= self.way_keep_hits
+            and w.near_hits >= self.way_keep_hits
             and all(_separation(w, v) > 2.0 * self.direction_gate for v in weighty)
         ]
         return weighty + seen or [max(tr.ways, key=lambda w: w.weight)]

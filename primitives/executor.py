@@ -35,6 +35,11 @@ wall pieces near it (:class:`pipe_env.world.NearContacts`; the same contacts as 
 automatic collisions against every piece, at about half the cost of a step);
 :meth:`Executor.use_near_contacts` switches back to the automatic collisions.
 
+Time compression (``time_compression``, k; see :data:`TIME_COMPRESSION`): the quasi-static
+motions run k times faster in physics while the clock keeps the robot's nominal speeds; the
+executor's default is k = 1, the full-fidelity plant's for ``physics="contact"`` is set in
+:mod:`pipe_env.envs.plant_full`.
+
 Per control tick the executor's own work is batched: every module's target (the followers'
 driven-path poses, the V's legs, the rolls, the quaternions) in one pass over preallocated
 arrays with compiled kernels, bit for bit what the per-module helpers computed; telemetry rows
@@ -91,10 +96,35 @@ __all__ = ["Executor", "SequenceOutcome"]
 #: and seeded RoutePlanner episodes on a grid of 2-8 ms steps and 20-100 ms periods): every
 #: outcome holds at 2 ms steps up to 100 ms periods, but from 40 ms the near-contact selection
 #: overruns its reach within a tick (the V folding at ``CLAMP_RATE`` moves its apex about
-#: 0.1 m/s, ``NEAR_REACH`` in 60 ms): contacts could be missed. 20 ms stays.
+#: 0.1 m/s, ``NEAR_REACH`` in 60 ms): contacts could be missed. Since the near contacts are
+#: selected within a period (``NEAR_INTERVAL``) every case holds up to 60 ms, but seeded episodes
+#: at 40 ms jam more than at 20 ms (with time compression 1.5). 20 ms stays.
 CONTROL_DT = 0.02
 #: Control periods an executor may run at, s.
 CONTROL_DT_RANGE = (0.001, 0.2)
+#: Time compression (the executor's ``time_compression``, k): the quasi-static motions (straight
+#: drives, reversing, rolls, folding and straightening the V, centring probes and shifts) run k
+#: times faster in physics than the robot's nominal speeds and rates, while the executor's clock
+#: (``Executor.time``, and so the plant's ``sim_time``) keeps the nominal speeds: the robot's
+#: real time is what users see; physics integrates the same path in k times fewer steps. Settling
+#: (after every motion, and :class:`~primitives.steps.Stop`) is not compressed: it is the time
+#: the dynamics need to come to rest, so it runs its full duration in physics and on the clock.
+#: A turn's arc and the drive holding the turn's heading after it are not compressed: there the
+#: walls set the front's heading, a contact-dynamic motion (measured: compressed 1.5 times, turns
+#: in 57-60 mm pipes stall their steering). Durations that bound a motion (``CLAMP_TIMEOUT``) are
+#: nominal. A motion's clock is its ticks times their nominal time (uncompressed, a motion is
+#: rounded up to whole control periods; compressed, up to k periods). The jam lag keeps its
+#: meaning (see :attr:`Executor.jam_lag`); the near contacts are selected as often per metre
+#: moved (see :attr:`Executor.near_steps`). The executor's default
+#: is 1 (no compression); the plant's default for ``physics="contact"`` is
+#: ``pipe_env.envs.plant_full.TIME_COMPRESSION``.
+TIME_COMPRESSION = 1.0
+#: A driven front trails its drive target by about this much time of travel at its physical
+#: speed (the weld's tracking delay; measured right after a 20 ms tick, 2 ms steps, a clamped
+#: straight drive: 1.57 mm at 0.05 m/s, 3.1 mm at 0.1, 4.7 at 0.15, 6.2 at 0.2), s.
+TRACKING_DELAY = 0.031
+#: Time compressions an executor may run at.
+TIME_COMPRESSION_RANGE = (1.0, 8.0)
 #: V folding/straightening rate, rad/s.
 CLAMP_RATE = math.radians(60.0)
 #: Slow folding rate near the expected wall, rad/s.
@@ -126,6 +156,11 @@ MAX_RESCANS = 4
 #: 585, bit-identical poses) but overflows the 160-pair pool in a mitre turn (automatic
 #: collisions then, slower), and the physics step costs the same; 6 mm stays.
 NEAR_REACH = 0.006
+#: The near contacts are selected again at least every this much nominal motion within a
+#: control period (a long or time-compressed period is stepped in chunks), s: at 20 ms periods
+#: the selection never overruns its reach, at 40 ms in one chunk it does (the V folding at
+#: ``CLAMP_RATE``).
+NEAR_INTERVAL = 0.025
 #: Physics modes. ``"contact"``: a clamped robot driving straight (forward or back) in a run,
 #: away from fittings (see :meth:`Executor.free_straight`), moves kinematically along the pipe
 #: axis with the shape, clamp, sag and roll physics gave it, then settles physically; contact
@@ -297,6 +332,9 @@ class Executor:
         physics: one of :data:`PHYSICS_MODES`.
         control_dt: the control period, s, in :data:`CONTROL_DT_RANGE`; rounded to a whole
             number of the world's physics steps (``control_dt`` holds the period in use).
+        time_compression: k in :data:`TIME_COMPRESSION_RANGE`: quasi-static motions run k
+            times faster in physics, the clock keeps their nominal durations (see
+            :data:`TIME_COMPRESSION`).
     """
 
     def __init__(
@@ -306,9 +344,13 @@ class Executor:
         lidar: RotatingLidar | None = None,
         physics: str = "everywhere",
         control_dt: float = CONTROL_DT,
+        time_compression: float = TIME_COMPRESSION,
     ) -> None:
         control_dt = check_number(
             "control_dt", control_dt, *CONTROL_DT_RANGE, unit="s", where="Executor"
+        )
+        time_compression = check_number(
+            "time_compression", time_compression, *TIME_COMPRESSION_RANGE, where="Executor"
         )
         if physics not in PHYSICS_MODES:
             raise ValueError(f"physics = {physics!r} is invalid; allowed: {PHYSICS_MODES}")
@@ -328,7 +370,23 @@ class Executor:
         #: physics steps), s
         self.substeps = max(1, int(round(control_dt / self.model.opt.timestep)))
         self.control_dt = self.substeps * self.model.opt.timestep
+        #: the time compression k, and the nominal (clock) time of one motion tick: a motion
+        #: tick advances the robot by its nominal speed times ``motion_dt`` in ``control_dt``
+        #: of physics, s
+        self.time_compression = float(time_compression)
+        self.motion_dt = self.time_compression * self.control_dt
+        #: physics steps between two near-contact selections within a control period: the
+        #: period split as evenly as possible into the fewest chunks of at most
+        #: ``NEAR_INTERVAL`` of nominal motion each (a motion moves the robot's geoms no further
+        #: between two selections than in one uncompressed 20-25 ms period, which the
+        #: selection's reach is set for; the whole period at the defaults)
+        chunks = max(1, math.ceil(self.motion_dt / NEAR_INTERVAL - 1e-9))
+        chunks = min(chunks, self.substeps)
+        base, extra = divmod(self.substeps, chunks)
+        self.near_steps = tuple(base + (i < extra) for i in range(chunks))
         self.physics = physics
+        #: the extra tracking lag of the drive running now (see :attr:`jam_lag`), m
+        self._lag_allowance = 0.0
         #: how far the last clamped straight physical drive fell short of its command, m
         self._shortfall = DEFAULT_SHORTFALL
         #: control ticks run with physics, and driven kinematically (``physics="contact"``)
@@ -380,12 +438,13 @@ class Executor:
         physics: str = "everywhere",
         timestep: float = TIMESTEP,
         control_dt: float = CONTROL_DT,
+        time_compression: float = TIME_COMPRESSION,
         **lidar_kwargs: Any,
     ) -> Executor:
         """Build the world of ``network`` with the robot and the LiDAR, the robot clamped at
         the network's start pose; ``physics`` is one of :data:`PHYSICS_MODES`; ``timestep``
         the physics step, s (:func:`pipe_env.world.build_world`); ``control_dt`` the control
-        period, s."""
+        period, s; ``time_compression`` the time compression k (see :data:`TIME_COMPRESSION`)."""
         if network.start_pose is None:
             raise ValueError("network.start_pose is None; the robot needs a start pose")
         robot = Robot(robot_config)
@@ -397,7 +456,14 @@ class Executor:
         if lidar is not None:
             kwargs = {"mount": robot.lidar_mount, **lidar_kwargs}
             sensor = RotatingLidar(world, lidar, **kwargs)
-        return cls(world, robot, sensor, physics=physics, control_dt=control_dt)
+        return cls(
+            world,
+            robot,
+            sensor,
+            physics=physics,
+            control_dt=control_dt,
+            time_compression=time_compression,
+        )
 
     # ------------------------------------------------------------------ placing
     def place(self, pose: Pose, diameter: float) -> None:
@@ -499,16 +565,22 @@ class Executor:
             self.near = None
 
     def _physics(self) -> None:
-        """One control period of physics steps (pairs near the robot selected first)."""
-        if self.near is not None:
-            self.near.update(self.data)
-        mujoco.mj_step(self.model, self.data, nstep=self.substeps)
+        """One control period of physics steps, in the chunks of ``near_steps`` with the pairs
+        near the robot selected before each."""
+        if self.near is None:
+            mujoco.mj_step(self.model, self.data, nstep=self.substeps)
+        else:
+            for n in self.near_steps:
+                self.near.update(self.data)
+                mujoco.mj_step(self.model, self.data, nstep=n)
         self.physics_ticks += 1
 
-    def _tick(self, lag_axis: NDArray | None = None) -> float:
-        """Advance one control period with the current targets; returns the front's lag, m."""
+    def _tick(self, lag_axis: NDArray | None = None, clock: float | None = None) -> float:
+        """Advance one control period of physics with the current targets, the clock by
+        ``clock`` s (None: the period; a motion tick: ``motion_dt``); returns the front's lag,
+        m."""
         self._physics()
-        self.time += self.substeps * self.model.opt.timestep
+        self.time += self.control_dt if clock is None else clock
         if self.on_tick is not None:
             self.on_tick(self.time)
         d = self.data
@@ -518,10 +590,29 @@ class Executor:
         self.telemetry.record(self.time, self.data, self.robot, lag)
         if not np.isfinite(d.qpos).all():
             raise _Jam("the simulation diverged")
-        if lag > self.config.jam_lag:
+        if lag > self.jam_lag:
             raise _Jam(f"stalled: the front lags its drive target by {lag * 1000:.1f} mm")
         self._check_tracking()
         return lag
+
+    @property
+    def jam_lag(self) -> float:
+        """The front's lag behind its drive target beyond which a drive has stalled, m.
+
+        ``RobotConfig.jam_lag`` means how far the front may fall behind the free tracking
+        lag of a drive at the robot's nominal speed. Compressed k times, a drive moves k times
+        faster in physics and its front trails by k times the free tracking lag
+        (``TRACKING_DELAY`` of travel at the physical speed); the threshold grows by that
+        extra, ``(k - 1) * speed * TRACKING_DELAY``, so a stall is still called when the front
+        has fallen ``jam_lag`` behind where a freely driving robot would be (the same margin
+        over the free lag as at k = 1; at k = 1 the threshold is ``jam_lag`` itself)."""
+        return self.config.jam_lag + self._lag_allowance
+
+    @staticmethod
+    def _speed_lag(speed: float, k: float) -> float:
+        """The extra tracking lag a drive at ``speed`` m/s has compressed ``k`` times (see
+        :attr:`jam_lag`), m."""
+        return (k - 1.0) * abs(speed) * TRACKING_DELAY
 
     def _check_tracking(self) -> None:
         """Jam if a follower module is further than ``jam_tracking`` off its target."""
@@ -555,8 +646,12 @@ class Executor:
         straight = cmd.curvature == 0.0 and self.vclamp.alpha > 0.0 and not cmd.hold_heading
         self.command.position, self.command.rotation = p.copy(), orthonormal(self.command.rotation)
         remaining = step.distance
-        ds_tick = step.speed * self.control_dt
+        # a turn's arc and the drive holding its heading after it are not compressed: there the
+        # walls set the front's heading (contact dynamics, not a quasi-static motion)
+        k = self.time_compression if cmd.curvature == 0.0 and not cmd.hold_heading else 1.0
+        ds_tick = step.speed * k * self.control_dt
         complying = False
+        self._lag_allowance = self._speed_lag(step.speed, k)
         while remaining > 1e-9:
             ds = min(ds_tick, remaining)
             remaining -= ds
@@ -572,7 +667,7 @@ class Executor:
             self.path.push(self.odometer, self.command.position.copy(), rear_frame.copy())
             self._set_targets()
             try:
-                self._tick(self.command.rotation[:, 0])
+                self._tick(self.command.rotation[:, 0], k * self.control_dt)
                 if step.comply and cmd.curvature == 0.0 and (complying or cmd.hold_heading):
                     complying = complying or self._steer_error() > self.config.jam_hold
                     if complying:  # the bend goes on: the walls set the heading
@@ -588,6 +683,7 @@ class Executor:
                 self._travelled -= max(lag, 0.0)
                 self.path.truncate(self.odometer)
                 raise
+        self._lag_allowance = 0.0
         self._settle(self._ticks(SETTLE_TIME))
         if straight and step.distance >= 0.01:
             # what a clamped straight drive falls short of its command (the drive's lag not
@@ -602,7 +698,8 @@ class Executor:
             self._glide(-distance, speed, axis)
             return
         remaining = distance
-        ds_tick = speed * self.control_dt
+        ds_tick = speed * self.motion_dt
+        self._lag_allowance = self._speed_lag(speed, self.time_compression)
         while remaining > 1e-9:
             ds = min(ds_tick, remaining)
             remaining -= ds
@@ -613,7 +710,8 @@ class Executor:
             if self.command.roll != 0.0:
                 self.command.rotation = self.command.rotation @ rx(self.command.roll)
             self._set_targets()
-            self._tick(None)
+            self._tick(None, self.motion_dt)
+        self._lag_allowance = 0.0
         self.command.heading = self.command.rotation.copy()
         self._settle(self._ticks(SETTLE_TIME))
 
@@ -679,7 +777,7 @@ class Executor:
         by the drive's duration, and the robot settles for ``SETTLE_TICKS`` physics ticks."""
         m, d = self.model, self.data
         step = abs(distance)
-        n_ticks = max(1, int(math.ceil(step / (speed * self.control_dt) - 1e-9)))
+        n_ticks = max(1, int(math.ceil(step / (speed * self.motion_dt) - 1e-9)))
         q = self.robot.free_qpos
         if distance > 0:
             # the robot advances what a physical drive of this length does (see ``_drive``)
@@ -704,7 +802,7 @@ class Executor:
         mujoco.mj_kinematics(m, d)
         if self.near is not None:
             self.near.update(d, force=True)
-        self.time += n_ticks * self.control_dt
+        self.time += n_ticks * self.motion_dt
         self.kinematic_ticks += n_ticks
         if self.on_tick is not None:  # (one frame of the glide for videos)
             self.on_tick(self.time)
@@ -723,7 +821,7 @@ class Executor:
         total = step.angle
         if abs(total) < 1e-9:
             return
-        n_ticks = max(1, int(math.ceil(abs(total) / (step.rate * self.control_dt))))
+        n_ticks = max(1, int(math.ceil(abs(total) / (step.rate * self.motion_dt))))
         inc = total / n_ticks
         for _ in range(n_ticks):
             turn = rx(inc)
@@ -731,7 +829,7 @@ class Executor:
             self.command.heading = self.command.heading @ turn
             self.command.roll += inc
             self._set_targets()
-            self._tick(None)
+            self._tick(None, self.motion_dt)
         self._settle(self._ticks(ROLL_SETTLE))
 
     def _roll_home(self) -> None:
@@ -769,27 +867,27 @@ class Executor:
         a_fast = c.clamp_angle(diameter - CLAMP_SEARCH)
         self.vclamp.alpha = min(self.vclamp.alpha, a_fast)
         touched = False
-        for _ in range(self._ticks(CLAMP_TIMEOUT)):
+        for _ in range(max(1, int(round(CLAMP_TIMEOUT / self.motion_dt)))):
             self._set_targets()
-            self._tick(None)
+            self._tick(None, self.motion_dt)
             if self.robot.apex_force(CLAMP_SIDE) >= c.clamp_force:
                 touched = True
                 break
             if self.vclamp.alpha >= a_goal:
                 break
             rate = CLAMP_RATE if self.vclamp.alpha < a_fast else CLAMP_RATE_SLOW
-            self.vclamp.alpha = min(self.vclamp.alpha + rate * self.control_dt, a_goal)
+            self.vclamp.alpha = min(self.vclamp.alpha + rate * self.motion_dt, a_goal)
         if touched:
             self.vclamp.alpha = c.clamp_angle(self.robot.clamped_diameter() + CLAMP_PRELOAD)
             self._set_targets()
         self._settle(self._ticks(CLAMP_SETTLE))
 
     def _unclamp(self) -> None:
-        rate = CLAMP_RATE * self.control_dt
+        rate = CLAMP_RATE * self.motion_dt
         while self.vclamp.alpha > 0:
             self.vclamp.alpha = max(0.0, self.vclamp.alpha - rate)
             self._set_targets()
-            self._tick(None)
+            self._tick(None, self.motion_dt)
         self._settle(self._ticks(UNCLAMP_SETTLE))
 
     def _probe(self, side: int, rng: np.random.Generator) -> float | None:
@@ -803,9 +901,9 @@ class Executor:
         a_max = math.radians(75.0)
         h = None
         while self.vclamp.alpha < a_max:
-            self.vclamp.alpha = min(self.vclamp.alpha + CLAMP_RATE * self.control_dt, a_max)
+            self.vclamp.alpha = min(self.vclamp.alpha + CLAMP_RATE * self.motion_dt, a_max)
             self._set_targets()
-            self._tick(None)
+            self._tick(None, self.motion_dt)
             if self.robot.apex_force(side) >= c.clamp_force:
                 h = 0.5 * self.robot.clamped_diameter(rng)
                 break
@@ -845,14 +943,14 @@ class Executor:
         rear = self.odometer - self._offsets[-1] - 0.5 * c.pitch
         w = np.clip((hs - (rear - SHIFT_BLEND)) / SHIFT_BLEND, 0.0, 1.0)
         sel = np.nonzero(w > 0)[0]
-        shift_step = SHIFT_SPEED * self.control_dt
+        shift_step = SHIFT_SPEED * self.motion_dt
         n_ticks = max(1, int(math.ceil(float(np.linalg.norm(move)) / shift_step)))
         inc = move / n_ticks
         for _ in range(n_ticks):
             self.path.shift(sel, w[sel], inc)
             self.command.position = self.command.position + inc
             self._set_targets()
-            self._tick(None)
+            self._tick(None, self.motion_dt)
         self._settle(self._ticks(SHIFT_SETTLE))
 
     def _steer_error(self) -> float:
@@ -974,6 +1072,7 @@ class Executor:
 
     def _stop_here(self) -> None:
         """After a jam: hold the targets where the robot is (it stops pushing)."""
+        self._lag_allowance = 0.0
         p, r = self._front_pose()
         self.command.position, self.command.rotation = p, r
         self.command.curvature = 0.0

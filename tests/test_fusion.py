@@ -305,3 +305,24 @@ def test_a_branch_seen_consistently_is_kept_when_near_scans_lose_it():
     for x in (0.70, 0.75, 0.80):
         s = tr.update(bend(1.0 - x, direction=2.13), np.array([x, 0, 0]), EYE)
     assert s.detection.kind == "bend"
+
+
+def test_a_second_way_only_far_scans_saw_is_dropped_when_near_scans_see_a_bend():
+    # closed-loop case (100 mm mitre bend at the end of an 8 m straight, ideal sensor): the
+    # sparse sweeps from 1.16 to 0.71 m read the bend's far wall as a second way on, four times
+    # in a row; every scan from 0.66 m on sees the bend alone. Far sightings do not count
+    # towards ``way_keep_hits``, so the bend stays a bend.
+    tr = StructureTracker()
+    ways = [(math.pi / 2, 0.0), (math.pi / 2, math.pi)]
+    for x in (0.0, 0.15, 0.30, 0.45):
+        tr.update(_junction(1.16 - x, ways), np.array([x, 0, 0]), EYE)
+    for x in (0.50, 0.65, 0.70, 0.75, 0.80, 0.85, 0.90, 0.95):
+        s = tr.update(bend(1.16 - x, direction=0.0), np.array([x, 0, 0]), EYE)
+    assert s.confirmed and s.detection.kind == "bend"
+    assert [round(o.direction, 3) for o in s.detection.options] == [0.0]
+    tr = StructureTracker(way_keep_reach=2.0)  # every sighting counted: the phantom stays
+    for x in (0.0, 0.15, 0.30, 0.45):
+        tr.update(_junction(1.16 - x, ways), np.array([x, 0, 0]), EYE)
+    for x in (0.50, 0.65, 0.70, 0.75, 0.80, 0.85, 0.90, 0.95):
+        s = tr.update(bend(1.16 - x, direction=0.0), np.array([x, 0, 0]), EYE)
+    assert len(s.detection.options) == 2

@@ -27,7 +27,8 @@ def test_physics_mode_is_checked() -> None:
 def test_a_straight_away_from_fittings_is_driven_kinematically_as_physics_would() -> None:
     """2 m of 90 mm pipe to a bend, the robot steering by its sweeps: the contact mode glides
     where the rule allows and decides where the all-physics reference decides (within 1 mm and
-    0.1 deg), clamped the same, at the same simulated time."""
+    0.1 deg), clamped the same, at the same simulated time (to the rounding of its motions to
+    whole time-compressed ticks: the contact mode runs compressed, the reference does not)."""
     net = layouts.mitre_bend(0.09, math.pi / 2, 0.0, distance=2.0)
     plants = {}
     for physics in ("everywhere", "contact"):
@@ -44,7 +45,7 @@ def test_a_straight_away_from_fittings_is_driven_kinematically_as_physics_would(
     cos = float(np.clip(a.rotation[:, 0] @ b.rotation[:, 0], -1.0, 1.0))
     assert math.degrees(math.acos(cos)) < 0.1
     assert new.robot.clamped_diameter() == pytest.approx(ref.robot.clamped_diameter(), abs=5e-4)
-    assert new.sim_time == pytest.approx(ref.sim_time)
+    assert new.sim_time == pytest.approx(ref.sim_time, rel=1e-3)
 
 
 def test_near_a_fitting_physics_runs() -> None:
