@@ -48,6 +48,7 @@ from typing import Any
 
 from scipy import stats
 
+from benchmarks.workers import run_plan
 from detector.atomic import atomic_write_text
 
 FIDELITIES = ("fast", "full")
@@ -155,27 +156,7 @@ def run_all(
 ) -> list[dict[str, Any]]:
     """Run ``plan`` (in ``jobs`` spawned worker processes when > 1); ``on_episode`` after each
     episode as it finishes; the episodes in plan order."""
-    if jobs <= 1:
-        out = []
-        for agent, fidelity, index in plan:
-            out.append(run_episode(agent, fidelity, index, network_config))
-            if on_episode:
-                on_episode(out[-1])
-        return out
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    results: dict[int, dict[str, Any]] = {}
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-        futures = {
-            pool.submit(run_episode, a, f, i, network_config): k for k, (a, f, i) in enumerate(plan)
-        }
-        for future in as_completed(futures):
-            results[futures[future]] = future.result()
-            if on_episode:
-                on_episode(results[futures[future]])
-    return [results[k] for k in range(len(plan))]
+    return run_plan(run_episode, [(a, f, i, network_config) for a, f, i in plan], jobs, on_episode)
 
 
 def merge_episodes(*groups: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:

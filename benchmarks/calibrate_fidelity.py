@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from benchmarks.workers import run_plan
 from detector.atomic import atomic_write_text
 
 FIDELITIES = ("fast", "full")
@@ -125,28 +126,8 @@ def run_all(
 ) -> list[dict[str, Any]]:
     """Run the episodes of ``plan`` (in ``jobs`` spawned worker processes when > 1: each builds
     its own environments, so no MuJoCo world is shared); results in plan order."""
-    if jobs <= 1:
-        out = []
-        for fidelity, index, seed in plan:
-            out.append(run_episode(fidelity, index, seed, network_config))
-            if on_episode:
-                on_episode(out[-1])
-        return out
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    results: dict[int, dict[str, Any]] = {}
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-        futures = {
-            pool.submit(run_episode, fid, index, seed, network_config): k
-            for k, (fid, index, seed) in enumerate(plan)
-        }
-        for future in as_completed(futures):
-            results[futures[future]] = future.result()
-            if on_episode:
-                on_episode(results[futures[future]])
-    return [results[k] for k in range(len(plan))]
+    calls = [(fid, index, seed, network_config) for fid, index, seed in plan]
+    return run_plan(run_episode, calls, jobs, on_episode)
 
 
 # ----------------------------------------------------------------------- statistics
