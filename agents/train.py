@@ -307,6 +307,14 @@ class _BudgetProgress:
         self.progress.stop()
 
 
+def _saved_batch_size(path: str, default: int) -> int:
+    """The minibatch size a saved SB3 model was trained with (``default`` if it has none)."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    data, _, _ = load_from_zip_file(path, load_data=True, device="cpu")
+    return int((data or {}).get("batch_size", default))
+
+
 def _make_model(cfg: TrainConfig, venv: Any, out: Path) -> MaskablePPO:
     """A new MaskablePPO per ``cfg.ppo``, or the model ``cfg.init`` with the run's rollout
     (:data:`INIT_OVERRIDES`) on ``venv``; model files are saved atomically."""
@@ -323,7 +331,8 @@ def _make_model(cfg: TrainConfig, venv: Any, out: Path) -> MaskablePPO:
     overrides = {k: cfg.ppo[k] for k in INIT_OVERRIDES if k in cfg.ppo}
     if "n_steps" in overrides:  # a minibatch no larger than the rollout
         rollout = int(overrides["n_steps"]) * cfg.n_envs
-        overrides["batch_size"] = min(int(overrides.get("batch_size", rollout)), rollout)
+        batch = overrides.get("batch_size", _saved_batch_size(cfg.init, rollout))
+        overrides["batch_size"] = min(int(batch), rollout)
     model = cls.load(
         cfg.init, env=venv, device="cpu", tensorboard_log=str(out / "tb"), verbose=0, **overrides
     )

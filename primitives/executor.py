@@ -774,7 +774,7 @@ class Executor:
         """Move the clamped robot ``distance`` m (negative: backwards) along the unit world
         ``axis`` kinematically: every body, drive target and the driven path translate
         together (joint angles, clamp, sag and roll as physics left them), the clock advances
-        by the drive's duration, and the robot settles for ``SETTLE_TICKS`` physics ticks."""
+        by the drive's duration, and the robot settles for ``SETTLE_TIME`` s of physics."""
         m, d = self.model, self.data
         step = abs(distance)
         n_ticks = max(1, int(math.ceil(step / (speed * self.motion_dt) - 1e-9)))

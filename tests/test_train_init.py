@@ -123,3 +123,12 @@ def test_the_cli_reports_a_bad_init_before_any_work(
     assert not out.exists()
     code = main(["train", "--n-envs", "65", "--out", str(out), "--no-progress"])
     assert code == 2 and "n_envs=65" in capsys.readouterr().out
+
+
+def test_without_a_configured_minibatch_the_saved_models_is_kept() -> None:
+    # a config without ppo.batch_size fine-tunes with the model's own minibatch (capped at the
+    # rollout), not with the whole rollout
+    from agents.train import _saved_batch_size
+
+    shipped = MaskablePPO.load(SHIPPED, device="cpu")
+    assert _saved_batch_size(str(SHIPPED), 10**6) == shipped.batch_size < 10**6
