@@ -70,7 +70,12 @@ from benchmarks.bench_primitives import SEARCH_MAX, survives  # noqa: E402
 from detector.atomic import atomic_write_text  # noqa: E402
 from detector.options import StructureOption  # noqa: E402
 from pipe_env import layouts  # noqa: E402
-from pipe_env.ground_truth import fitting_ahead, option_angles, structures_ahead  # noqa: E402
+from pipe_env.ground_truth import (  # noqa: E402
+    fitting_ahead,
+    option_angles,
+    structures_ahead,
+    ways_at,
+)
 from pipe_env.network import PipeNetwork  # noqa: E402
 from pipe_env.routing import locate  # noqa: E402
 from primitives.executor import Executor, SequenceOutcome  # noqa: E402
@@ -207,20 +212,7 @@ def _on_axis(net: PipeNetwork, ex: Executor, tol: float = 0.002) -> bool:
 def _ways(net: PipeNetwork, ex: Executor) -> list[tuple[StructureOption, str]]:
     """Ground-truth options of the fitting ahead, each with the run it leads into."""
     pose = ex.robot.sensor_pose()
-    node, entry = fitting_ahead(net, pose)
-    g = net.geometry[node]
-    travel = -g.port(entry).axis
-    distance = float((g.reference_point(entry) - pose.position) @ travel)
-    kind = "bend" if g.kind == "bend" else "junction"
-    radius = float(g.bend_radius or 0.0) if g.style == "long" else 0.0
-    out = []
-    for p in g.ports:
-        if p.run_id == entry:
-            continue
-        angle, direction = option_angles(travel, p.axis, pose)
-        option = StructureOption(kind, distance, p.diameter, direction, angle, bend_radius=radius)
-        out.append((option, p.run_id))
-    return out
+    return ways_at(net, *fitting_ahead(net, pose), pose)
 
 
 def _option_case(

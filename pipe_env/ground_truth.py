@@ -55,6 +55,32 @@ def fitting_ahead(network: PipeNetwork, pose: Pose) -> tuple[str, str]:
     return towards, ep.run_id
 
 
+def ways_at(
+    network: PipeNetwork, node_id: str, entry_run: str, pose: Pose
+) -> list[tuple[StructureOption, str]]:
+    """Each way on at fitting ``node_id`` for a robot arriving by ``entry_run``, seen from
+    ``pose``: its option and the run it leads into, in the fitting's port order. A closure has
+    one option with diameter 0 and no run (``""``)."""
+    g = network.geometry[node_id]
+    travel = -g.port(entry_run).axis
+    ref = g.reference_point(entry_run)
+    distance = float((ref - pose.position) @ travel)
+    kind = OPTION_KIND[g.kind]
+    if g.kind == "closure":
+        return [(StructureOption("closure", distance, 0.0, 0.0, 0.0), "")]
+    bend_radius = float(g.bend_radius or 0.0) if g.kind == "bend" and g.style == "long" else 0.0
+    ways = []
+    for p in g.ports:
+        if p.run_id == entry_run:
+            continue
+        angle, direction = option_angles(travel, p.axis, pose)
+        option = StructureOption(
+            kind, distance, p.diameter, direction, angle, bend_radius=bend_radius
+        )
+        ways.append((option, p.run_id))
+    return ways
+
+
 def options_at(
     network: PipeNetwork, node_id: str, entry_run: str, pose: Pose
 ) -> list[StructureOption]:
@@ -63,24 +89,7 @@ def options_at(
     Sorted straight-on first, then by direction. One option per way on; a closure has one
     option with diameter 0.
     """
-    g = network.geometry[node_id]
-    travel = -g.port(entry_run).axis
-    ref = g.reference_point(entry_run)
-    distance = float((ref - pose.position) @ travel)
-    kind = OPTION_KIND[g.kind]
-    if g.kind == "closure":
-        return [StructureOption("closure", distance, 0.0, 0.0, 0.0)]
-    bend_radius = float(g.bend_radius or 0.0) if g.kind == "bend" and g.style == "long" else 0.0
-    options = []
-    for p in g.ports:
-        if p.run_id == entry_run:
-            continue
-        angle, direction = option_angles(travel, p.axis, pose)
-        options.append(
-            StructureOption(kind, distance, p.diameter, direction, angle, bend_radius=bend_radius)
-        )
-    options.sort(key=option_order)
-    return options
+    return sorted((o for o, _ in ways_at(network, node_id, entry_run, pose)), key=option_order)
 
 
 def structures_ahead(
