@@ -47,6 +47,9 @@ sees its outline (thesis 5.1.2: a bend seen from too close becomes a "type 1"). 
   the challenger has ``confirm_count - 1`` consistent detections and more trust weight than the
   track (nearer scans weigh more), it replaces the track: a tee seen from its stem that looked
   like a closure from 45 cm is a junction once the scans from 30 and 20 cm agree on it.
+  A reducer challenger does not replace a confirmed junction: from close up a branch's mouth
+  beside the way straight on reads as a widening (a 78 mm wye seen from 37 and 32 cm read as a
+  reducer to 118 mm from 26 and 20 cm, and the robot drove past the branch by itself).
 - **Hands over** near the structure: when the fused reference point is closer than
   ``handover_distance`` (the detector's blind zone, about one diameter), detections that
   disagree ("straight", a closure-like reading, or nothing) are ignored; the confirmed estimate
@@ -346,7 +349,11 @@ class StructureTracker:
                 if tr.evidence <= 0.0 or (not tr.confirmed and obs["weight"] > tr.weight):
                     self._track = self._new_track(obs)
                     self._challenger = None
-                elif challenger.hits >= self.confirm_count - 1 and challenger.weight > tr.weight:
+                elif (
+                    challenger.hits >= self.confirm_count - 1
+                    and challenger.weight > tr.weight
+                    and not self._keeps_branch(tr, challenger)
+                ):
                     self._track = challenger
                     self._challenger = None
         tr = self._track
@@ -403,6 +410,18 @@ class StructureTracker:
             # the nearest way's reference point (a thesis detection may place ways apart)
             "near_ref": pos + min(o.distance for o in det.options) * axis_w,
         }
+
+    def _keeps_branch(self, tr: _Track, challenger: _Track) -> bool:
+        """True if ``tr`` is a confirmed junction (more than one way on reported) and
+        ``challenger`` a reducer: from close up a branch's mouth beside the way straight on
+        reads as a widening of the pipe, so nearer reducer scans do not overrule the junction
+        (its evidence still drains with every scan that disagrees)."""
+        return (
+            tr.confirmed
+            and tr.family == _FAMILY["junction"]
+            and challenger.family == _FAMILY["reducer"]
+            and len(self._kept_ways(tr)) > 1
+        )
 
     def _contested(self, obs: dict[str, Any]) -> bool:
         """True unless scans from another place saw a structure where this one is and none

@@ -326,3 +326,39 @@ def test_a_second_way_only_far_scans_saw_is_dropped_when_near_scans_see_a_bend()
     for x in (0.50, 0.65, 0.70, 0.75, 0.80, 0.85, 0.90, 0.95):
         s = tr.update(bend(1.16 - x, direction=0.0), np.array([x, 0, 0]), EYE)
     assert len(s.detection.options) == 2
+
+
+def _reducer(distance, diameter, conf=0.9):
+    return Detection(
+        "reducer", [StructureOption("reducer", distance, diameter, 0.0, 0.0, conf)], conf
+    )
+
+
+def test_a_confirmed_junction_is_not_overruled_by_a_near_reducer_reading():
+    # closed-loop case (held-out network 64, 78 mm wye with a 45 deg branch, improved
+    # detector): sweeps from 66, 62, 37 and 32 cm see the wye; from 26 and 20 cm its branch
+    # mouth beside the way straight on reads as a widening, a reducer to 118 mm. The nearer
+    # reducer scans outweighed the junction and the robot drove past the branch by itself.
+    ways = [(0.0, 0.0), (math.pi / 4, math.pi)]
+    positions = (0.0, 0.04, 0.29, 0.34)
+    distances = (0.66, 0.62, 0.37, 0.32)
+    near = ((0.40, 0.26), (0.46, 0.20))
+
+    def run(tr):
+        for x, d in zip(positions, distances, strict=True):
+            s = tr.update(_junction(d, ways, diameter=0.078), np.array([x, 0, 0]), EYE)
+        assert s.confirmed and s.detection.kind == "junction"
+        for x, d in near:
+            s = tr.update(_reducer(d, 0.118), np.array([x, 0, 0]), EYE)
+        return s
+
+    s = run(StructureTracker())
+    assert s.confirmed and s.detection.kind == "junction"
+    assert sorted(round(o.angle, 3) for o in s.detection.options) == [0.0, round(math.pi / 4, 3)]
+    # a reducer seen from near still replaces a confirmed bend (one way on: no branch to keep)
+    tr = StructureTracker()
+    for x, d in zip(positions, distances, strict=True):
+        tr.update(bend(d, angle=0.3, diameter=0.078), np.array([x, 0, 0]), EYE)
+    for x, d in near:
+        s = tr.update(_reducer(d, 0.118), np.array([x, 0, 0]), EYE)
+    assert s.detection.kind == "reducer"
