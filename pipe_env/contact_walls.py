@@ -127,8 +127,15 @@ def _tube_pieces(
     pts = wall_points(s)
     valid = keep(pts.reshape(-1, 3)).reshape(pts.shape[:3])
     # (S, n) every / any corner of cell k of sector j valid; Python lists for the scan below
-    lo_all, hi_all = valid[:, :, :-1].all(axis=0), valid[:, :, 1:].all(axis=0)
-    lo_any, hi_any = valid[:, :, :-1].any(axis=0), valid[:, :, 1:].any(axis=0)
+    # (asarray: reductions type as scalar | array)
+    lo_all, hi_all = (
+        np.asarray(valid[:, :, :-1].all(axis=0)),
+        np.asarray(valid[:, :, 1:].all(axis=0)),
+    )
+    lo_any, hi_any = (
+        np.asarray(valid[:, :, :-1].any(axis=0)),
+        np.asarray(valid[:, :, 1:].any(axis=0)),
+    )
     cells_all = (lo_all[:-1] & lo_all[1:] & hi_all[:-1] & hi_all[1:]).tolist()
     cells_any = (lo_any[:-1] | lo_any[1:] | hi_any[:-1] | hi_any[1:]).tolist()
     sl = s.tolist()

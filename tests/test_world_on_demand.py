@@ -286,3 +286,22 @@ def test_have_volume_is_the_one_at_a_time_test(sizes: list[int], seed: int) -> N
         return bool(len(sv) == 3 and sv[2] > 1e-5)
 
     assert _have_volume(sets) == [one(p) for p in sets]
+
+
+def test_the_full_fidelity_plant_builds_ray_meshes_only_for_the_mujoco_lidar() -> None:
+    from pipe_env.envs.plant_full import PhysicalPlant
+
+    net = layouts.t_junction(0.09, direction=0.0, distance=0.5)
+    analytic = PhysicalPlant(net)  # the default backend: analytic ray casting
+    assert analytic.world is not None and not analytic.world.has_ray_meshes
+    meshes = PhysicalPlant(net, lidar_backend="mujoco")
+    assert meshes.world is not None and meshes.world.has_ray_meshes
+    # the same physics world but for the ray meshes
+    a, m = analytic.world.model, meshes.world.model
+    nw = len(meshes.world.wall_geoms)
+    assert m.ngeom - a.ngeom == nw > 0
+    assert m.geom_pos[nw:].tobytes() == a.geom_pos.tobytes()
+    assert m.geom_size[nw:].tobytes() == a.geom_size.tobytes()
+    # a render or an export of the analytic plant's world gets the ray meshes on demand
+    assert analytic.world.complete().has_ray_meshes
+    assert mjcf_text(analytic.world) == mjcf_text(meshes.world)
