@@ -205,6 +205,7 @@ def build_world(
     if customize is not None:
         customize(spec)
     _static_walls_posed_once(spec)
+    _no_island_discovery(spec)
     model = spec.compile()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
@@ -314,6 +315,19 @@ def _static_walls_posed_once(spec: mujoco.MjSpec) -> None:
     for body in spec.worldbody.bodies:
         if body.joints:  # (a tree that can move; static and mocap bodies have no policy)
             body.sleep = mujoco.mjtSleepPolicy.mjSLEEP_NEVER
+
+
+def _no_island_discovery(spec: mujoco.MjSpec) -> None:
+    """Switch MuJoCo's constraint island discovery off.
+
+    Islands let the solver treat independent groups of constrained bodies apart; a world has one
+    moving tree (the robot, its modules held by welds to their targets), so there is one island
+    and finding it is pure cost: about 2-8 % of an mj_step (``benchmarks/bench_step_cost.py``;
+    one Newton iteration solves a step, so the solver's own settings change nothing). The
+    trajectories are bit for bit those with islands (the benchmark and a test compare them);
+    sleeping (:func:`_static_walls_posed_once`) works without islands.
+    """
+    spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
 
 
 def _contact_style(g: mujoco.MjsGeom) -> None:
