@@ -731,3 +731,75 @@ def robust_line(
         s = max(mad_sigma(res), sigma_floor)
         w = tukey_weights(res, 4.685 * s)
     return a, b
+
+
+@njit(cache=True)
+def _sorted_percentile(s, q):
+    """``np.percentile`` (linear interpolation, numpy's own rounding) of the sorted ``s`` at
+    ``q`` (percent); ``s`` must hold one value or more."""
+    n = s.size
+    v = (n - 1) * (q / 100.0)
+    if v >= n - 1:
+        return s[n - 1]
+    lo = math.floor(v)
+    i = int(lo)
+    g = v - lo
+    a, b = s[i], s[i + 1]
+    d = b - a
+    if g >= 0.5:
+        return b - d * (1.0 - g)
+    return a + d * g
+
+
+@njit(cache=True)
+def _sorted_median(s):
+    """``np.median`` of the sorted ``s`` (one value or more)."""
+    n = s.size
+    h = n // 2
+    if n % 2:
+        return s[h]
+    return (s[h - 1] + s[h]) / 2.0
+
+
+@njit(cache=True)
+def column_stats(cols, r, sigma, k, g):
+    """Per column of the scan grid (``0 <= cols < k``) that holds values, in increasing
+    order: the share of the grid's ``g`` rows it holds, the 10th, 50th and 90th percentiles
+    of its ``r`` and the median of its ``sigma`` (as ``np.percentile`` and ``np.median`` give
+    them). Returns ``(shares, r10, r50, r90, sigma50)``."""
+    count = np.zeros(k, dtype=np.int64)
+    for i in range(cols.size):
+        count[cols[i]] += 1
+    start = np.zeros(k + 1, dtype=np.int64)
+    m = 0
+    for c in range(k):
+        start[c + 1] = start[c] + count[c]
+        if count[c] > 0:
+            m += 1
+    fill = start[:k].copy()
+    r_by = np.empty(cols.size)
+    s_by = np.empty(cols.size)
+    for i in range(cols.size):
+        c = cols[i]
+        r_by[fill[c]] = r[i]
+        s_by[fill[c]] = sigma[i]
+        fill[c] += 1
+    shares = np.empty(m)
+    r10 = np.empty(m)
+    r50 = np.empty(m)
+    r90 = np.empty(m)
+    sig50 = np.empty(m)
+    j = 0
+    denom = max(g, 1)
+    for c in range(k):
+        if count[c] == 0:
+            continue
+        rs = np.sort(r_by[start[c] : start[c + 1]])
+        ss = np.sort(s_by[start[c] : start[c + 1]])
+        shares[j] = count[c] / denom
+        r10[j] = _sorted_percentile(rs, 10.0)
+        r50[j] = _sorted_percentile(rs, 50.0)
+        r90[j] = _sorted_percentile(rs, 90.0)
+        sig50[j] = _sorted_median(ss)
+        j += 1
+    return shares, r10, r50, r90, sig50
