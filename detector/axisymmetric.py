@@ -306,9 +306,9 @@ def detect_axisymmetric(
     diag: dict[str, Any],
 ) -> Detection:
     """End wall (closure) or reducer/expander: the structure is (nearly) axisymmetric."""
-    contraction = bool(inside.sum() >= beyond.sum())
+    contraction = bool(np.count_nonzero(inside) >= np.count_nonzero(beyond))
     anomaly = inside if contraction else beyond
-    if anomaly.sum() < cfg.min_anomaly_points:
+    if np.count_nonzero(anomaly) < cfg.min_anomaly_points:
         return Detection.straight(confidence=0.3, **diag)
     p = cloud.points(anomaly)
     u = p[:, 0]

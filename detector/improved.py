@@ -886,7 +886,7 @@ def _detect_in_pipe_frame(
         u_grid = cloud.xyz[0]
         u_start = partial_percentile(u_grid[beyond_k], 5.0)
         inside_near = inside_k & (u_grid <= u_start + 4.0 * big_r)
-        if uniform >= 0.3 and inside_near.sum() < 0.3 * beyond_k.sum():
+        if uniform >= 0.3 and np.count_nonzero(inside_near) < 0.3 * np.count_nonzero(beyond_k):
             return detect_axisymmetric(cloud, big_r, inside_near, beyond_k, wall, tol, cfg, diag)
         return detect_branches(cloud, big_r, lobes, keep, wall, tol, cfg, diag)
     det = detect_axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
@@ -894,7 +894,7 @@ def _detect_in_pipe_frame(
         return det
     # neither an end wall nor a reducer: the far wall of a turn seen head-on (small pipes, far
     # away): fit an outgoing pipe to the inner returns with unknown roll
-    pseudo = Lobe(inside_k, 0.0, int(inside_k.sum()))
+    pseudo = Lobe(inside_k, 0.0, int(np.count_nonzero(inside_k)))
     alt = detect_branches(cloud, big_r, [pseudo], keep, wall, tol, cfg, dict(diag), any_roll=True)
     if det.diagnostics.get("closure_tentative", False):
         # a wall that looks flat within the range noise but curves: the far wall of a turn

@@ -51,6 +51,10 @@ class PipeCloud:
     _r_v: NDArray[np.float64] | None = field(init=False, default=None)
     _tol_v: NDArray[np.float64] | None = field(init=False, default=None)
     _sigma_pct: dict[float, float] = field(init=False, default_factory=dict)
+    #: (points, radii, tolerances) under earlier poses (the same arrays, never changed)
+    _stashed: list[tuple[NDArray, NDArray | None, NDArray | None]] = field(
+        init=False, default_factory=list
+    )
 
     @property
     def n(self) -> int:
@@ -116,9 +120,19 @@ class PipeCloud:
         return np.take(self.xyz.reshape(3, -1), flat_cells, axis=1).T
 
     def set_pose(self, pose: SensorInPipe) -> None:
+        self._stash()
         self.pose = pose
         self.xyz_v = _transform(pose, self.sensor_v)
         self._xyz = self._r_v = self._tol_v = None
+
+    def _stash(self) -> None:
+        """Keep the radii and tolerances computed under the current pose's points, for a
+        :meth:`restore` of those points (the last :data:`STASHED_POSES` poses)."""
+        if not hasattr(self, "xyz_v") or (self._r_v is None and self._tol_v is None):
+            return
+        kept = [e for e in self._stashed if e[0] is not self.xyz_v]
+        kept.append((self.xyz_v, self._r_v, self._tol_v))
+        self._stashed = kept[-STASHED_POSES:]
 
     @property
     def r_v(self) -> NDArray[np.float64]:
@@ -128,9 +142,15 @@ class PipeCloud:
         return self._r_v
 
     def restore(self, pose: SensorInPipe, xyz_v: NDArray[np.float64]) -> None:
-        """Go back to a pose whose points were computed before."""
+        """Go back to a pose whose points were computed before (with their radii and
+        tolerances, when they were computed and kept)."""
+        self._stash()
         self.pose, self.xyz_v = pose, xyz_v
         self._xyz = self._r_v = self._tol_v = None
+        for points, r_v, tol_v in self._stashed:
+            if points is xyz_v:
+                self._r_v, self._tol_v = r_v, tol_v
+                break
 
 
 @njit(cache=True)
@@ -608,6 +628,9 @@ def partial_percentiles(x: NDArray[np.float64], qs: tuple[float, ...]) -> list[f
             out.append(float(part[lo] + (h - lo) * (part[lo + 1] - part[lo])))
     return out
 
+
+#: How many earlier poses' radii and tolerances a cloud keeps (:meth:`PipeCloud.restore`).
+STASHED_POSES = 4
 
 #: The percentiles of the returns' radial noise the detector reads
 #: (:meth:`PipeCloud.sigma_percentile`).

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from detector import fit_kernels as fk
-from detector.axis_fit import _off_wall_entries
+from detector.axis_fit import _axis_returns, _off_wall_entries
 from detector.grid import label_regions
 from detector.pipe_cloud import (
     _crop,
@@ -27,6 +27,7 @@ from detector.pipe_cloud import (
     _spread_exceeds,
     azimuth_coverage,
     column_stats,
+    even_indices,
     partial_percentile,
     partial_percentiles,
     region_sizes,
@@ -528,3 +529,19 @@ def test_column_stats_are_numpys(seed: int, n: int, k: int, decimals: int) -> No
     got = column_stats(cols, r, sigma, k, g)
     for a, b in zip(got, column_stats_np(cols, r, sigma, g)):
         np.testing.assert_array_equal(a, b)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seeds, st.integers(0, 3000), st.integers(10, 600), st.booleans())
+def test_axis_returns_spread_evenly_as_even_indices(
+    seed: int, n: int, n_keep: int, nearest: bool
+) -> None:
+    """The axis refinement's returns, ``n_keep`` of them picked in the compiled pass, are the
+    ones :func:`even_indices` picks from all of them."""
+    rng = np.random.default_rng(seed)
+    xyz = rng.normal(size=(3, n))
+    r = np.hypot(xyz[1], xyz[2])
+    u_max = math.nan if nearest else float(rng.normal())
+    every = _axis_returns(xyz, r, 1.0, 0.5, u_max, 10**9)
+    ref = every[:, even_indices(every.shape[1], n_keep)]
+    np.testing.assert_array_equal(_axis_returns(xyz, r, 1.0, 0.5, u_max, n_keep), ref)
