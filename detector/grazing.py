@@ -90,6 +90,7 @@ def find_ring_holes(
     before: float,
     beam_step: float,
     cfg: ImprovedConfig = DEFAULT_CONFIG,
+    sigma_range: NDArray[np.float64] | None = None,
 ) -> list[RingHole]:
     """Side holes that one ring of beams (or two or three) enters, nearer than ``before``
     along the axis, where the rings meet the wall sparsely (``cfg.hole_sparse_rings``).
@@ -103,6 +104,9 @@ def find_ring_holes(
         before: only holes whose ring meets the wall nearer than this, m.
         beam_step: angle between neighbouring beams of a plane, rad.
         cfg: tuning (the ``hole_*`` fields).
+        sigma_range: (G, K) range noise of each return, m (``None``: none); a far side's fit
+            may miss its returns by ``cfg.hole_fit_noise_k`` times it (range noise lies along
+            the beam, nearly along the axis, and moves the far-side returns by that much).
     """
     step, ok = ring_steps(xyz, valid, big_r)
     thr = np.maximum(cfg.hole_min_step, cfg.hole_noise_k * sigma_r)
@@ -137,7 +141,7 @@ def find_ring_holes(
     fitted: list[tuple[RingHole, NDArray[np.intp], NDArray[np.intp]]] = []
     for _, rs, cs in groups:
         rows, cols = np.concatenate(rs), np.concatenate(cs)
-        hole = _accepted(xyz, rows, cols, g, big_r, cfg)
+        hole = _accepted(xyz, rows, cols, g, big_r, cfg, sigma_range)
         if hole is None:
             continue
         for k, (other, r_o, c_o) in enumerate(fitted):
@@ -146,7 +150,7 @@ def find_ring_holes(
                 and abs(hole.position - other.position) < big_r
             ):
                 rows, cols = np.concatenate([r_o, rows]), np.concatenate([c_o, cols])
-                merged = _accepted(xyz, rows, cols, g, big_r, cfg)
+                merged = _accepted(xyz, rows, cols, g, big_r, cfg, sigma_range)
                 if merged is not None:
                     fitted[k] = (merged, rows, cols)
                 break
@@ -169,10 +173,11 @@ def _accepted(
     g: int,
     big_r: float,
     cfg: ImprovedConfig,
+    sigma_range: NDArray[np.float64] | None = None,
 ) -> RingHole | None:
     """The hole fitted to the bump returns at ``(rows, cols)`` of a grid of ``g`` rows, if the
     bump is one: enough returns and rows, on at most ``cfg.hole_max_rings`` rings, not all
-    around."""
+    around (``sigma_range``: the (G, K) range noise of the returns, m, or ``None``)."""
     n_rows = np.unique(rows).size
     if rows.size < cfg.hole_min_returns or n_rows < cfg.hole_min_returns:
         return None
@@ -180,19 +185,31 @@ def _accepted(
         return None  # a long opening: the regular detector's
     if n_rows * 2.0 * math.pi / g > cfg.hole_max_roll_span:
         return None  # (almost) all around: a widening, not a side hole
-    return _fit_far_side(xyz[:, rows, cols], big_r, cfg)
+    max_rms = cfg.hole_max_fit_rms
+    if sigma_range is not None:
+        noise = float(np.median(sigma_range[rows, cols]))
+        max_rms = max(max_rms, cfg.hole_fit_noise_k * noise)
+    return _fit_far_side(xyz[:, rows, cols], big_r, cfg, max_rms)
 
 
-def _fit_far_side(p: NDArray[np.float64], big_r: float, cfg: ImprovedConfig) -> RingHole | None:
+def _fit_far_side(
+    p: NDArray[np.float64], big_r: float, cfg: ImprovedConfig, max_rms: float | None = None
+) -> RingHole | None:
     """Fit a branch to the far-side returns ``p`` (3, n): a cylinder of radius ``rho`` whose
     axis leaves the run's axis at ``position``, deflected by a standard fitting angle (90 deg
     first, then 45 and 135 deg: the patch a ring sees cannot measure the deflection, only tell
     these apart) towards ``roll``; the deflection with the smallest rms wins, if at most
-    ``cfg.hole_max_fit_rms`` (m). The fit starts from a branch of ``cfg.hole_start_radius``
+    ``max_rms`` (m; default ``cfg.hole_max_fit_rms``). The residuals are measured along the
+    beams (the distance from the surface over the cosine of the incidence, at least
+    ``cfg.hole_min_cos_incidence``): the range noise lies along the beam, and measured across
+    the surface it would favour the inclined far sides of 45 and 135 deg fittings, whose
+    returns it moves less across them. The fit starts from a branch of ``cfg.hole_start_radius``
     radii and may turn by ``cfg.hole_roll_reach`` from the returns' roll."""
+    max_rms = cfg.hole_max_fit_rms if max_rms is None else max_rms
     u = p[0]
     r = np.hypot(p[1], p[2])
     phi = np.arctan2(p[2], p[1])
+    rng = np.hypot(u, r)  # (the beams leave the sensor, near the axis at u = 0)
     # roll: the circular mean weighted by how far along each return went
     w = u - float(u.min()) + 1e-4
     roll0 = math.atan2(float(np.sum(w * np.sin(phi))), float(np.sum(w * np.cos(phi))))
@@ -209,7 +226,14 @@ def _fit_far_side(p: NDArray[np.float64], big_r: float, cfg: ImprovedConfig) -> 
             lat = r * np.cos(phi - x[2])
             along = q * ct + lat * st
             d2 = q * q + r * r - along * along
-            return np.sqrt(np.maximum(d2, 0.0)) - x[1]
+            dist = np.sqrt(np.maximum(d2, 0.0))
+            # (the cosine of the incidence: the beam ``(u, r) / rng`` on the surface's normal,
+            # the point's offset from the branch's axis, ``(q - along ct, r - along st)`` in
+            # the plane of the beam and the axis, over its length ``dist``)
+            cos_inc = np.abs(u * (q - along * ct) + lat * (r - along * st)) / np.maximum(
+                dist * rng, 1e-12
+            )
+            return (dist - x[1]) / np.maximum(cos_inc, cfg.hole_min_cos_incidence)
 
         lower = np.array([x_start - 3.0 * big_r, 0.2 * big_r, roll0 - cfg.hole_roll_reach])
         upper = np.array([x_start + 3.0 * big_r, 1.05 * big_r, roll0 + cfg.hole_roll_reach])
@@ -227,7 +251,7 @@ def _fit_far_side(p: NDArray[np.float64], big_r: float, cfg: ImprovedConfig) -> 
         if not np.all(np.isfinite(x)):
             continue
         rms = float(np.sqrt(np.mean(np.square(res))))
-        if rms > cfg.hole_max_fit_rms or (best is not None and rms >= best.rms):
+        if rms > max_rms or (best is not None and rms >= best.rms):
             continue
         entry = float(np.median(u * big_r / np.maximum(r, 1e-9)))
         best = RingHole(

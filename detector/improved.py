@@ -409,7 +409,9 @@ def _with_ring_holes(
     fitting angle (90, 45 or 135 deg) whose far side fits the bump best; the run goes on past
     them (the rings beyond lie on its wall)."""
     # (cheap tests first: too few returns beyond the wall at all, or nearer than the limit)
-    beyond, n_beyond = _beyond_bump(cloud.r_v, cloud.sigma_v, big_r)
+    beyond, n_beyond = _beyond_bump(
+        cloud.r_v, cloud.sigma_v, big_r, cfg.hole_min_step, cfg.hole_noise_k
+    )
     if n_beyond < 6:
         return det
     support = det.diagnostics.get("fit_support")
@@ -457,6 +459,7 @@ def _with_ring_holes(
         before,
         cloud.beam_step,
         cfg,
+        cloud.sigma_range_grid()[:, c0:c1],
     )
     if not holes or (weak and len(holes) < sum(not o.is_straight_on for o in det.options)):
         return det  # (nothing, or fewer ways than the openings the fit had to explain)
@@ -494,13 +497,14 @@ def _with_ring_holes(
 
 
 @njit(cache=True)
-def _beyond_bump(r, sigma, big_r):
+def _beyond_bump(r, sigma, big_r, min_step, noise_k):
     """Which returns at distances ``r`` from the axis lie beyond the wall of radius ``big_r``
-    by more than 0.35 mm and four times their radial noise ``sigma`` (m), and how many."""
+    by more than ``min_step`` and ``noise_k`` times their radial noise ``sigma`` (m), and how
+    many."""
     out = np.empty(r.size, dtype=np.bool_)
     n = 0
     for i in range(r.size):
-        out[i] = r[i] - big_r > max(0.00035, 4.0 * sigma[i])
+        out[i] = r[i] - big_r > max(min_step, noise_k * sigma[i])
         if out[i]:
             n += 1
     return out, n

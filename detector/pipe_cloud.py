@@ -88,6 +88,10 @@ class PipeCloud:
         """(G, K, 3) view of the pipe-frame points."""
         return self.xyz.transpose(1, 2, 0)
 
+    def sigma_range_grid(self) -> NDArray[np.float64]:
+        """(G, K) range noise of each return (0 where none), m."""
+        return self._grid(self.sigma_range_v, 0.0)
+
     def sigma_percentile(self, q: float) -> float:
         """The ``q``-th percentile of the returns' radial noise (m; computed once; the
         percentiles of :data:`SIGMA_PERCENTILES` in one partial sort)."""
