@@ -412,6 +412,10 @@ def _with_ring_holes(
     beyond, n_beyond = _beyond_bump(
         cloud.r_v, cloud.sigma_v, big_r, cfg.hole_min_step, cfg.hole_noise_k
     )
+    unseen = _past_incidence(cloud, big_r, cfg)
+    if unseen is not None:
+        beyond |= unseen
+        n_beyond = int(np.count_nonzero(beyond))
     if n_beyond < 6:
         return det
     support = det.diagnostics.get("fit_support")
@@ -460,6 +464,7 @@ def _with_ring_holes(
         cloud.beam_step,
         cfg,
         cloud.sigma_range_grid()[:, c0:c1],
+        None if unseen is None else cloud._grid(unseen, False)[:, c0:c1],
     )
     if not holes or (weak and len(holes) < sum(not o.is_straight_on for o in det.options)):
         return det  # (nothing, or fewer ways than the openings the fit had to explain)
@@ -494,6 +499,28 @@ def _with_ring_holes(
         replaced_kind=det.kind,
     )
     return Detection("junction", options, conf, diag)
+
+
+def _past_incidence(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
+) -> NDArray[np.bool_] | None:
+    """Which returns (compact order) lie on the wall radius ``big_r`` (m, within
+    ``cfg.hole_wall_band`` and ``cfg.hole_noise_k`` times their radial noise) where the beam
+    would meet a straight wall beyond the sensor's largest incidence (less
+    ``cfg.incidence_jitter_k`` times its beam-angle jitter): no straight wall returns there,
+    so they come from a surface facing the sensor, the far side of a hole in the wall (a
+    branch far ahead of a sensor that loses the grazing wall around it). ``None`` when the
+    sensor returns at any incidence."""
+    limit = cloud.max_incidence + cfg.incidence_jitter_k * cloud.angular_jitter
+    if limit >= 0.5 * math.pi:
+        return None
+    d = cloud.xyz_v - np.asarray(cloud.pose.position, dtype=float)[:, None]
+    r = np.maximum(cloud.r_v, 1e-12)
+    # (the cosine of the incidence on a straight wall: the beam on the wall's normal there)
+    across = np.abs(d[1] * cloud.xyz_v[1] + d[2] * cloud.xyz_v[2]) / r
+    length = np.sqrt(np.sum(d * d, axis=0))
+    on_wall = np.abs(cloud.r_v - big_r) <= cfg.hole_wall_band + cfg.hole_noise_k * cloud.sigma_v
+    return on_wall & (d[0] > 0.0) & (across < math.cos(limit) * length)
 
 
 @njit(cache=True)
