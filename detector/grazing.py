@@ -214,8 +214,10 @@ def _fit_far_side(
     head-on and the inclined far sides of 45 and 135 deg fittings obliquely, moving their
     returns less across them. The returns are weighted by ``cfg.hole_max_fit_rms`` over that
     allowance, and their weighted rms must be at most ``cfg.hole_max_fit_rms`` (without range
-    noise: their rms). The fit starts from a branch of ``cfg.hole_start_radius`` radii and may
-    turn by ``cfg.hole_roll_reach`` from the returns' roll."""
+    noise: their rms). Another deflection replaces 90 deg only when its weighted rms is below
+    ``cfg.hole_deflection_ratio`` times that of 90 deg. The fit starts from a branch of
+    ``cfg.hole_start_radius`` radii and may turn by ``cfg.hole_roll_reach`` from the returns'
+    roll."""
     u = p[0]
     r = np.hypot(p[1], p[2])
     phi = np.arctan2(p[2], p[1])
@@ -229,6 +231,7 @@ def _fit_far_side(
     roll0 = math.atan2(float(np.sum(w * np.sin(phi))), float(np.sum(w * np.cos(phi))))
     best: RingHole | None = None
     best_ratio = math.inf
+    square_fits = False  # (the 90 deg fit was accepted)
     for theta in DEFLECTIONS:
         ct, st = math.cos(theta), math.sin(theta)
         rho0 = cfg.hole_start_radius * big_r
@@ -271,9 +274,15 @@ def _fit_far_side(
         if not np.all(np.isfinite(x)):
             continue
         ratio = float(np.sqrt(np.mean(np.square(res)))) / cfg.hole_max_fit_rms
+        if square_fits:
+            # (a tee's or a cross's 90 deg, tried first, stands unless another fits clearly
+            # better: the deflection trades against the branch's place along the axis, and
+            # under range noise the fits differ by a few per cent)
+            ratio /= cfg.hole_deflection_ratio
         if ratio > 1.0 or (best is not None and ratio >= best_ratio):
             continue
         best_ratio = ratio
+        square_fits = square_fits or theta == DEFLECTIONS[0]
         rms = float(np.sqrt(np.mean(np.square(res / _scale(x, ct, st)))))
         entry = float(np.median(u * big_r / np.maximum(r, 1e-9)))
         best = RingHole(
