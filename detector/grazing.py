@@ -11,7 +11,10 @@ run's wall radius (less than the wall tolerance, so the opening detector sees no
 though its range is up to a few centimetres long. Compared with the rings on either side,
 which lie on the wall, the ring shows a bump of returns beyond the wall over a bounded range
 of roll; the far-side positions of those returns give the branch's place along the axis, its
-roll, its radius and which standard deflection (90, 45 or 135 deg) it leaves at.
+roll, its radius and which standard deflection (90, 45 or 135 deg) it leaves at. Under range
+noise (along the beam, nearly along the axis) the far side's fit weighs each return by its
+noise projected on the surface; where the run's wall lies beyond the sensor's largest
+incidence, returns on its radius are the far side with no ring beyond to compare with.
 
 Everything here works on the unrolled scan grid (:mod:`detector.grid`) in the pipe frame.
 Lengths in metres, angles in radians.

@@ -89,7 +89,9 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    away, between rings) shows as a bump of returns a millimetre or two beyond the wall on
    those rings alone; its far side places and sizes the branch (:mod:`detector.grazing`)
    when nothing nearer was found, or when a junction's branch fit rests on a handful of
-   returns.
+   returns. A sensor that loses returns beyond its largest incidence sees no run wall past
+   ``R tan(incidence)``: returns on the wall radius there come from a surface facing the
+   sensor, a hole's far side, and count as a bump of their own.
    A junction's branches are held at the standard angle of fittings (90 deg for tees and
    crosses, 45 or 135 deg for laterals) when fitted within 25 deg of it and the returns do
    not reject it (likelihood ratio): a small opening far away shows a patch of the branch
