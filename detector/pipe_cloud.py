@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from detector.grid import build_grid, label_grid, label_stats, region_stats
 from detector.improved_config import ImprovedConfig
 from detector.robust import mad_sigma, tukey_weights
-from detector.scan import Scan, radial_noise
+from detector.scan import Scan, radial_noise, spec_value
 from detector.transforms import SensorInPipe
 
 
@@ -41,6 +41,9 @@ class PipeCloud:
     sigma_range_v: NDArray[np.float64]  # (N,) range noise of each return
     pose: SensorInPipe
     beam_step: float = 0.0  # angle between neighbouring beams of a plane, radians
+    #: the sensor's largest incidence (rad; pi/2: none) and its beam-angle jitter (rad)
+    max_incidence: float = 0.5 * math.pi
+    angular_jitter: float = 0.0
     xyz_v: NDArray[np.float64] = field(init=False)  # (3, N) pipe frame
     thin: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(init=False, default=None)
     tol0: NDArray[np.float64] | None = field(init=False, default=None)  # floor + noise part
@@ -91,6 +94,10 @@ class PipeCloud:
     def pts(self) -> NDArray[np.float64]:
         """(G, K, 3) view of the pipe-frame points."""
         return self.xyz.transpose(1, 2, 0)
+
+    def sigma_range_grid(self) -> NDArray[np.float64]:
+        """(G, K) range noise of each return (0 where none), m."""
+        return self._grid(self.sigma_range_v, 0.0)
 
     def sigma_percentile(self, q: float) -> float:
         """The ``q``-th percentile of the returns' radial noise (m; computed once; the
@@ -277,7 +284,16 @@ def prepare_cloud(
     shape = (g, k)
     sigma_range, sigma_r = radial_noise(scan.spec, ranges, tr[0], tr[1])
     cloud = PipeCloud(
-        wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose, beam_step
+        wraps,
+        shape,
+        cell,
+        np.ascontiguousarray(local),
+        sigma_r,
+        sigma_range,
+        pose,
+        beam_step,
+        spec_value(scan.spec, "max_incidence", 0.5 * math.pi),
+        spec_value(scan.spec, "angular_jitter", 0.0),
     )
     cloud.set_pose(pose)
     return cloud
