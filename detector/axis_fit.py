@@ -21,7 +21,6 @@ from detector.improved_config import ImprovedConfig
 from detector.pipe_cloud import (
     PipeCloud,
     covers_azimuth,
-    even_indices,
     partial_percentile,
     wall_tolerance,
 )
@@ -67,10 +66,11 @@ def refine_wall_axis(
     if xyz.shape[1] < 20:
         return cloud.pose, info
     gate = max(0.35 * big_r, 0.01)
-    sub = _axis_returns(xyz, cloud.r_v, big_r, gate, math.nan if u_max is None else u_max)
+    sub = _axis_returns(
+        xyz, cloud.r_v, big_r, gate, math.nan if u_max is None else u_max, cfg.axis_points
+    )
     if sub.shape[1] == 0:
         return cloud.pose, info
-    sub = np.ascontiguousarray(sub[:, even_indices(sub.shape[1], cfg.axis_points)])
     # the tilt needs a lever arm: over a short stretch of wall it is not observable (and a
     # gentle taper would pass for a tilted wall), so it is held at the prior
     span = float(partial_percentile(sub[0], 95) - partial_percentile(sub[0], 5))
@@ -104,11 +104,12 @@ def refine_wall_axis(
 
 
 @njit(cache=True)
-def _axis_returns(xyz, r, big_r, gate, u_max):
+def _axis_returns(xyz, r, big_r, gate, u_max, n_keep):
     """The wall-like returns (within ``gate`` of the radius ``big_r``, m) an axis refinement
     fits, ``(3, n)`` in their order: with ``u_max`` NaN, the nearest 60 % of them along the
-    axis (at least 400); else those nearer than ``u_max`` (m). None (``(3, 0)``) when fewer
-    than 20, or 40 before ``u_max``, are left."""
+    axis (at least 400); else those nearer than ``u_max`` (m); ``n_keep`` of them spread
+    evenly when there are more (as :func:`detector.pipe_cloud.even_indices` picks them).
+    None (``(3, 0)``) when fewer than 20, or 40 before ``u_max``, are left."""
     n = r.size
     cand = np.empty(n, dtype=np.intp)
     m = 0
@@ -131,13 +132,19 @@ def _axis_returns(xyz, r, big_r, gate, u_max):
         sel = u < u_max
         if np.count_nonzero(sel) < 40:
             return np.empty((3, 0))
-    out = np.empty((3, np.count_nonzero(sel)))
-    k = 0
+    n_sel = np.count_nonzero(sel)
+    n_out = min(n_sel, n_keep)
+    step = n_sel / n_keep  # (even_indices: position int(i * step) of the selected ones)
+    out = np.empty((3, n_out))
+    k = 0  # (position among the selected returns)
+    i = 0  # (next output column)
     for j in range(m):
         if sel[j]:
-            out[0, k] = xyz[0, cand[j]]
-            out[1, k] = xyz[1, cand[j]]
-            out[2, k] = xyz[2, cand[j]]
+            if i < n_out and (n_sel <= n_keep or k == int(i * step)):
+                out[0, i] = xyz[0, cand[j]]
+                out[1, i] = xyz[1, cand[j]]
+                out[2, i] = xyz[2, cand[j]]
+                i += 1
             k += 1
     return out
 

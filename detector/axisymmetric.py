@@ -21,6 +21,7 @@ from detector.options import StructureOption
 from detector.pipe_cloud import (
     PipeCloud,
     azimuth_coverage,
+    column_stats,
     even_indices,
     fit_confidence,
     partial_percentile,
@@ -118,17 +119,10 @@ def _end_wall_rings(
     percentile: small for a ring about the axis, large for one tilted or shifted off it) and
     the median radial noise (m)."""
     g, k = cloud.shape
-    cols = cloud.cell[slab] % max(k, 1)
-    r_s, sig_s = cloud.r_v[slab], cloud.sigma_v[slab]
-    shares, radii, spreads, sigmas = [], [], [], []
-    for c in np.unique(cols):
-        sel = cols == c
-        lo, med, hi = np.percentile(r_s[sel], [10.0, 50.0, 90.0])
-        shares.append(float(np.count_nonzero(sel)) / max(g, 1))
-        radii.append(float(med))
-        spreads.append(float(hi - lo))
-        sigmas.append(float(np.median(sig_s[sel])))
-    return np.array(shares), np.array(radii), np.array(spreads), np.array(sigmas)
+    k = max(k, 1)
+    cols = cloud.cell[slab] % k
+    shares, lo, med, hi, sigmas = column_stats(cols, cloud.r_v[slab], cloud.sigma_v[slab], k, g)
+    return shares, med, hi - lo, sigmas
 
 
 def _end_wall_seen_through(
@@ -312,9 +306,9 @@ def detect_axisymmetric(
     diag: dict[str, Any],
 ) -> Detection:
     """End wall (closure) or reducer/expander: the structure is (nearly) axisymmetric."""
-    contraction = bool(inside.sum() >= beyond.sum())
+    contraction = bool(np.count_nonzero(inside) >= np.count_nonzero(beyond))
     anomaly = inside if contraction else beyond
-    if anomaly.sum() < cfg.min_anomaly_points:
+    if np.count_nonzero(anomaly) < cfg.min_anomaly_points:
         return Detection.straight(confidence=0.3, **diag)
     p = cloud.points(anomaly)
     u = p[:, 0]

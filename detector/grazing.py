@@ -11,7 +11,10 @@ run's wall radius (less than the wall tolerance, so the opening detector sees no
 though its range is up to a few centimetres long. Compared with the rings on either side,
 which lie on the wall, the ring shows a bump of returns beyond the wall over a bounded range
 of roll; the far-side positions of those returns give the branch's place along the axis, its
-roll, its radius and which standard deflection (90, 45 or 135 deg) it leaves at.
+roll, its radius and which standard deflection (90, 45 or 135 deg) it leaves at. Under range
+noise (along the beam, nearly along the axis) the far side's fit weighs each return by its
+noise projected on the surface; where the run's wall lies beyond the sensor's largest
+incidence, returns on its radius are the far side with no ring beyond to compare with.
 
 Everything here works on the unrolled scan grid (:mod:`detector.grid`) in the pipe frame.
 Lengths in metres, angles in radians.
@@ -90,6 +93,8 @@ def find_ring_holes(
     before: float,
     beam_step: float,
     cfg: ImprovedConfig = DEFAULT_CONFIG,
+    sigma_range: NDArray[np.float64] | None = None,
+    unseen_wall: NDArray[np.bool_] | None = None,
 ) -> list[RingHole]:
     """Side holes that one ring of beams (or two or three) enters, nearer than ``before``
     along the axis, where the rings meet the wall sparsely (``cfg.hole_sparse_rings``).
@@ -103,17 +108,27 @@ def find_ring_holes(
         before: only holes whose ring meets the wall nearer than this, m.
         beam_step: angle between neighbouring beams of a plane, rad.
         cfg: tuning (the ``hole_*`` fields).
+        sigma_range: (G, K) range noise of each return, m (``None``: none); a far side's fit
+            may miss its returns by ``cfg.hole_fit_noise_k`` times it (range noise lies along
+            the beam, nearly along the axis, and moves the far-side returns by that much).
+        unseen_wall: (G, K) returns on the wall radius where no straight wall would return
+            (beyond the sensor's largest incidence; ``None``: none): a hole's far side facing
+            the sensor, bumps of their own whose rings beyond show nothing.
     """
     step, ok = ring_steps(xyz, valid, big_r)
     thr = np.maximum(cfg.hole_min_step, cfg.hole_noise_k * sigma_r)
     bump = ok & (step > thr) & (xyz[0] < before)
-    if np.count_nonzero(bump) < cfg.hole_min_returns:
+    unseen = None if unseen_wall is None else unseen_wall & valid & (xyz[0] < before)
+    n_unseen = 0 if unseen is None else int(np.count_nonzero(unseen))
+    if np.count_nonzero(bump) + n_unseen < cfg.hole_min_returns:
         return []
     # ... between rings that lie on the wall (the run goes on past the hole)
     on_wall = (
         np.abs(np.hypot(xyz[1], xyz[2]) - big_r) <= cfg.hole_wall_band + cfg.hole_noise_k * sigma_r
     )
     bump[:, 1:-1] &= on_wall[:, :-2] & on_wall[:, 2:]
+    if unseen is not None:
+        bump |= unseen
     if np.count_nonzero(bump) < cfg.hole_min_returns:
         return []
     labels, n_lab = label_regions(bump, wraps)
@@ -137,7 +152,7 @@ def find_ring_holes(
     fitted: list[tuple[RingHole, NDArray[np.intp], NDArray[np.intp]]] = []
     for _, rs, cs in groups:
         rows, cols = np.concatenate(rs), np.concatenate(cs)
-        hole = _accepted(xyz, rows, cols, g, big_r, cfg)
+        hole = _accepted(xyz, rows, cols, g, big_r, cfg, sigma_range)
         if hole is None:
             continue
         for k, (other, r_o, c_o) in enumerate(fitted):
@@ -146,7 +161,7 @@ def find_ring_holes(
                 and abs(hole.position - other.position) < big_r
             ):
                 rows, cols = np.concatenate([r_o, rows]), np.concatenate([c_o, cols])
-                merged = _accepted(xyz, rows, cols, g, big_r, cfg)
+                merged = _accepted(xyz, rows, cols, g, big_r, cfg, sigma_range)
                 if merged is not None:
                     fitted[k] = (merged, rows, cols)
                 break
@@ -169,10 +184,11 @@ def _accepted(
     g: int,
     big_r: float,
     cfg: ImprovedConfig,
+    sigma_range: NDArray[np.float64] | None = None,
 ) -> RingHole | None:
     """The hole fitted to the bump returns at ``(rows, cols)`` of a grid of ``g`` rows, if the
     bump is one: enough returns and rows, on at most ``cfg.hole_max_rings`` rings, not all
-    around."""
+    around (``sigma_range``: the (G, K) range noise of the returns, m, or ``None``)."""
     n_rows = np.unique(rows).size
     if rows.size < cfg.hole_min_returns or n_rows < cfg.hole_min_returns:
         return None
@@ -180,23 +196,45 @@ def _accepted(
         return None  # a long opening: the regular detector's
     if n_rows * 2.0 * math.pi / g > cfg.hole_max_roll_span:
         return None  # (almost) all around: a widening, not a side hole
-    return _fit_far_side(xyz[:, rows, cols], big_r, cfg)
+    noise = None if sigma_range is None else sigma_range[rows, cols]
+    return _fit_far_side(xyz[:, rows, cols], big_r, cfg, noise)
 
 
-def _fit_far_side(p: NDArray[np.float64], big_r: float, cfg: ImprovedConfig) -> RingHole | None:
+def _fit_far_side(
+    p: NDArray[np.float64],
+    big_r: float,
+    cfg: ImprovedConfig,
+    sigma_range: NDArray[np.float64] | None = None,
+) -> RingHole | None:
     """Fit a branch to the far-side returns ``p`` (3, n): a cylinder of radius ``rho`` whose
     axis leaves the run's axis at ``position``, deflected by a standard fitting angle (90 deg
     first, then 45 and 135 deg: the patch a ring sees cannot measure the deflection, only tell
-    these apart) towards ``roll``; the deflection with the smallest rms wins, if at most
-    ``cfg.hole_max_fit_rms`` (m). The fit starts from a branch of ``cfg.hole_start_radius``
-    radii and may turn by ``cfg.hole_roll_reach`` from the returns' roll."""
+    these apart) towards ``roll``; the deflection whose returns lie closest to it for their
+    noise wins, if they lie within it. Each return's distance from the surface is measured
+    against ``cfg.hole_max_fit_rms`` (m) and ``cfg.hole_fit_noise_k`` times its range noise
+    (``sigma_range``, (n,) m; ``None``: none) projected on the surface's normal (the cosine of
+    the incidence): the range noise lies along the beam, which meets a 90 deg branch's far side
+    head-on and the inclined far sides of 45 and 135 deg fittings obliquely, moving their
+    returns less across them. The returns are weighted by ``cfg.hole_max_fit_rms`` over that
+    allowance, and their weighted rms must be at most ``cfg.hole_max_fit_rms`` (without range
+    noise: their rms). Another deflection replaces 90 deg only when its weighted rms is below
+    ``cfg.hole_deflection_ratio`` times that of 90 deg. The fit starts from a branch of
+    ``cfg.hole_start_radius`` radii and may turn by ``cfg.hole_roll_reach`` from the returns'
+    roll."""
     u = p[0]
     r = np.hypot(p[1], p[2])
     phi = np.arctan2(p[2], p[1])
+    rng = np.hypot(u, r)  # (the beams leave the sensor, near the axis at u = 0)
+    floor2 = cfg.hole_max_fit_rms**2
+    noise2 = (
+        np.zeros_like(u) if sigma_range is None else np.square(cfg.hole_fit_noise_k * sigma_range)
+    )
     # roll: the circular mean weighted by how far along each return went
     w = u - float(u.min()) + 1e-4
     roll0 = math.atan2(float(np.sum(w * np.sin(phi))), float(np.sum(w * np.cos(phi))))
     best: RingHole | None = None
+    best_ratio = math.inf
+    square_fits = False  # (the 90 deg fit was accepted)
     for theta in DEFLECTIONS:
         ct, st = math.cos(theta), math.sin(theta)
         rho0 = cfg.hole_start_radius * big_r
@@ -209,7 +247,19 @@ def _fit_far_side(p: NDArray[np.float64], big_r: float, cfg: ImprovedConfig) -> 
             lat = r * np.cos(phi - x[2])
             along = q * ct + lat * st
             d2 = q * q + r * r - along * along
-            return np.sqrt(np.maximum(d2, 0.0)) - x[1]
+            return (np.sqrt(np.maximum(d2, 0.0)) - x[1]) * _scale(x, ct, st)
+
+        def _scale(x: NDArray[np.float64], ct: float, st: float) -> NDArray[np.float64]:
+            """Each return's weight: ``cfg.hole_max_fit_rms`` over its allowed distance from
+            the surface (1 without range noise)."""
+            q = u - x[0]
+            lat = r * np.cos(phi - x[2])
+            along = q * ct + lat * st
+            dist = np.sqrt(np.maximum(q * q + r * r - along * along, 1e-24))
+            # (the cosine of the incidence: the beam, ``(u, y, z) / rng``, on the surface's
+            # normal, the return's offset from the branch's axis over its length ``dist``)
+            cos_inc = np.abs(u * (q - along * ct) + r * r - along * st * lat) / (dist * rng)
+            return np.sqrt(floor2 / (floor2 + noise2 * np.square(np.minimum(cos_inc, 1.0))))
 
         lower = np.array([x_start - 3.0 * big_r, 0.2 * big_r, roll0 - cfg.hole_roll_reach])
         upper = np.array([x_start + 3.0 * big_r, 1.05 * big_r, roll0 + cfg.hole_roll_reach])
@@ -226,9 +276,17 @@ def _fit_far_side(p: NDArray[np.float64], big_r: float, cfg: ImprovedConfig) -> 
         )
         if not np.all(np.isfinite(x)):
             continue
-        rms = float(np.sqrt(np.mean(np.square(res))))
-        if rms > cfg.hole_max_fit_rms or (best is not None and rms >= best.rms):
+        ratio = float(np.sqrt(np.mean(np.square(res)))) / cfg.hole_max_fit_rms
+        if square_fits:
+            # (a tee's or a cross's 90 deg, tried first, stands unless another fits clearly
+            # better: the deflection trades against the branch's place along the axis, and
+            # under range noise the fits differ by a few per cent)
+            ratio /= cfg.hole_deflection_ratio
+        if ratio > 1.0 or (best is not None and ratio >= best_ratio):
             continue
+        best_ratio = ratio
+        square_fits = square_fits or theta == DEFLECTIONS[0]
+        rms = float(np.sqrt(np.mean(np.square(res / _scale(x, ct, st)))))
         entry = float(np.median(u * big_r / np.maximum(r, 1e-9)))
         best = RingHole(
             float(x[0]), float(x[1]), wrap_angle(float(x[2])), int(u.size), rms, entry, theta

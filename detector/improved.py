@@ -89,7 +89,9 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    away, between rings) shows as a bump of returns a millimetre or two beyond the wall on
    those rings alone; its far side places and sizes the branch (:mod:`detector.grazing`)
    when nothing nearer was found, or when a junction's branch fit rests on a handful of
-   returns.
+   returns. A sensor that loses returns beyond its largest incidence sees no run wall past
+   ``R tan(incidence)``: returns on the wall radius there come from a surface facing the
+   sensor, a hole's far side, and count as a bump of their own.
    A junction's branches are held at the standard angle of fittings (90 deg for tees and
    crosses, 45 or 135 deg for laterals) when fitted within 25 deg of it and the returns do
    not reject it (likelihood ratio): a small opening far away shows a patch of the branch
@@ -409,7 +411,13 @@ def _with_ring_holes(
     fitting angle (90, 45 or 135 deg) whose far side fits the bump best; the run goes on past
     them (the rings beyond lie on its wall)."""
     # (cheap tests first: too few returns beyond the wall at all, or nearer than the limit)
-    beyond, n_beyond = _beyond_bump(cloud.r_v, cloud.sigma_v, big_r)
+    beyond, n_beyond = _beyond_bump(
+        cloud.r_v, cloud.sigma_v, big_r, cfg.hole_min_step, cfg.hole_noise_k
+    )
+    unseen = _past_incidence(cloud, big_r, cfg)
+    if unseen is not None:
+        beyond |= unseen
+        n_beyond = int(np.count_nonzero(beyond))
     if n_beyond < 6:
         return det
     support = det.diagnostics.get("fit_support")
@@ -457,6 +465,8 @@ def _with_ring_holes(
         before,
         cloud.beam_step,
         cfg,
+        cloud.sigma_range_grid()[:, c0:c1],
+        None if unseen is None else cloud._grid(unseen, False)[:, c0:c1],
     )
     if not holes or (weak and len(holes) < sum(not o.is_straight_on for o in det.options)):
         return det  # (nothing, or fewer ways than the openings the fit had to explain)
@@ -493,14 +503,37 @@ def _with_ring_holes(
     return Detection("junction", options, conf, diag)
 
 
+def _past_incidence(
+    cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
+) -> NDArray[np.bool_] | None:
+    """Which returns (compact order) lie on the wall radius ``big_r`` (m, within
+    ``cfg.hole_wall_band`` and ``cfg.hole_noise_k`` times their radial noise) where the beam
+    would meet a straight wall beyond the sensor's largest incidence (less
+    ``cfg.incidence_jitter_k`` times its beam-angle jitter): no straight wall returns there,
+    so they come from a surface facing the sensor, the far side of a hole in the wall (a
+    branch far ahead of a sensor that loses the grazing wall around it). ``None`` when the
+    sensor returns at any incidence."""
+    limit = cloud.max_incidence + cfg.incidence_jitter_k * cloud.angular_jitter
+    if limit >= 0.5 * math.pi:
+        return None
+    d = cloud.xyz_v - np.asarray(cloud.pose.position, dtype=float)[:, None]
+    r = np.maximum(cloud.r_v, 1e-12)
+    # (the cosine of the incidence on a straight wall: the beam on the wall's normal there)
+    across = np.abs(d[1] * cloud.xyz_v[1] + d[2] * cloud.xyz_v[2]) / r
+    length = np.sqrt(np.sum(d * d, axis=0))
+    on_wall = np.abs(cloud.r_v - big_r) <= cfg.hole_wall_band + cfg.hole_noise_k * cloud.sigma_v
+    return on_wall & (d[0] > 0.0) & (across < math.cos(limit) * length)
+
+
 @njit(cache=True)
-def _beyond_bump(r, sigma, big_r):
+def _beyond_bump(r, sigma, big_r, min_step, noise_k):
     """Which returns at distances ``r`` from the axis lie beyond the wall of radius ``big_r``
-    by more than 0.35 mm and four times their radial noise ``sigma`` (m), and how many."""
+    by more than ``min_step`` and ``noise_k`` times their radial noise ``sigma`` (m), and how
+    many."""
     out = np.empty(r.size, dtype=np.bool_)
     n = 0
     for i in range(r.size):
-        out[i] = r[i] - big_r > max(0.00035, 4.0 * sigma[i])
+        out[i] = r[i] - big_r > max(min_step, noise_k * sigma[i])
         if out[i]:
             n += 1
     return out, n
@@ -886,7 +919,7 @@ def _detect_in_pipe_frame(
         u_grid = cloud.xyz[0]
         u_start = partial_percentile(u_grid[beyond_k], 5.0)
         inside_near = inside_k & (u_grid <= u_start + 4.0 * big_r)
-        if uniform >= 0.3 and inside_near.sum() < 0.3 * beyond_k.sum():
+        if uniform >= 0.3 and np.count_nonzero(inside_near) < 0.3 * np.count_nonzero(beyond_k):
             return detect_axisymmetric(cloud, big_r, inside_near, beyond_k, wall, tol, cfg, diag)
         return detect_branches(cloud, big_r, lobes, keep, wall, tol, cfg, diag)
     det = detect_axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
@@ -894,7 +927,7 @@ def _detect_in_pipe_frame(
         return det
     # neither an end wall nor a reducer: the far wall of a turn seen head-on (small pipes, far
     # away): fit an outgoing pipe to the inner returns with unknown roll
-    pseudo = Lobe(inside_k, 0.0, int(inside_k.sum()))
+    pseudo = Lobe(inside_k, 0.0, int(np.count_nonzero(inside_k)))
     alt = detect_branches(cloud, big_r, [pseudo], keep, wall, tol, cfg, dict(diag), any_roll=True)
     if det.diagnostics.get("closure_tentative", False):
         # a wall that looks flat within the range noise but curves: the far wall of a turn

@@ -147,7 +147,19 @@ class ImprovedConfig:
         hole_max_rings: most rings of beams a hole's bump may span.
         hole_max_roll_span: a bump around more than this much of the circumference (rad) is no
             side hole.
-        hole_max_fit_rms: largest rms (m) of a hole's far-side fit for the hole to be accepted.
+        hole_max_fit_rms, hole_fit_noise_k: a hole's far-side fit is accepted when its returns
+            lie within ``hole_max_fit_rms`` (m) and ``hole_fit_noise_k`` times their range noise
+            projected on the far side's normal (rms of the ratios at most 1): the range noise
+            lies along the beam and moves a return across a surface by the cosine of the
+            incidence of it.
+        hole_deflection_ratio: ... a branch at 45 or 135 deg replaces one at 90 deg (tees and
+            crosses, tried first) only when its fit's rms is below this fraction of the 90 deg
+            one's: the patch of far side a ring sees trades the deflection against the
+            branch's place along the axis, and under range noise the fits differ by a few per
+            cent.
+        incidence_jitter_k: returns on the wall radius whose beams would meet a straight wall
+            beyond the sensor's largest incidence plus this many times its beam-angle jitter
+            come from a surface facing the sensor: the far side of a hole in the wall.
         hole_start_radius: a hole's far-side fit starts from a branch of this fraction of the
             run's radius ...
         hole_roll_reach: ... and may turn its roll by at most this (rad) from the roll the
@@ -220,13 +232,16 @@ class ImprovedConfig:
     rim_ring_spread: float = 0.5
     rim_wall_gap: float = 1.0
     hole_min_step: float = 0.00035
-    hole_noise_k: float = 4.0
+    hole_noise_k: float = 3.0
     hole_wall_band: float = 0.002
     hole_min_returns: int = 6
     hole_sparse_rings: float = 0.25
     hole_max_rings: int = 3
     hole_max_roll_span: float = math.radians(200.0)
     hole_max_fit_rms: float = 0.002
+    hole_fit_noise_k: float = 2.0
+    hole_deflection_ratio: float = 0.8
+    incidence_jitter_k: float = 3.0
     hole_start_radius: float = 0.8
     hole_roll_reach: float = 0.6
     hole_merge_roll: float = math.radians(45.0)
@@ -319,6 +334,9 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "hole_max_rings": (int, 1, True, math.inf, "an integer >= 1"),
     "hole_max_roll_span": (float, 0.0, True, 2.0 * math.pi, "a number in [0, 2 pi] rad"),
     "hole_max_fit_rms": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "hole_fit_noise_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "hole_deflection_ratio": (float, 0.0, False, 1.0, "a number in (0, 1]"),
+    "incidence_jitter_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
     "hole_start_radius": (float, 0.2, True, 1.05, "a number in [0.2, 1.05] (radii)"),
     "hole_roll_reach": (float, 0.0, True, math.pi, "a number in [0, pi] rad"),
     "hole_merge_roll": (float, 0.0, True, math.pi, "a number in [0, pi] rad"),

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from detector.grid import build_grid, label_grid, label_stats, region_stats
 from detector.improved_config import ImprovedConfig
 from detector.robust import mad_sigma, tukey_weights
-from detector.scan import Scan, radial_noise
+from detector.scan import Scan, radial_noise, spec_value
 from detector.transforms import SensorInPipe
 
 
@@ -41,6 +41,9 @@ class PipeCloud:
     sigma_range_v: NDArray[np.float64]  # (N,) range noise of each return
     pose: SensorInPipe
     beam_step: float = 0.0  # angle between neighbouring beams of a plane, radians
+    #: the sensor's largest incidence (rad; pi/2: none) and its beam-angle jitter (rad)
+    max_incidence: float = 0.5 * math.pi
+    angular_jitter: float = 0.0
     xyz_v: NDArray[np.float64] = field(init=False)  # (3, N) pipe frame
     thin: tuple[NDArray[np.float64], NDArray[np.float64]] | None = field(init=False, default=None)
     tol0: NDArray[np.float64] | None = field(init=False, default=None)  # floor + noise part
@@ -51,6 +54,10 @@ class PipeCloud:
     _r_v: NDArray[np.float64] | None = field(init=False, default=None)
     _tol_v: NDArray[np.float64] | None = field(init=False, default=None)
     _sigma_pct: dict[float, float] = field(init=False, default_factory=dict)
+    #: (points, radii, tolerances) under earlier poses (the same arrays, never changed)
+    _stashed: list[tuple[NDArray, NDArray | None, NDArray | None]] = field(
+        init=False, default_factory=list
+    )
 
     @property
     def n(self) -> int:
@@ -88,6 +95,10 @@ class PipeCloud:
         """(G, K, 3) view of the pipe-frame points."""
         return self.xyz.transpose(1, 2, 0)
 
+    def sigma_range_grid(self) -> NDArray[np.float64]:
+        """(G, K) range noise of each return (0 where none), m."""
+        return self._grid(self.sigma_range_v, 0.0)
+
     def sigma_percentile(self, q: float) -> float:
         """The ``q``-th percentile of the returns' radial noise (m; computed once; the
         percentiles of :data:`SIGMA_PERCENTILES` in one partial sort)."""
@@ -116,9 +127,19 @@ class PipeCloud:
         return np.take(self.xyz.reshape(3, -1), flat_cells, axis=1).T
 
     def set_pose(self, pose: SensorInPipe) -> None:
+        self._stash()
         self.pose = pose
         self.xyz_v = _transform(pose, self.sensor_v)
         self._xyz = self._r_v = self._tol_v = None
+
+    def _stash(self) -> None:
+        """Keep the radii and tolerances computed under the current pose's points, for a
+        :meth:`restore` of those points (the last :data:`STASHED_POSES` poses)."""
+        if not hasattr(self, "xyz_v") or (self._r_v is None and self._tol_v is None):
+            return
+        kept = [e for e in self._stashed if e[0] is not self.xyz_v]
+        kept.append((self.xyz_v, self._r_v, self._tol_v))
+        self._stashed = kept[-STASHED_POSES:]
 
     @property
     def r_v(self) -> NDArray[np.float64]:
@@ -128,9 +149,15 @@ class PipeCloud:
         return self._r_v
 
     def restore(self, pose: SensorInPipe, xyz_v: NDArray[np.float64]) -> None:
-        """Go back to a pose whose points were computed before."""
+        """Go back to a pose whose points were computed before (with their radii and
+        tolerances, when they were computed and kept)."""
+        self._stash()
         self.pose, self.xyz_v = pose, xyz_v
         self._xyz = self._r_v = self._tol_v = None
+        for points, r_v, tol_v in self._stashed:
+            if points is xyz_v:
+                self._r_v, self._tol_v = r_v, tol_v
+                break
 
 
 @njit(cache=True)
@@ -257,7 +284,16 @@ def prepare_cloud(
     shape = (g, k)
     sigma_range, sigma_r = radial_noise(scan.spec, ranges, tr[0], tr[1])
     cloud = PipeCloud(
-        wraps, shape, cell, np.ascontiguousarray(local), sigma_r, sigma_range, pose, beam_step
+        wraps,
+        shape,
+        cell,
+        np.ascontiguousarray(local),
+        sigma_r,
+        sigma_range,
+        pose,
+        beam_step,
+        spec_value(scan.spec, "max_incidence", 0.5 * math.pi),
+        spec_value(scan.spec, "angular_jitter", 0.0),
     )
     cloud.set_pose(pose)
     return cloud
@@ -609,6 +645,9 @@ def partial_percentiles(x: NDArray[np.float64], qs: tuple[float, ...]) -> list[f
     return out
 
 
+#: How many earlier poses' radii and tolerances a cloud keeps (:meth:`PipeCloud.restore`).
+STASHED_POSES = 4
+
 #: The percentiles of the returns' radial noise the detector reads
 #: (:meth:`PipeCloud.sigma_percentile`).
 SIGMA_PERCENTILES = (50.0, 90.0)
@@ -731,3 +770,75 @@ def robust_line(
         s = max(mad_sigma(res), sigma_floor)
         w = tukey_weights(res, 4.685 * s)
     return a, b
+
+
+@njit(cache=True)
+def _sorted_percentile(s, q):
+    """``np.percentile`` (linear interpolation, numpy's own rounding) of the sorted ``s`` at
+    ``q`` (percent); ``s`` must hold one value or more."""
+    n = s.size
+    v = (n - 1) * (q / 100.0)
+    if v >= n - 1:
+        return s[n - 1]
+    lo = math.floor(v)
+    i = int(lo)
+    g = v - lo
+    a, b = s[i], s[i + 1]
+    d = b - a
+    if g >= 0.5:
+        return b - d * (1.0 - g)
+    return a + d * g
+
+
+@njit(cache=True)
+def _sorted_median(s):
+    """``np.median`` of the sorted ``s`` (one value or more)."""
+    n = s.size
+    h = n // 2
+    if n % 2:
+        return s[h]
+    return (s[h - 1] + s[h]) / 2.0
+
+
+@njit(cache=True)
+def column_stats(cols, r, sigma, k, g):
+    """Per column of the scan grid (``0 <= cols < k``) that holds values, in increasing
+    order: the share of the grid's ``g`` rows it holds, the 10th, 50th and 90th percentiles
+    of its ``r`` and the median of its ``sigma`` (as ``np.percentile`` and ``np.median`` give
+    them). Returns ``(shares, r10, r50, r90, sigma50)``."""
+    count = np.zeros(k, dtype=np.int64)
+    for i in range(cols.size):
+        count[cols[i]] += 1
+    start = np.zeros(k + 1, dtype=np.int64)
+    m = 0
+    for c in range(k):
+        start[c + 1] = start[c] + count[c]
+        if count[c] > 0:
+            m += 1
+    fill = start[:k].copy()
+    r_by = np.empty(cols.size)
+    s_by = np.empty(cols.size)
+    for i in range(cols.size):
+        c = cols[i]
+        r_by[fill[c]] = r[i]
+        s_by[fill[c]] = sigma[i]
+        fill[c] += 1
+    shares = np.empty(m)
+    r10 = np.empty(m)
+    r50 = np.empty(m)
+    r90 = np.empty(m)
+    sig50 = np.empty(m)
+    j = 0
+    denom = max(g, 1)
+    for c in range(k):
+        if count[c] == 0:
+            continue
+        rs = np.sort(r_by[start[c] : start[c + 1]])
+        ss = np.sort(s_by[start[c] : start[c + 1]])
+        shares[j] = count[c] / denom
+        r10[j] = _sorted_percentile(rs, 10.0)
+        r50[j] = _sorted_percentile(rs, 50.0)
+        r90[j] = _sorted_percentile(rs, 90.0)
+        sig50[j] = _sorted_median(ss)
+        j += 1
+    return shares, r10, r50, r90, sig50

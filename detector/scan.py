@@ -207,7 +207,7 @@ class Scan:
 
     @property
     def n_valid(self) -> int:
-        return int(self.valid.sum())
+        return int(np.count_nonzero(self.valid))
 
     def directions(self) -> NDArray[np.float64]:
         """(P, B, 3) nominal beam directions in the sensor frame."""

@@ -77,7 +77,9 @@ def test_bump_all_around_is_no_side_hole() -> None:
 
 def test_roll_span_guard_rejects_a_bump_all_around(monkeypatch: pytest.MonkeyPatch) -> None:
     # a far-side fit that accepts every bump: only the roll-span guard can reject one
-    def fit_anything(p: np.ndarray, big_r: float, cfg: object) -> grazing.RingHole:
+    def fit_anything(
+        p: np.ndarray, big_r: float, cfg: object, sigma_range: object = None
+    ) -> grazing.RingHole:
         return grazing.RingHole(0.4, big_r, 0.0, int(p.shape[1]), 0.0, 0.4)
 
     monkeypatch.setattr(grazing, "_fit_far_side", fit_anything)

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from detector import fit_kernels as fk
-from detector.axis_fit import _off_wall_entries
+from detector.axis_fit import _axis_returns, _off_wall_entries
 from detector.grid import label_regions
 from detector.pipe_cloud import (
     _crop,
@@ -26,6 +26,8 @@ from detector.pipe_cloud import (
     _sloped_tolerance,
     _spread_exceeds,
     azimuth_coverage,
+    column_stats,
+    even_indices,
     partial_percentile,
     partial_percentiles,
     region_sizes,
@@ -498,3 +500,48 @@ def test_scatter_is_numpys(seed: int, rows: int) -> None:
     np.testing.assert_array_equal(_scatter(values, cell, 100, 0.0), ref)
     flags = _scatter(np.ones((1, cell.size), dtype=bool), cell, 100, False)
     np.testing.assert_array_equal(flags[0], np.isin(np.arange(100), cell))
+
+
+def column_stats_np(
+    cols: np.ndarray, r: np.ndarray, sigma: np.ndarray, g: int
+) -> tuple[np.ndarray, ...]:
+    """Per column that holds values: share of ``g`` rows, 10/50/90th percentile of ``r``,
+    median of ``sigma`` (the numpy loop :func:`column_stats` replaces)."""
+    out: list[list[float]] = [[], [], [], [], []]
+    for c in np.unique(cols):
+        sel = cols == c
+        lo, med, hi = np.percentile(r[sel], [10.0, 50.0, 90.0])
+        for k, v in enumerate(
+            (float(np.count_nonzero(sel)) / max(g, 1), lo, med, hi, np.median(sigma[sel]))
+        ):
+            out[k].append(float(v))
+    return tuple(np.array(v) for v in out)
+
+
+@settings(max_examples=80, deadline=None)
+@given(seeds, st.integers(1, 300), st.integers(1, 40), st.integers(0, 6))
+def test_column_stats_are_numpys(seed: int, n: int, k: int, decimals: int) -> None:
+    rng = np.random.default_rng(seed)
+    cols = rng.integers(0, k, n).astype(np.intp)
+    r = rng.random(n) * rng.random()
+    sigma = np.round(rng.random(n), decimals)  # (ties at the median)
+    g = int(rng.integers(0, 100))
+    got = column_stats(cols, r, sigma, k, g)
+    for a, b in zip(got, column_stats_np(cols, r, sigma, g)):
+        np.testing.assert_array_equal(a, b)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seeds, st.integers(0, 3000), st.integers(10, 600), st.booleans())
+def test_axis_returns_spread_evenly_as_even_indices(
+    seed: int, n: int, n_keep: int, nearest: bool
+) -> None:
+    """The axis refinement's returns, ``n_keep`` of them picked in the compiled pass, are the
+    ones :func:`even_indices` picks from all of them."""
+    rng = np.random.default_rng(seed)
+    xyz = rng.normal(size=(3, n))
+    r = np.hypot(xyz[1], xyz[2])
+    u_max = math.nan if nearest else float(rng.normal())
+    every = _axis_returns(xyz, r, 1.0, 0.5, u_max, 10**9)
+    ref = every[:, even_indices(every.shape[1], n_keep)]
+    np.testing.assert_array_equal(_axis_returns(xyz, r, 1.0, 0.5, u_max, n_keep), ref)
