@@ -389,6 +389,7 @@ def phase_profile(first: int, n: int, physics: str = "contact") -> dict[str, Any
         "kinematic_ticks": sum(r["kinematic_ticks"] for r in rows),
         "by_phase": counter.by_phase,
         "by_sequence": counter.by_sequence,
+        "outcomes": [[r["success"], r["jams"], r["decisions"]] for r in rows],
     }
 
 
