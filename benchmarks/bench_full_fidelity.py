@@ -27,8 +27,14 @@ Python: targets, contact-pair selection, telemetry, checks), the contact pairs' 
 and the episode's decisions/s. ``--repeat K`` runs the episode K times (the figures of the
 fastest run are printed, each run's on its own line).
 
+With ``--phases contact`` (or ``everywhere``) it instead runs that mode alone on the networks
+``--first`` .. ``--first + --networks - 1`` and prints the physics control ticks (and simulated
+seconds of physics) per decision by motion phase and by sequence (see :func:`phase_profile`):
+where the simulated time of a decision goes.
+
 Usage: python benchmarks/bench_full_fidelity.py [--networks 48] [--write-docs] [--json out.json]
        python benchmarks/bench_full_fidelity.py --ticks 0 [--repeat 3]
+       python benchmarks/bench_full_fidelity.py --phases contact [--networks 12]
 """
 
 from __future__ import annotations

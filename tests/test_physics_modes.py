@@ -49,7 +49,7 @@ def test_a_straight_away_from_fittings_is_driven_kinematically_as_physics_would(
 
 
 def test_near_a_fitting_physics_runs() -> None:
-    """The rule: within a quarter diameter of a fitting, no kinematic motion;
+    """The rule: within a diameter of a fitting, no kinematic motion;
     the reference mode never glides."""
     net = layouts.mitre_bend(0.1, math.pi / 2, 0.0, distance=0.15)
     ex = Executor.for_network(net, lidar=None, physics="contact")
@@ -103,7 +103,7 @@ def test_the_model_is_built_once_per_network_and_reset_between_episodes() -> Non
     assert np.array_equal(base.plant.pose().position, fresh.unwrapped.plant.pose().position)
 
 
-def test_the_free_run_ends_a_quarter_diameter_inside_the_port_plane() -> None:
+def test_the_free_run_ends_the_clearance_inside_the_port_plane() -> None:
     """The kinematic rule's span: the sensor may glide up to ``KINEMATIC_CLEARANCE`` diameters
     short of the bend's port plane, and no further."""
     from pipe_env.routing import edge_length, leg_length, locate
