@@ -62,7 +62,10 @@ def _chord_radius(radius: float, facet_angle: float) -> float:
 
 
 def run_panels(p0: NDArray, p1: NDArray, diameter: float) -> list[BoxPanel]:
-    """Box panels lining a straight pipe from p0 to p1 (port centres, m)."""
+    """Box panels lining a straight pipe from p0 to p1 (port centres, m).
+
+    All ``SECTORS`` panels in one pass of array arithmetic: element for element the same
+    operations, in the same order, as one panel at a time (the world's digests pin the bits)."""
     axis = p1 - p0
     length = float(np.linalg.norm(axis))
     axis = axis / length
@@ -75,15 +78,15 @@ def run_panels(p0: NDArray, p1: NDArray, diameter: float) -> list[BoxPanel]:
     half_width = face * math.tan(0.5 * delta) * 1.15 + 0.0005
     half_len = 0.5 * length + SEAM_OVERLAP
     mid = 0.5 * (p0 + p1)
-    panels = []
-    for j in range(SECTORS):
-        phi = (j + 0.5) * delta
-        normal = math.cos(phi) * u + math.sin(phi) * v
-        tangent = np.cross(normal, axis)
-        rot = np.column_stack([axis, tangent, normal])
-        centre = mid + normal * (face + 0.5 * THICKNESS)
-        panels.append(BoxPanel(centre, rot, np.array([half_len, half_width, 0.5 * THICKNESS])))
-    return panels
+    phis = [(j + 0.5) * delta for j in range(SECTORS)]
+    cos = np.array([math.cos(phi) for phi in phis])[:, None]
+    sin = np.array([math.sin(phi) for phi in phis])[:, None]
+    normal = cos * u + sin * v  # (S, 3)
+    tangent = np.cross(normal, axis)
+    rot = np.stack([np.broadcast_to(axis, normal.shape), tangent, normal], axis=2)
+    centre = mid + normal * (face + 0.5 * THICKNESS)
+    half = np.array([half_len, half_width, 0.5 * THICKNESS])
+    return [BoxPanel(centre[j], rot[j], half.copy()) for j in range(SECTORS)]
 
 
 def _tube_pieces(
@@ -123,21 +126,27 @@ def _tube_pieces(
     s = np.linspace(s0, s1, n + 1)
     pts = wall_points(s)
     valid = keep(pts.reshape(-1, 3)).reshape(pts.shape[:3])
+    # (S, n) every / any corner of cell k of sector j valid; Python lists for the scan below
+    # (asarray: reductions type as scalar | array)
+    lo_all, hi_all = (
+        np.asarray(valid[:, :, :-1].all(axis=0)),
+        np.asarray(valid[:, :, 1:].all(axis=0)),
+    )
+    lo_any, hi_any = (
+        np.asarray(valid[:, :, :-1].any(axis=0)),
+        np.asarray(valid[:, :, 1:].any(axis=0)),
+    )
+    cells_all = (lo_all[:-1] & lo_all[1:] & hi_all[:-1] & hi_all[1:]).tolist()
+    cells_any = (lo_any[:-1] | lo_any[1:] | hi_any[:-1] | hi_any[1:]).tolist()
+    sl = s.tolist()
     pieces: list[HullPiece] = []
     for j in range(SECTORS):
-        corner = valid[:, j : j + 2]  # (2, 2, n+1)
-        # (n,) every / any corner of cell k valid (asarray: reductions type as scalar | array)
-        cell_all = np.asarray(
-            corner[:, :, :-1].all(axis=(0, 1)) & corner[:, :, 1:].all(axis=(0, 1))
-        )
-        cell_any = np.asarray(
-            corner[:, :, :-1].any(axis=(0, 1)) | corner[:, :, 1:].any(axis=(0, 1))
-        )
+        cell_all, cell_any = cells_all[j], cells_any[j]
         k = 0
         while k < n:
             if cell_all[k]:
                 m = k
-                while m + 1 < n and cell_all[m + 1] and s[m + 2] - s[k] <= MAX_SLICE:
+                while m + 1 < n and cell_all[m + 1] and sl[m + 2] - sl[k] <= MAX_SLICE:
                     m += 1
                 pieces.append(HullPiece(pts[:, j : j + 2, [k, m + 1]].reshape(-1, 3)))
                 k = m + 1
@@ -147,13 +156,26 @@ def _tube_pieces(
                 if len(sel) >= 4:
                     pieces.append(HullPiece(sel))
             k += 1
-    return [p for p in pieces if _has_volume(p.points)]
+    return [p for p, ok in zip(pieces, _have_volume([p.points for p in pieces])) if ok]
 
 
-def _has_volume(points: NDArray) -> bool:
-    centred = points - points.mean(axis=0)
-    sv = np.linalg.svd(centred, compute_uv=False)
-    return bool(len(sv) == 3 and sv[2] > 1e-5)
+def _have_volume(point_sets: list[NDArray]) -> list[bool]:
+    """Whether each point set (k, 3) spans a volume: its smallest singular value about its
+    mean is above 10 um. Sets of equal size are tested in one batched SVD (per set the same
+    LAPACK call as one at a time)."""
+    out = [False] * len(point_sets)
+    by_size: dict[int, list[int]] = {}
+    for i, pts in enumerate(point_sets):
+        by_size.setdefault(len(pts), []).append(i)
+    for size, idx in by_size.items():
+        if size < 3:
+            continue  # fewer than 3 singular values: no volume
+        stack = np.stack([point_sets[i] for i in idx])
+        centred = stack - stack.mean(axis=1, keepdims=True)
+        sv = np.linalg.svd(centred, compute_uv=False)
+        for i, ok in zip(idx, sv[:, 2] > 1e-5):
+            out[i] = bool(ok)
+    return out
 
 
 def _const(r: float) -> Callable[[NDArray], NDArray]:
@@ -270,20 +292,23 @@ def _torus_pieces(g: FittingGeometry) -> list[HullPiece]:
     delta = 2 * math.pi / SECTORS
     k_in = _chord_radius(1.0, delta)
     k_arc = _chord_radius(1.0, psis[1] - psis[0])
-    pieces = []
-    for lo, hi in zip(psis[:-1], psis[1:]):
-        ps = np.array([lo, hi])
-        radial = np.cos(ps)[:, None] * u0 + np.sin(ps)[:, None] * w0  # (2, 3)
-        for j in range(SECTORS):
-            phis = np.array([j * delta, (j + 1) * delta])
-            # cross-section frame at each arc position: radial outward and the bend normal
-            dirs = (
-                np.cos(phis)[None, :, None] * radial[:, None, :]
-                + np.sin(phis)[None, :, None] * normal[None, None, :]
-            )
-            inner = bend_r * radial[:, None, :] + dirs * (r * k_in)
-            outer = bend_r * radial[:, None, :] + dirs * (r + THICKNESS)
-            # scale about the arc centre so chords along the arc straddle the true wall
-            pts = centre + k_arc * np.concatenate([inner.reshape(-1, 3), outer.reshape(-1, 3)])
-            pieces.append(HullPiece(pts))
-    return pieces
+    # every (arc slice, sector) at once; element for element the operations of one at a time
+    ends = np.stack([psis[:-1], psis[1:]], axis=1)  # (A, 2) arc positions of each slice
+    radial = np.cos(ends)[:, :, None] * u0 + np.sin(ends)[:, :, None] * w0  # (A, 2, 3)
+    lims = np.stack([np.arange(SECTORS) * delta, np.arange(1, SECTORS + 1) * delta], axis=1)
+    cos, sin = np.cos(lims), np.sin(lims)  # (S, 2) sector edge angles
+    # cross-section frame at each arc position: radial outward and the bend normal; (A, S, 2, 2, 3)
+    dirs = (
+        cos[None, :, None, :, None] * radial[:, None, :, None, :]
+        + sin[None, :, None, :, None] * normal
+    )
+    ring = bend_r * radial[:, None, :, None, :]
+    inner = ring + dirs * (r * k_in)
+    outer = ring + dirs * (r + THICKNESS)
+    # scale about the arc centre so chords along the arc straddle the true wall
+    n_arc, n_pts = len(ends), 8
+    pts = np.concatenate(
+        [inner.reshape(n_arc, SECTORS, 4, 3), outer.reshape(n_arc, SECTORS, 4, 3)], axis=2
+    )
+    pts = centre + k_arc * pts.reshape(n_arc * SECTORS, n_pts, 3)
+    return [HullPiece(p) for p in pts]

@@ -140,7 +140,7 @@ def mjcf_text(world: PipeWorld, keyframe: Mapping[str, Any] | None = None) -> st
         keyframe: optional state to store as the keyframe ``"start"``: any of ``qpos``,
             ``qvel``, ``mocap_pos``, ``mocap_quat`` (arrays of the compiled model's sizes).
     """
-    spec = world.spec
+    spec = world.complete().spec  # (a world built without ray meshes: with them)
     if keyframe:
         key = spec.add_key()
         key.name = "start"

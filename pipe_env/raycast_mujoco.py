@@ -52,6 +52,7 @@ def sensing_model(world: PipeWorld, inner_only: bool = True) -> mujoco.MjModel:
         world: the world whose wall meshes are copied (from its ``MjSpec``; nothing is re-meshed).
         inner_only: keep only the faces that face the bore (see module docstring).
     """
+    world = world.complete()  # (a world built without ray meshes: with them)
     bore = None
     if inner_only:
         from pipe_env.raycast_analytic import AnalyticBore
@@ -145,7 +146,7 @@ class MujocoCaster:
         if sensing_only:
             self.model = sensing_model(world, inner_only)
         else:
-            self.model = world.model
+            self.model = world.complete().model
         self.datas = [mujoco.MjData(self.model) for _ in range(threads)]
         for d in self.datas:
             mujoco.mj_forward(self.model, d)

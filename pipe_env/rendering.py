@@ -283,7 +283,7 @@ class WorldRenderer:
     @property
     def renderer(self) -> _GLRenderer:
         if self._renderer is None:
-            model = self.world.model
+            model = self.world.complete().model  # (a world built without ray meshes: with them)
             model.vis.global_.offwidth = max(model.vis.global_.offwidth, self.width)
             model.vis.global_.offheight = max(model.vis.global_.offheight, self.height)
             self._renderer = _GLRenderer(model, self.height, self.width)
@@ -330,7 +330,9 @@ class WorldRenderer:
         opt = mujoco.MjvOption()
         opt.geomgroup[:] = 1
         opt.geomgroup[self.world.contact_group] = 0
-        r.update_scene(self.world.data, camera=cam, scene_option=opt)
+        # the world with its ray meshes, in this world's state (itself, unless it was built
+        # without them: see ``PipeWorld.complete``)
+        r.update_scene(self.world.complete().data, camera=cam, scene_option=opt)
         scene = r.scene
         for pos, radius in markers:
             if scene.ngeom >= scene.maxgeom:

@@ -25,10 +25,20 @@ on, with every moving body kept awake; see :func:`_static_walls_posed_once`).
 
 Open ends do not exist: every leaf of a network is a closure with an end wall, so rays cannot
 escape. Callers can add bodies (a robot) through the ``customize`` hook before compilation.
+
+Ray meshes on demand: a world for physics whose LiDAR casts rays analytically
+(:mod:`pipe_env.raycast_analytic`) needs no ray meshes, and they are about half the cost of
+building a world (the CSG and their compilation). ``build_world(..., ray_meshes=False)`` leaves
+them out of the model; every other geom, body, joint and pair is the one of the world with them
+(geom ids lower by the number of ray meshes, which come first), so the physics is the same bit
+for bit. Their consumers (renders, MJCF export, the MuJoCo ray caster) ask
+:meth:`PipeWorld.complete`: the same world with the ray meshes, built on first use, in this
+world's state.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -73,6 +83,8 @@ class PipeWorld:
         contact_group: geom group of the contact walls.
         wall_geoms: geom id -> network element id (``run:<id>`` or ``fitting:<id>``).
         triangle_count: triangles in all ray meshes.
+        contact_geom_count: contact-wall geoms.
+        has_ray_meshes: whether ``model`` holds the ray meshes (see :meth:`complete`).
     """
 
     network: PipeNetwork
@@ -84,6 +96,33 @@ class PipeWorld:
     wall_geoms: dict[int, str] = field(default_factory=dict)
     triangle_count: int = 0
     contact_geom_count: int = 0
+    has_ray_meshes: bool = True
+    #: builds the same world with its ray meshes (a world built without them), and that world
+    _rebuild: Callable[[], PipeWorld] | None = field(default=None, repr=False)
+    _complete: PipeWorld | None = field(default=None, repr=False)
+
+    def complete(self) -> PipeWorld:
+        """This world with its ray meshes, in this world's state, for their consumers (renders,
+        MJCF export, the MuJoCo ray caster).
+
+        A world built with them (the default) returns itself. A world built with
+        ``ray_meshes=False`` builds, on the first call, the same world (network, contact walls,
+        ``customize``, timestep) with them, and keeps it; every call sets that world's state
+        (time, ``qpos``, ``qvel``, ``act``, ``ctrl``, mocap poses) to this world's and runs
+        ``mj_forward`` on it (the two models have the same bodies, joints and actuators)."""
+        if self.has_ray_meshes:
+            return self
+        if self._complete is None:
+            if self._rebuild is None:
+                raise ValueError("this world has no ray meshes and no way to build them")
+            self._complete = self._rebuild()
+        full = self._complete
+        src, dst = self.data, full.data
+        dst.time = src.time
+        for name in ("qpos", "qvel", "act", "ctrl", "mocap_pos", "mocap_quat"):
+            getattr(dst, name)[:] = getattr(src, name)
+        mujoco.mj_forward(full.model, dst)
+        return full
 
     @property
     def ray_geomgroup(self) -> NDArray[np.uint8]:
@@ -140,6 +179,7 @@ def build_world(
     contact_walls: bool = True,
     customize: Callable[[mujoco.MjSpec], None] | None = None,
     timestep: float = TIMESTEP,
+    ray_meshes: bool = True,
 ) -> PipeWorld:
     """Compile ``network`` into a MuJoCo world (see module docstring).
 
@@ -148,6 +188,8 @@ def build_world(
         contact_walls: add the contact walls (skip them for sensing-only worlds).
         customize: called with the spec before compiling, to add bodies such as a robot.
         timestep: the physics step, s, in :data:`TIMESTEP_RANGE`.
+        ray_meshes: add the ray meshes; False leaves them out (built on demand by
+            :meth:`PipeWorld.complete`; see the module docstring).
     """
     timestep = check_number("timestep", timestep, *TIMESTEP_RANGE, unit="s", where="build_world")
     network.validate()
@@ -158,11 +200,51 @@ def build_world(
     spec.visual.headlight.diffuse = [0.6, 0.6, 0.6]
     spec.stat.extent = float(np.linalg.norm(np.subtract(*network.bounds()[::-1])))
     spec.stat.center = (0.5 * np.add(*network.bounds())).tolist()
+    triangles = _add_ray_meshes(spec, network) if ray_meshes else 0
+    n_contact = _add_contact_walls(spec, network) if contact_walls else 0
+    if customize is not None:
+        customize(spec)
+    _static_walls_posed_once(spec)
+    _no_island_discovery(spec)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    wall_geoms = {}
+    for gid in range(model.ngeom if ray_meshes else 0):
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, gid) or ""
+        if name.startswith("wall:"):
+            wall_geoms[gid] = name[len("wall:") :]
+    rebuild = None
+    if not ray_meshes:
+        rebuild = functools.partial(
+            build_world,
+            network,
+            contact_walls=contact_walls,
+            customize=customize,
+            timestep=timestep,
+        )
+    return PipeWorld(
+        network,
+        spec,
+        model,
+        data,
+        WALL_GROUP,
+        CONTACT_GROUP,
+        wall_geoms,
+        triangles,
+        n_contact,
+        has_ray_meshes=bool(ray_meshes),
+        _rebuild=rebuild,
+    )
+
+
+def _add_ray_meshes(spec: mujoco.MjSpec, network: PipeNetwork) -> int:
+    """Add the ray meshes (one mesh geom per element, ``WALL_GROUP``, no contacts) to the
+    world body of ``spec``; returns their triangle count."""
     world = spec.worldbody
-    names: list[str] = []
     triangles = 0
-    for mesh in network_meshes(network):
-        mname = f"wall_{len(names)}"
+    for k, mesh in enumerate(network_meshes(network)):
+        mname = f"wall_{k}"
         m = spec.add_mesh()
         m.name = mname
         m.uservert = mesh.vertices.ravel().tolist()
@@ -175,57 +257,49 @@ def build_world(
         g.contype = 0
         g.conaffinity = 0
         g.rgba = WALL_RGBA
-        names.append(mesh.name)
         triangles += len(mesh.faces)
+    return triangles
+
+
+def _add_contact_walls(spec: mujoco.MjSpec, network: PipeNetwork) -> int:
+    """Add the contact walls (box panels and hull pieces, element by element), the two parking
+    spheres and the pool of predefined pairs to ``spec``; returns the contact geoms' count."""
+    world = spec.worldbody
+    box_type, mesh_type = mujoco.mjtGeom.mjGEOM_BOX, mujoco.mjtGeom.mjGEOM_MESH
     n_contact = 0
-    if contact_walls:
-        for element, hulls, boxes in network_contact_pieces(network):
-            for box in boxes:
-                g = world.add_geom()
-                g.type = mujoco.mjtGeom.mjGEOM_BOX
-                g.size = box.half_size.tolist()
-                g.pos = box.centre.tolist()
-                g.quat = _quat(box.rotation).tolist()
-                _contact_style(g)
-                n_contact += 1
-            for piece in hulls:
-                mname = f"contact_{n_contact}"
-                m = spec.add_mesh()
-                m.name = mname
-                m.uservert = piece.points.ravel().tolist()
-                g = world.add_geom()
-                g.type = mujoco.mjtGeom.mjGEOM_MESH
-                g.meshname = mname
-                _contact_style(g)
-                n_contact += 1
-            del element
-        for k, name in enumerate(_PARK):
+    for _, hulls, boxes in network_contact_pieces(network):
+        for box in boxes:
             g = world.add_geom()
-            g.name = name
-            g.type = mujoco.mjtGeom.mjGEOM_SPHERE
-            g.size = [1e-4, 0.0, 0.0]
-            g.pos = [1e4 + 10.0 * k, 1e4, 1e4]
-            g.group = 5
-            g.contype = 0
-            g.conaffinity = 0
-            g.rgba = [0.0, 0.0, 0.0, 0.0]
-        for _ in range(CONTACT_PAIR_POOL):
-            pair = spec.add_pair()
-            pair.geomname1, pair.geomname2 = _PARK
-    if customize is not None:
-        customize(spec)
-    _static_walls_posed_once(spec)
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    wall_geoms = {}
-    for gid in range(model.ngeom):
-        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, gid) or ""
-        if name.startswith("wall:"):
-            wall_geoms[gid] = name[len("wall:") :]
-    return PipeWorld(
-        network, spec, model, data, WALL_GROUP, CONTACT_GROUP, wall_geoms, triangles, n_contact
-    )
+            g.type = box_type
+            g.size = box.half_size.tolist()
+            g.pos = box.centre.tolist()
+            g.quat = _quat(box.rotation).tolist()
+            _contact_style(g)
+            n_contact += 1
+        for piece in hulls:
+            mname = f"contact_{n_contact}"
+            m = spec.add_mesh()
+            m.name = mname
+            m.uservert = piece.points.ravel().tolist()
+            g = world.add_geom()
+            g.type = mesh_type
+            g.meshname = mname
+            _contact_style(g)
+            n_contact += 1
+    for k, name in enumerate(_PARK):
+        g = world.add_geom()
+        g.name = name
+        g.type = mujoco.mjtGeom.mjGEOM_SPHERE
+        g.size = [1e-4, 0.0, 0.0]
+        g.pos = [1e4 + 10.0 * k, 1e4, 1e4]
+        g.group = 5
+        g.contype = 0
+        g.conaffinity = 0
+        g.rgba = [0.0, 0.0, 0.0, 0.0]
+    for _ in range(CONTACT_PAIR_POOL):
+        pair = spec.add_pair()
+        pair.geomname1, pair.geomname2 = _PARK
+    return n_contact
 
 
 def _static_walls_posed_once(spec: mujoco.MjSpec) -> None:
@@ -241,6 +315,19 @@ def _static_walls_posed_once(spec: mujoco.MjSpec) -> None:
     for body in spec.worldbody.bodies:
         if body.joints:  # (a tree that can move; static and mocap bodies have no policy)
             body.sleep = mujoco.mjtSleepPolicy.mjSLEEP_NEVER
+
+
+def _no_island_discovery(spec: mujoco.MjSpec) -> None:
+    """Switch MuJoCo's constraint island discovery off.
+
+    Islands let the solver treat independent groups of constrained bodies apart; a world has one
+    moving tree (the robot, its modules held by welds to their targets), so there is one island
+    and finding it is pure cost: about 2-8 % of an mj_step (``benchmarks/bench_step_cost.py``;
+    one Newton iteration solves a step, so the solver's own settings change nothing). The
+    trajectories are bit for bit those with islands (the benchmark and a test compare them);
+    sleeping (:func:`_static_walls_posed_once`) works without islands.
+    """
+    spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_ISLAND)
 
 
 def _contact_style(g: mujoco.MjsGeom) -> None:

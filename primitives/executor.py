@@ -470,17 +470,24 @@ class Executor:
         timestep: float = TIMESTEP,
         control_dt: float = CONTROL_DT,
         time_compression: float = TIME_COMPRESSION,
+        ray_meshes: bool = True,
         **lidar_kwargs: Any,
     ) -> Executor:
         """Build the world of ``network`` with the robot and the LiDAR, the robot clamped at
         the network's start pose; ``physics`` is one of :data:`PHYSICS_MODES`; ``timestep``
         the physics step, s (:func:`pipe_env.world.build_world`); ``control_dt`` the control
-        period, s; ``time_compression`` the time compression k (see :data:`TIME_COMPRESSION`)."""
+        period, s; ``time_compression`` the time compression k (see :data:`TIME_COMPRESSION`);
+        ``ray_meshes``: build the world's ray meshes now (False: on demand, for a LiDAR with the
+        analytic backend; see :func:`pipe_env.world.build_world`)."""
         if network.start_pose is None:
             raise ValueError("network.start_pose is None; the robot needs a start pose")
         robot = Robot(robot_config)
         world = build_world(
-            network, contact_walls=True, customize=robot.customize, timestep=timestep
+            network,
+            contact_walls=True,
+            customize=robot.customize,
+            timestep=timestep,
+            ray_meshes=ray_meshes,
         )
         robot.bind(world.model, world.data)
         sensor = None

@@ -195,6 +195,9 @@ class PhysicalPlant:
             "robot_config": robot_config,
             "lidar": lidar,
             "physics": physics,
+            # the analytic LiDAR casts on the network itself: the world's ray meshes are built
+            # only if a render or an export asks for them (``PipeWorld.complete``)
+            "ray_meshes": lidar_backend == "mujoco",
             **lidar_kwargs,
         }
         # the physics step and control period: the executor's defaults unless given
