@@ -27,8 +27,14 @@ Python: targets, contact-pair selection, telemetry, checks), the contact pairs' 
 and the episode's decisions/s. ``--repeat K`` runs the episode K times (the figures of the
 fastest run are printed, each run's on its own line).
 
+With ``--phases contact`` (or ``everywhere``) it instead runs that mode alone on the networks
+``--first`` .. ``--first + --networks - 1`` and prints the physics control ticks (and simulated
+seconds of physics) per decision by motion phase and by sequence (see :func:`phase_profile`):
+where the simulated time of a decision goes.
+
 Usage: python benchmarks/bench_full_fidelity.py [--networks 48] [--write-docs] [--json out.json]
        python benchmarks/bench_full_fidelity.py --ticks 0 [--repeat 3]
+       python benchmarks/bench_full_fidelity.py --phases contact [--networks 12]
 """
 
 from __future__ import annotations
@@ -234,6 +240,190 @@ def _print_tick_profile(index: int, repeat: int) -> None:
     )
 
 
+#: The executor's motion methods a physics tick is attributed to (innermost first wins), with
+#: the phase each stands for; a ``_settle`` inside one is that phase's settle.
+_PHASE_METHODS = {
+    "_stop_here": "stop after a jam",
+    "_clamp": "clamp",
+    "_unclamp": "unclamp",
+    "_probe": "centre: probes",
+    "_shift": "centre: shift",
+    "_roll": "roll",
+    "_bend": "bend",
+    "_reverse": "reverse",
+    "_glide": "kinematic glide",
+    "_drive": "drive",
+}
+
+
+def _drive_phase(ex: Any, context: str) -> str:
+    """The phase of a physical ``_drive`` starting now: the sensing drives of ``advance``
+    (near fittings: the kinematic rule refused them), a turn's arc, the drive holding its
+    heading after the arc, or a straight drive of a sequence (clamped or not)."""
+    if context == "drive_until":
+        return "drive: sensing (approach)"
+    if ex.command.curvature != 0.0:
+        return "drive: turn arc"
+    if ex.command.hold_heading:
+        return "drive: after arc (held heading)"
+    return "drive: straight " + ("clamped" if ex.vclamp.alpha > 0.0 else "unclamped")
+
+
+class PhaseCounter:
+    """Physics control ticks by motion phase (see :func:`phase_profile`): a tick counts
+    towards the innermost executor motion running it (``_PHASE_METHODS``; a ``Stop`` step is
+    ``"stop"``), its settle separately (``"<phase>: settle"``), and towards the sequence (or
+    ``drive_until``, ``place``) it belongs to."""
+
+    def __init__(self) -> None:
+        self.by_phase: dict[str, int] = {}
+        self.by_sequence: dict[str, int] = {}
+        self.stack: list[str] = []
+        self.context: list[str] = []
+
+    def count(self) -> None:
+        seq = self.context[-1] if self.context else "other"
+        phase = "place (reset)" if seq == "place" else self.stack[-1] if self.stack else "other"
+        self.by_phase[phase] = self.by_phase.get(phase, 0) + 1
+        self.by_sequence[seq] = self.by_sequence.get(seq, 0) + 1
+
+
+@contextmanager
+def _phased(counter: PhaseCounter) -> Iterator[None]:
+    """Attribute every physics tick the executor runs while inside to its phase (see
+    :class:`PhaseCounter`); the executor's methods are restored on exit."""
+    from primitives.executor import Executor
+    from primitives.steps import Stop
+
+    names = [*_PHASE_METHODS, "_settle", "_physics", "_do", "run", "drive_until", "place"]
+    saved = {name: getattr(Executor, name) for name in names}
+
+    def phase(name: str, label: str) -> Callable[..., Any]:
+        method = saved[name]
+
+        def wrapper(self: Any, *args: Any, **kwargs: Any) -> Any:
+            top = counter.stack[-1] if counter.stack else ""
+            if name == "_drive":
+                tag = _drive_phase(self, counter.context[-1] if counter.context else "")
+            elif top.startswith("centre") or (top == "clamp" and name == "_unclamp"):
+                tag = f"{top} ({label})"  # a probe's unfolding, a clamp's unclamping first
+            else:
+                tag = label
+            counter.stack.append(tag)
+            try:
+                return method(self, *args, **kwargs)
+            finally:
+                counter.stack.pop()
+
+        return wrapper
+
+    def context(name: str) -> Callable[..., Any]:
+        method = saved[name]
+
+        def wrapper(self: Any, *args: Any, **kwargs: Any) -> Any:
+            seq = args[0] if args else None
+            counter.context.append(getattr(seq, "name", name) if name == "run" else name)
+            try:
+                return method(self, *args, **kwargs)
+            finally:
+                counter.context.pop()
+
+        return wrapper
+
+    def settle(self: Any, *args: Any, **kwargs: Any) -> Any:
+        parent = counter.stack[-1] if counter.stack else "stop"
+        counter.stack.append(parent if parent.endswith("settle") else f"{parent}: settle")
+        try:
+            return saved["_settle"](self, *args, **kwargs)
+        finally:
+            counter.stack.pop()
+
+    def do(self: Any, step: Any, *args: Any, **kwargs: Any) -> Any:
+        if isinstance(step, Stop):
+            counter.stack.append("stop")
+        try:
+            return saved["_do"](self, step, *args, **kwargs)
+        finally:
+            if isinstance(step, Stop):
+                counter.stack.pop()
+
+    def physics(self: Any, *args: Any, **kwargs: Any) -> Any:
+        counter.count()
+        return saved["_physics"](self, *args, **kwargs)
+
+    for name, label in _PHASE_METHODS.items():
+        setattr(Executor, name, phase(name, label))
+    for name in ("run", "drive_until", "place"):
+        setattr(Executor, name, context(name))
+    Executor._settle = settle  # type: ignore[method-assign]
+    Executor._do = do  # type: ignore[method-assign]
+    Executor._physics = physics  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        for name, method in saved.items():
+            setattr(Executor, name, method)
+
+
+def phase_profile(first: int, n: int, physics: str = "contact") -> dict[str, Any]:
+    """Physics control ticks per decision by motion phase and by sequence, over RoutePlanner
+    episodes on held-out networks ``first .. first + n - 1`` (seeds ``EVAL_POOL_SEED + i``)
+    with ``physics``; resets (building, placing and clamping the robot) counted apart."""
+    cfg = NetworkConfig.from_dict(NETWORK_CONFIG)
+    networks = held_out_networks(cfg, first + n)[first:]
+    env = gym.make(
+        "pipenav/PipeNav-v0",
+        fidelity="full",
+        detector="improved",
+        network_config=cfg,
+        physics=physics,
+    )
+    counter = PhaseCounter()
+    rows = []
+    with _phased(counter):
+        for i, net in enumerate(networks):
+            rows.append(run_episode(env, net, EVAL_POOL_SEED + first + i))
+    env.close()
+    return {
+        "physics": physics,
+        "episodes": len(rows),
+        "decisions": sum(r["decisions"] for r in rows),
+        "success": sum(r["success"] for r in rows),
+        "jams": sum(r["jams"] for r in rows),
+        "steps_s": sum(r["steps_s"] for r in rows),
+        "reset_s": sum(r["reset_s"] for r in rows),
+        "kinematic_ticks": sum(r["kinematic_ticks"] for r in rows),
+        "by_phase": counter.by_phase,
+        "by_sequence": counter.by_sequence,
+        "outcomes": [[r["success"], r["jams"], r["decisions"]] for r in rows],
+    }
+
+
+def phase_table(profile: dict[str, Any], control_dt: float = 0.02) -> str:
+    """The markdown tables of a :func:`phase_profile`: physics ticks per decision (and the
+    simulated seconds of physics, ``control_dt`` s a tick) by phase and by sequence."""
+    dec = max(profile["decisions"], 1)
+    out = [
+        f"physics={profile['physics']}: {profile['episodes']} episodes, "
+        f"{profile['decisions']} decisions, success {profile['success']}, jams "
+        f"{profile['jams']}; decisions/s steps {profile['decisions'] / profile['steps_s']:.3f}, "
+        f"with resets {profile['decisions'] / (profile['steps_s'] + profile['reset_s']):.3f}; "
+        f"kinematic ticks/decision {profile['kinematic_ticks'] / dec:.0f}\n"
+    ]
+    for key, title in (("by_phase", "phase"), ("by_sequence", "sequence")):
+        counts = profile[key]
+        resets = ("place", "place (reset)")
+        total = max(sum(v for k, v in counts.items() if k not in resets), 1)
+        out.append(f"| {title} | physics ticks/decision | physics s/decision | share |")
+        out.append("|---|---|---|---|")
+        for name, v in sorted(counts.items(), key=lambda kv: -kv[1]):
+            share = f"{100 * v / total:.1f} %" if name not in resets else "(resets)"
+            out.append(f"| {name} | {v / dec:.1f} | {v * control_dt / dec:.2f} | {share} |")
+        steps = total / dec
+        out.append(f"| total (steps) | {steps:.1f} | {steps * control_dt:.2f} | 100 % |\n")
+    return "\n".join(out)
+
+
 def _errors(rows: list[dict[str, Any]], key: str) -> np.ndarray:
     vals = [e[key] for r in rows for e in r["errors"] if key in e and math.isfinite(e[key])]
     return np.asarray(vals, dtype=float)
@@ -366,7 +556,20 @@ def main() -> None:
     parser.add_argument("--write-docs", action="store_true")
     parser.add_argument("--ticks", type=int, default=None, help="profile this network per tick")
     parser.add_argument("--repeat", type=int, default=1, help="runs of the --ticks episode")
+    parser.add_argument(
+        "--phases",
+        choices=MODES,
+        default=None,
+        help="print physics ticks per decision by motion phase with this physics mode "
+        "(networks --first .. --first + --networks - 1)",
+    )
     args = parser.parse_args()
+    if args.phases is not None:
+        profile = phase_profile(args.first, args.networks, args.phases)
+        print(phase_table(profile))
+        if args.json:
+            atomic_write_text(args.json, json.dumps(profile))
+        return
     if args.ticks is not None:
         if args.ticks < 0 or args.repeat < 1:
             parser.error(f"--ticks = {args.ticks}, --repeat = {args.repeat}; allowed: >= 0, >= 1")

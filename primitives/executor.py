@@ -119,6 +119,17 @@ CONTROL_DT_RANGE = (0.001, 0.2)
 #: is 1 (no compression); the plant's default for ``physics="contact"`` is
 #: ``pipe_env.envs.plant_full.TIME_COMPRESSION``.
 TIME_COMPRESSION = 1.0
+#: Straightening the V (an unclamping, a centring probe letting go of the wall) runs this many
+#: times the time compression k in physics when the executor compresses time (k > 1; at k = 1,
+#: the reference, nothing is compressed). Straightening takes the apex wheels off the wall:
+#: contact only ends, nothing the walls decide is integrated faster, and the V's joints follow
+#: their targets as at any other rate (the legs' tips move 0.3 m/s at 3 x ``CLAMP_RATE``, a
+#: follower trails about 9 mm, within ``RobotConfig.jam_tracking``). At the plant's k = 1.5
+#: the V straightens at k = 3, the largest compression every tolerance and jam case of
+#: ``benchmarks/physics_step_study.py`` holds at for every motion. Measured
+#: (``benchmarks/bench_full_fidelity.py --phases``): straightening after the centring probes
+#: was 12 % of the physics ticks per decision.
+RELEASE_COMPRESSION = 2.0
 #: A driven front trails its drive target by about this much time of travel at its physical
 #: speed (the weld's tracking delay; measured right after a 20 ms tick, 2 ms steps, a clamped
 #: straight drive: 1.57 mm at 0.05 m/s, 3.1 mm at 0.1, 4.7 at 0.15, 6.2 at 0.2), s.
@@ -161,15 +172,32 @@ NEAR_REACH = 0.006
 #: the selection never overruns its reach, at 40 ms in one chunk it does (the V folding at
 #: ``CLAMP_RATE``).
 NEAR_INTERVAL = 0.025
-#: Physics modes. ``"contact"``: a clamped robot driving straight (forward or back) in a run,
-#: away from fittings (see :meth:`Executor.free_straight`), moves kinematically along the pipe
-#: axis with the shape, clamp, sag and roll physics gave it, then settles physically; contact
+#: Physics modes. ``"contact"``: a clamped (or unclamped, its V straight) robot driving
+#: straight (forward or back) in a run, away from fittings (see :meth:`Executor.free_straight`),
+#: moves kinematically along the pipe axis with the shape, clamp, sag and roll physics gave it,
+#: then settles physically (a drive leaving the free run glides to its end, see
+#: ``KINEMATIC_SPLIT``); contact
 #: physics runs for everything else. ``"everywhere"``: contact physics for every motion (the
 #: reference the ``"contact"`` mode is measured against).
 PHYSICS_MODES = ("contact", "everywhere")
-#: Kinematic motion keeps the robot's body this much further than the pipe's diameter from
-#: both port planes of its run, m (see ``free_straight``).
+#: Kinematic motion keeps the robot's body (from its rear to the sensor, its foremost point)
+#: at least this fraction of the run's inner diameter inside both port planes of its run (see
+#: ``free_straight``): a whole diameter, so no module, wheel or V apex nor the near contacts'
+#: reach comes near a fitting. Tried: a quarter diameter (inside the port planes a run's wall
+#: is a plain cylinder; wheels and reach stay 11.5 mm clear of them) moves more of the sensing
+#: drives near fittings to the kinematic path and passed the equivalence run (24 networks), but
+#: the sub-millimetre pose differences of the glides near a tee changed a seeded thesis-detector
+#: decision (``tests/test_full_fidelity_digest.py``: the branch no longer seen); kept at 1.
+KINEMATIC_CLEARANCE = 1.0
+#: ... plus this, m.
 KINEMATIC_MARGIN = 0.0
+#: A straight drive that starts in the free run and leaves it (a drive through a fitting, a
+#: reducer, or up to a turn's arc, see :meth:`Executor.free_span`) glides to the free run's end
+#: and runs contact physics from there, if that glide is at least this long, m: a glide costs
+#: its settle (``SETTLE_TIME``, 3 control ticks), 2 cm of drive 13 ticks at the plant's k = 1.5.
+#: Measured (``benchmarks/bench_full_fidelity.py --phases``): straight drives of the sequences
+#: (mostly unclamped, through fittings) were 24 % of the physics ticks per decision.
+KINEMATIC_SPLIT = 0.02
 #: Kinematic motion needs the sensor within this fraction of the pipe's diameter of the run's
 #: axis and its heading within ``KINEMATIC_TILT`` of it (a robot well placed in the pipe).
 KINEMATIC_OFFSET = 0.15
@@ -375,6 +403,9 @@ class Executor:
         #: of physics, s
         self.time_compression = float(time_compression)
         self.motion_dt = self.time_compression * self.control_dt
+        #: the nominal time of one tick straightening the V (see :data:`RELEASE_COMPRESSION`), s
+        release = RELEASE_COMPRESSION if self.time_compression > 1.0 else 1.0
+        self.release_dt = release * self.motion_dt
         #: physics steps between two near-contact selections within a control period: the
         #: period split as evenly as possible into the fewest chunks of at most
         #: ``NEAR_INTERVAL`` of nominal motion each (a motion moves the robot's geoms no further
@@ -642,10 +673,16 @@ class Executor:
         if step.distance < 0:
             self._reverse(-step.distance, step.speed)
             return
-        axis = self.free_straight(step.distance)
-        if axis is not None:
-            self._glide(step.distance, step.speed, axis)
-            return
+        span = self.free_span()
+        if span is not None:
+            axis, _, ahead = span
+            if step.distance <= ahead:
+                self._glide(step.distance, step.speed, axis)
+                return
+            if ahead >= KINEMATIC_SPLIT:
+                # the drive leaves the free run: glide up to its end, physics from there
+                self._glide(ahead, step.speed, axis)
+                step = Drive(step.distance - ahead, step.speed, step.comply)
         self.path.truncate(self.odometer)
         p, r = self._front_pose()
         start, heading = p.copy(), r[:, 0].copy()
@@ -725,24 +762,36 @@ class Executor:
     # ------------------------------------------------------------ kinematic motion
     def free_straight(self, distance: float) -> NDArray[np.float64] | None:
         """The rule of ``physics="contact"``: the run's unit axis (world, the way the robot
-        faces) if driving ``distance`` m (negative: backwards) is a straight drive of a
-        clamped robot in a run, away from fittings; None if contact physics must run.
+        faces) if driving ``distance`` m (negative: backwards) is a straight drive in a run,
+        away from fittings, of a clamped robot or one with its V straight; None if contact
+        physics must run.
 
         Away from fittings: before and after the motion the whole robot (from its rear,
-        ``RobotConfig.length`` behind the sensor, to the sensor) lies more than the run's
-        inner diameter (+ ``KINEMATIC_MARGIN``) inside both port planes of its run: the
-        sensor is more than a diameter plus the robot's length from the fitting behind and
-        more than a diameter from the one ahead, so no module, wheel or V apex is within a
-        diameter of a fitting, a taper or a junction's opening. Straight drive of a clamped
-        robot: the V folded on its clamping side, no steering bend, no roll, no bent joint, no
-        held turn heading, and the sensor within ``KINEMATIC_OFFSET`` diameters of the axis,
-        its heading within ``KINEMATIC_TILT`` of it. Everything else (approaches, turns, junctions,
-        reducers, clamping, centring, back-outs near fittings, jams) runs contact physics."""
-        if self.physics != "contact" or not math.isfinite(distance):
+        ``RobotConfig.length`` behind the sensor, to the sensor) lies more than
+        ``KINEMATIC_CLEARANCE`` of the run's inner diameter (+ ``KINEMATIC_MARGIN``) inside
+        both port planes of its run, so no module, wheel or V apex (nor the near contacts'
+        reach) comes near a fitting, a taper or a junction's opening. Straight drive: the V
+        folded on its clamping side (clamped) or straight (unclamped: the welds hold every
+        module on the driven path as they do clamped), no steering bend, no roll, no bent
+        joint, no held turn heading, and the sensor within ``KINEMATIC_OFFSET`` diameters of
+        the axis, its heading within ``KINEMATIC_TILT`` of it. Everything else (approaches,
+        turns, junctions, reducers, clamping, centring, back-outs near fittings, jams) runs
+        contact physics."""
+        span = self.free_span()
+        if span is None or not math.isfinite(distance):
             return None
+        axis, back, ahead = span
+        return axis if -back <= distance <= ahead else None
+
+    def free_span(self) -> tuple[NDArray[np.float64], float, float] | None:
+        """The run's unit axis (see :meth:`free_straight`) with how far the robot may move
+        kinematically backwards and forwards from where it is (both >= 0), m; None if it may
+        not move kinematically at all."""
+        if self.physics != "contact":
+            return None
+        v = self.vclamp
         if (
-            self.vclamp.alpha <= 0.0
-            or self.vclamp.side != CLAMP_SIDE
+            not (v.alpha == 0.0 or (v.alpha > 0.0 and v.side == CLAMP_SIDE))
             or self.command.curvature != 0.0
             or self.command.roll != 0.0
             or self.command.hold_heading
@@ -766,16 +815,18 @@ class Executor:
         if float(pose.forward @ axis) < math.cos(KINEMATIC_TILT):
             return None
         # the robot's body, from its rear (``length`` behind the sensor) to the sensor, must
-        # stay more than a diameter (+ margin) inside both port planes of the run
-        clearance = diameter + KINEMATIC_MARGIN
+        # stay more than the clearance inside both port planes [lo, hi] of the run
+        clearance = KINEMATIC_CLEARANCE * diameter + KINEMATIC_MARGIN
         lo = leg_length(net, run.a, run.id) + clearance
         hi = edge_length(net, run.id) - leg_length(net, run.b, run.id) - clearance
         length = self.config.length
-        for s_sensor in (ep.s, ep.s + sign * distance):
-            s_rear = s_sensor - sign * length
-            if not (lo <= min(s_sensor, s_rear) and max(s_sensor, s_rear) <= hi):
-                return None
-        return axis
+        if sign > 0:  # facing b: the sensor may go up to hi, the rear down to lo
+            ahead, back = hi - ep.s, ep.s - length - lo
+        else:  # facing a: the sensor may go down to lo, the rear up to hi
+            ahead, back = ep.s - lo, hi - length - ep.s
+        if ahead < 0.0 or back < 0.0:
+            return None
+        return axis, back, ahead
 
     def _glide(self, distance: float, speed: float, axis: NDArray[np.float64]) -> None:
         """Move the clamped robot ``distance`` m (negative: backwards) along the unit world
@@ -890,11 +941,15 @@ class Executor:
         self._settle(self._ticks(CLAMP_SETTLE))
 
     def _unclamp(self) -> None:
-        rate = CLAMP_RATE * self.motion_dt
+        """Straighten the V (compressed by :data:`RELEASE_COMPRESSION`) and settle; a V
+        already straight moves nothing and settles nothing."""
+        if self.vclamp.alpha <= 0.0:
+            return
+        rate = CLAMP_RATE * self.release_dt
         while self.vclamp.alpha > 0:
             self.vclamp.alpha = max(0.0, self.vclamp.alpha - rate)
             self._set_targets()
-            self._tick(None, self.motion_dt)
+            self._tick(None, self.release_dt)
         self._settle(self._ticks(UNCLAMP_SETTLE))
 
     def _probe(self, side: int, rng: np.random.Generator) -> float | None:

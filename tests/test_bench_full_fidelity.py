@@ -70,3 +70,37 @@ def test_the_tick_profile_times_mj_step_and_restores_the_executor() -> None:
     import primitives.executor as executor_module
 
     assert executor_module.mujoco is bench.mujoco
+
+
+def test_the_phase_profile_counts_every_physics_tick_and_restores_the_executor() -> None:
+    from pipe_env import layouts
+    from primitives.executor import Executor
+    from primitives.sequences import Sequence
+    from primitives.steps import Centre, Clamp, Drive, Unclamp
+
+    methods = (Executor._physics, Executor._settle, Executor._clamp, Executor.run)
+    counter = bench.PhaseCounter()
+    with bench._phased(counter):
+        ex = Executor.for_network(layouts.straight(0.09, 1.0), lidar=None)
+        ticks = ex.physics_ticks
+        ex.run(Sequence("probe", (Unclamp(), Drive(0.02), Centre(), Clamp(0.09))))
+    assert sum(counter.by_phase.values()) == ex.physics_ticks
+    assert counter.by_phase["place (reset)"] == ticks > 0
+    for phase in ("unclamp", "drive: straight unclamped", "centre: probes", "clamp: settle"):
+        assert counter.by_phase.get(phase, 0) > 0, (phase, counter.by_phase)
+    assert counter.by_sequence["probe"] == ex.physics_ticks - ticks
+    assert (Executor._physics, Executor._settle, Executor._clamp, Executor.run) == methods
+    profile = {
+        "physics": "contact",
+        "episodes": 1,
+        "decisions": 1,
+        "success": 1,
+        "jams": 0,
+        "steps_s": 1.0,
+        "reset_s": 1.0,
+        "kinematic_ticks": 0,
+        "by_phase": counter.by_phase,
+        "by_sequence": counter.by_sequence,
+    }
+    text = bench.phase_table(profile)
+    assert "| centre: probes |" in text and "(resets)" in text and "| total (steps) |" in text

@@ -49,11 +49,11 @@ def test_a_straight_away_from_fittings_is_driven_kinematically_as_physics_would(
 
 
 def test_near_a_fitting_physics_runs() -> None:
-    """The rule: within a diameter plus the robot's length of a fitting, no kinematic motion;
+    """The rule: within a diameter of a fitting, no kinematic motion;
     the reference mode never glides."""
     net = layouts.mitre_bend(0.1, math.pi / 2, 0.0, distance=0.15)
     ex = Executor.for_network(net, lidar=None, physics="contact")
-    assert ex.free_straight(0.05) is None  # the sensor would come within a diameter of it
+    assert ex.free_straight(0.05) is None  # the sensor would come near it
     far = layouts.mitre_bend(0.1, math.pi / 2, 0.0, distance=2.0)
     ex = Executor.for_network(far, lidar=None, physics="contact")
     axis = ex.free_straight(0.05)
@@ -101,3 +101,93 @@ def test_the_model_is_built_once_per_network_and_reset_between_episodes() -> Non
     for k in obs:
         assert np.array_equal(obs[k], obs2[k]), k
     assert np.array_equal(base.plant.pose().position, fresh.unwrapped.plant.pose().position)
+
+
+def test_the_free_run_ends_the_clearance_inside_the_port_plane() -> None:
+    """The kinematic rule's span: the sensor may glide up to ``KINEMATIC_CLEARANCE`` diameters
+    short of the bend's port plane, and no further."""
+    from pipe_env.routing import edge_length, leg_length, locate
+    from primitives.executor import KINEMATIC_CLEARANCE, KINEMATIC_MARGIN
+
+    net = layouts.mitre_bend(0.1, math.pi / 2, 0.0, distance=1.0)
+    ex = Executor.for_network(net, lidar=None, physics="contact")
+    span = ex.free_span()
+    assert span is not None
+    axis, back, ahead = span
+    ep, towards = locate(net, ex.robot.sensor_pose())
+    run = net.run_by_id[ep.run_id]
+    assert towards == run.b
+    port = edge_length(net, run.id) - leg_length(net, run.b, run.id)
+    assert ahead == pytest.approx(port - (KINEMATIC_CLEARANCE * 0.1 + KINEMATIC_MARGIN) - ep.s)
+    assert back >= 0.0
+    assert ex.free_straight(ahead - 1e-4) is not None
+    assert ex.free_straight(ahead + 1e-4) is None
+    assert Executor.for_network(net, lidar=None, physics="everywhere").free_span() is None
+
+
+def _drive_both(steps: tuple) -> dict[str, Executor]:
+    from primitives.sequences import Sequence
+
+    net = layouts.mitre_bend(0.09, math.pi / 2, 0.0, distance=1.0)
+    out = {}
+    for physics in ("everywhere", "contact"):
+        ex = Executor.for_network(net, lidar=None, physics=physics, time_compression=1.5)
+        res = ex.run(Sequence("test", steps))
+        assert res.status == "done", res.reason
+        out[physics] = ex
+    return out
+
+
+def test_a_drive_leaving_the_free_run_glides_to_its_end_then_runs_physics() -> None:
+    """A clamped drive from the free run up to 4 cm before the bend: the contact mode glides
+    the free part and drives the rest physically, ending where the reference does (1 mm)."""
+    from primitives.steps import Drive
+
+    probe = Executor.for_network(
+        layouts.mitre_bend(0.09, math.pi / 2, 0.0, distance=1.0), lidar=None, physics="contact"
+    )
+    span = probe.free_span()
+    assert span is not None
+    run = _drive_both((Drive(span[2] + 0.05),))
+    ref, new = run["everywhere"], run["contact"]
+    assert new.kinematic_ticks > 0 and new.physics_ticks < 0.6 * ref.physics_ticks
+    a, b = ref.robot.sensor_pose(), new.robot.sensor_pose()
+    assert float(np.linalg.norm(a.position - b.position)) < 0.001
+    assert new.time == pytest.approx(ref.time, abs=0.1)
+
+
+def test_an_unclamped_robot_glides_in_the_free_run_as_physics_moves_it() -> None:
+    """Unclamped (the V straight), a straight drive in the free run is kinematic too, and
+    clamping after it finds the same pipe (0.5 mm) at the same place (1 mm)."""
+    from primitives.steps import Clamp, Drive, Unclamp
+
+    run = _drive_both((Unclamp(), Drive(0.3), Clamp(0.09)))
+    ref, new = run["everywhere"], run["contact"]
+    assert new.kinematic_ticks > 0 and new.physics_ticks < 0.6 * ref.physics_ticks
+    a, b = ref.robot.sensor_pose(), new.robot.sensor_pose()
+    assert float(np.linalg.norm(a.position - b.position)) < 0.001
+    assert new.robot.clamped_diameter() == pytest.approx(ref.robot.clamped_diameter(), abs=5e-4)
+
+
+def test_straightening_the_v_is_compressed_and_a_straight_v_settles_nothing() -> None:
+    """Compressed (k > 1), the V straightens at ``RELEASE_COMPRESSION`` x k, the clock at the
+    nominal rate; uncompressed (the reference) at the nominal rate; a V already straight
+    runs no physics and takes no time."""
+    from primitives.executor import CLAMP_RATE, RELEASE_COMPRESSION, UNCLAMP_SETTLE
+    from primitives.sequences import Sequence
+    from primitives.steps import Unclamp
+
+    net = layouts.straight(0.09, distance=1.0)
+    for k, release in ((1.0, 1.0), (1.5, RELEASE_COMPRESSION * 1.5)):
+        ex = Executor.for_network(net, lidar=None, time_compression=k)
+        assert ex.release_dt == pytest.approx(release * ex.control_dt)
+        alpha, ticks, t0 = ex.vclamp.alpha, ex.physics_ticks, ex.time
+        assert alpha > 0.0
+        ex.run(Sequence("release", (Unclamp(),)))
+        folding = math.ceil(alpha / (CLAMP_RATE * ex.release_dt) - 1e-9)
+        settle = round(UNCLAMP_SETTLE / ex.control_dt)
+        assert ex.physics_ticks - ticks == folding + settle
+        assert ex.time - t0 == pytest.approx(folding * ex.release_dt + settle * ex.control_dt)
+        ticks, t0 = ex.physics_ticks, ex.time
+        ex.run(Sequence("release", (Unclamp(),)))
+        assert (ex.physics_ticks, ex.time) == (ticks, t0)

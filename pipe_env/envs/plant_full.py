@@ -135,7 +135,7 @@ class PhysicalPlant:
             fixed cadence).
         robot_config: the robot (None: the default :class:`~pipe_env.robot.RobotConfig`).
         physics: ``"contact"`` (physics where contact decides: straight drives away from
-            fittings move the clamped robot kinematically, see
+            fittings move the robot kinematically, clamped or with its V straight, see
             :meth:`primitives.executor.Executor.free_straight`) or ``"everywhere"`` (contact
             physics for every motion: the reference).
         timestep: the physics step, s (None: ``pipe_env.world.TIMESTEP``).
