@@ -26,6 +26,11 @@ its scalar constants from ``fpar``:
   ``(L, theta, phi, rho, R_b)``.
 - ``MODEL_TAPER``: a reducer's radius along the axis, ``r(u)`` from the wall radius to ``r2``
   over ``[L, L + T]``; ``data`` = (u, r), ``fpar`` = (wall radius,), parameters ``(L, T, r2)``.
+- ``MODEL_FAR_SIDE``: a side hole's far side (:func:`detector.grazing.find_ring_holes`): the
+  distance to a branch cylinder deflected by ``theta`` whose axis leaves the run's axis at
+  ``x_a`` towards roll ``psi``, less its radius ``rho``, each weighted by its noise allowance;
+  ``data`` = (u, r, phi, range, noise^2), ``fpar`` = (cos theta, sin theta, floor^2, and the
+  forward-difference steps of the three parameters), parameters ``(x_a, rho, psi)``.
 
 :func:`wall_distances` and :func:`wall_fit` measure how well a pose explains the wall;
 :func:`coarse_branch_cost` scores the coarse grid an outgoing pipe's fit starts from.
@@ -47,6 +52,7 @@ MODEL_LINES = 1
 MODEL_OWN_LINES = 2
 MODEL_TORUS = 3
 MODEL_TAPER = 4
+MODEL_FAR_SIDE = 5
 #: Forward-difference step of the torus model's Jacobian (m, rad).
 TORUS_FD_STEP = 1e-6
 
@@ -207,6 +213,40 @@ def _taper(data, fpar, x, r, jt, want_jac):
 
 
 @njit(cache=True)
+def far_side_residuals(data, ct, st, floor2, x0, x1, x2, out):
+    """The weighted residuals of :data:`MODEL_FAR_SIDE` at ``(x0, x1, x2)`` into ``out``:
+    operation for operation those of :func:`detector.grazing._fit_far_side`'s numpy model."""
+    for i in range(data.shape[1]):
+        u = data[0, i]
+        r = data[1, i]
+        q = u - x0
+        lat = r * math.cos(data[2, i] - x2)
+        along = q * ct + lat * st
+        d2 = q * q + r * r - along * along
+        res = math.sqrt(max(d2, 0.0)) - x1
+        dist = math.sqrt(max(d2, 1e-24))
+        cos_inc = abs(u * (q - along * ct) + r * r - along * st * lat) / (dist * data[3, i])
+        ci = min(cos_inc, 1.0)
+        out[i] = res * math.sqrt(floor2 / (floor2 + data[4, i] * (ci * ci)))
+
+
+@njit(cache=True)
+def _far_side(data, fpar, x, r, jt, want_jac):
+    ct, st, floor2 = fpar[0], fpar[1], fpar[2]
+    far_side_residuals(data, ct, st, floor2, x[0], x[1], x[2], r)
+    if want_jac:
+        n = data.shape[1]
+        d_k = np.empty(n)
+        for k in range(3):
+            xs = x.copy()
+            step = fpar[3 + k]
+            xs[k] = x[k] + step
+            far_side_residuals(data, ct, st, floor2, xs[0], xs[1], xs[2], d_k)
+            for i in range(n):
+                jt[k, i] = (d_k[i] - r[i]) / step
+
+
+@njit(cache=True)
 def model_eval(model, data, ipar, fpar, x, r, jt, want_jac):
     """Residuals of ``model`` at ``x`` into ``r`` (N,) and, with ``want_jac``, its Jacobian
     into ``jt`` (n_params, N)."""
@@ -218,6 +258,8 @@ def model_eval(model, data, ipar, fpar, x, r, jt, want_jac):
         _lines(data, ipar, x, r, jt, want_jac, True)
     elif model == MODEL_TORUS:
         _torus(data, x, r, jt, want_jac)
+    elif model == MODEL_FAR_SIDE:
+        _far_side(data, fpar, x, r, jt, want_jac)
     else:
         _taper(data, fpar, x, r, jt, want_jac)
 

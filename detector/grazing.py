@@ -28,13 +28,18 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from detector.fit_kernels import MODEL_FAR_SIDE, far_side_residuals
 from detector.geometry import wrap_angle
 from detector.grid import label_regions
 from detector.improved_config import DEFAULT_CONFIG, ImprovedConfig
-from detector.robust import robust_gauss_newton
+from detector.robust import robust_fit
 
 #: Deflections of standard branch fittings tried for the branch behind a hole, rad.
 DEFLECTIONS = (0.5 * math.pi, 0.25 * math.pi, 0.75 * math.pi)
+
+
+#: Forward-difference steps of the far side's fit (m, m, rad): position, radius, roll.
+FAR_SIDE_FD_STEPS = (1e-4, 1e-4, 1e-3)
 
 
 @dataclass(frozen=True)
@@ -229,6 +234,10 @@ def _fit_far_side(
     noise2 = (
         np.zeros_like(u) if sigma_range is None else np.square(cfg.hole_fit_noise_k * sigma_range)
     )
+    data = np.ascontiguousarray(np.stack([u, r, phi, rng, noise2]))
+    bare = data.copy()
+    bare[4] = 0.0
+    raw = np.empty(u.size)
     # roll: the circular mean weighted by how far along each return went
     w = u - float(u.min()) + 1e-4
     roll0 = math.atan2(float(np.sum(w * np.sin(phi))), float(np.sum(w * np.cos(phi))))
@@ -242,37 +251,20 @@ def _fit_far_side(
         x_start = float(np.median(u)) - rho0 / st - big_r * ct / st
         x0 = np.array([x_start, rho0, roll0])
 
-        def residual(x: NDArray[np.float64], ct: float = ct, st: float = st) -> NDArray[np.float64]:
-            q = u - x[0]
-            lat = r * np.cos(phi - x[2])
-            along = q * ct + lat * st
-            d2 = q * q + r * r - along * along
-            return (np.sqrt(np.maximum(d2, 0.0)) - x[1]) * _scale(x, ct, st)
-
-        def _scale(x: NDArray[np.float64], ct: float, st: float) -> NDArray[np.float64]:
-            """Each return's weight: ``cfg.hole_max_fit_rms`` over its allowed distance from
-            the surface (1 without range noise)."""
-            q = u - x[0]
-            lat = r * np.cos(phi - x[2])
-            along = q * ct + lat * st
-            dist = np.sqrt(np.maximum(q * q + r * r - along * along, 1e-24))
-            # (the cosine of the incidence: the beam, ``(u, y, z) / rng``, on the surface's
-            # normal, the return's offset from the branch's axis over its length ``dist``)
-            cos_inc = np.abs(u * (q - along * ct) + r * r - along * st * lat) / (dist * rng)
-            return np.sqrt(floor2 / (floor2 + noise2 * np.square(np.minimum(cos_inc, 1.0))))
-
         lower = np.array([x_start - 3.0 * big_r, 0.2 * big_r, roll0 - cfg.hole_roll_reach])
         upper = np.array([x_start + 3.0 * big_r, 1.05 * big_r, roll0 + cfg.hole_roll_reach])
-        x, res, _ = robust_gauss_newton(
-            residual,
+        fpar = np.array([ct, st, floor2, *FAR_SIDE_FD_STEPS])
+        x, res, _ = robust_fit(
+            MODEL_FAR_SIDE,
+            data,
             x0,
-            np.array([1e-4, 1e-4, 1e-3]),
             c=0.01,
             c_final=0.003,
             iterations=30,
             lower=lower,
             upper=upper,
             step_tol=1e-7,
+            fpar=fpar,
         )
         if not np.all(np.isfinite(x)):
             continue
@@ -286,7 +278,9 @@ def _fit_far_side(
             continue
         best_ratio = ratio
         square_fits = square_fits or theta == DEFLECTIONS[0]
-        rms = float(np.sqrt(np.mean(np.square(res / _scale(x, ct, st)))))
+        # (the unweighted distances: the same model without range noise)
+        far_side_residuals(bare, ct, st, floor2, x[0], x[1], x[2], raw)
+        rms = float(np.sqrt(np.mean(np.square(raw))))
         entry = float(np.median(u * big_r / np.maximum(r, 1e-9)))
         best = RingHole(
             float(x[0]), float(x[1]), wrap_angle(float(x[2])), int(u.size), rms, entry, theta
