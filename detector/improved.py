@@ -508,7 +508,7 @@ def _past_incidence(
 ) -> NDArray[np.bool_] | None:
     """Which returns (compact order) lie on the wall radius ``big_r`` (m, within
     ``cfg.hole_wall_band`` and ``cfg.hole_noise_k`` times their radial noise) where the beam
-    would meet a straight wall beyond the sensor's largest incidence (less
+    would meet a straight wall beyond the sensor's largest incidence (plus
     ``cfg.incidence_jitter_k`` times its beam-angle jitter): no straight wall returns there,
     so they come from a surface facing the sensor, the far side of a hole in the wall (a
     branch far ahead of a sensor that loses the grazing wall around it). ``None`` when the
