@@ -322,7 +322,7 @@ def _no_island_discovery(spec: mujoco.MjSpec) -> None:
 
     Islands let the solver treat independent groups of constrained bodies apart; a world has one
     moving tree (the robot, its modules held by welds to their targets), so there is one island
-    and finding it is pure cost: about 2-8 % of an mj_step (``benchmarks/bench_step_cost.py``;
+    and finding it is pure cost: about 4-10 % of an mj_step (``benchmarks/bench_step_cost.py``;
     one Newton iteration solves a step, so the solver's own settings change nothing). The
     trajectories are bit for bit those with islands (the benchmark and a test compare them);
     sleeping (:func:`_static_walls_posed_once`) works without islands.
