@@ -466,7 +466,7 @@ def _with_ring_holes(
         cloud.beam_step,
         cfg,
         cloud.sigma_range_grid()[:, c0:c1],
-        None if unseen is None else cloud._grid(unseen, False)[:, c0:c1],
+        None if unseen is None else cloud.grid(unseen, False)[:, c0:c1],
     )
     if not holes or (weak and len(holes) < sum(not o.is_straight_on for o in det.options)):
         return det  # (nothing, or fewer ways than the openings the fit had to explain)
