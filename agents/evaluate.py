@@ -143,7 +143,7 @@ def _summarise(agent: str, infos: list[dict[str, Any]], wall: float) -> EvalResu
 BACKENDS = ("process", "ray")
 
 
-def _env_setup(env_kwargs: dict[str, Any] | None) -> tuple[NetworkConfig, dict[str, Any]]:
+def env_setup(env_kwargs: dict[str, Any] | None) -> tuple[NetworkConfig, dict[str, Any]]:
     """The network config and the remaining env arguments of an evaluation (the held-out
     pool replaces any pool the arguments name)."""
     kwargs = dict(env_kwargs or {})
@@ -192,7 +192,7 @@ def evaluate(
             agent, n_episodes, env_id, env_kwargs, pool_seed, on_episode, jobs, backend
         )
         return _summarise(agent, infos, time.perf_counter() - t0)
-    cfg, kwargs = _env_setup(env_kwargs)
+    cfg, kwargs = env_setup(env_kwargs)
     networks = held_out_networks(cfg, n_episodes, pool_seed)
     env = SequentialNetworks(gym.make(env_id, network_config=cfg, **kwargs), networks, pool_seed)
     t0 = time.perf_counter()
@@ -304,14 +304,18 @@ class _PlainPolicyAgent:
         return int(action)
 
 
-def _worker_env(agent: str, env_id: str, env_kwargs: dict[str, Any] | None) -> tuple[gym.Env, Any]:
+def worker_env(agent: str, env_id: str, env_kwargs: dict[str, Any] | None) -> tuple[gym.Env, Any]:
+    """The env (``env_id`` made with the held-out evaluation's arguments, see
+    :func:`env_setup`) and the actor of ``agent`` (a scripted agent, a MaskablePPO policy or
+    a plain policy) this process evaluates with; the last pair is cached and reused while the
+    arguments stay the same (a new pair closes the old env)."""
     key = repr((agent, env_id, sorted((env_kwargs or {}).items(), key=lambda kv: kv[0])))
     hit = _WORKER_CACHE.get(key)
     if hit is None:
         for env, _ in _WORKER_CACHE.values():
             env.close()
         _WORKER_CACHE.clear()
-        cfg, kwargs = _env_setup(env_kwargs)
+        cfg, kwargs = env_setup(env_kwargs)
         env = gym.make(env_id, network_config=cfg, **kwargs)
         actor: Any
         if agent in SCRIPTED_AGENTS:
@@ -333,8 +337,8 @@ def run_held_out_episode(
 ) -> dict[str, Any]:
     """Held-out episode ``index`` (network ``index`` of the pool, seed ``pool_seed + index``)
     of ``agent``; its final info (the worker's env and agent are reused between calls)."""
-    env, actor = _worker_env(agent, env_id, env_kwargs)
-    cfg, _ = _env_setup(env_kwargs)
+    env, actor = worker_env(agent, env_id, env_kwargs)
+    cfg, _ = env_setup(env_kwargs)
     network = pool_network(cfg, pool_seed, index)
     obs, info = env.reset(seed=pool_seed + index, options={"network": network})
     actor.reset()

@@ -56,7 +56,9 @@ import pipe_env  # noqa: F401  (registers the environment ids)
 from agents.evaluate import EVAL_POOL_SEED, held_out_networks
 from agents.scripted import make_agent
 from detector.atomic import atomic_write_text
+from detector.validation import fail
 from pipe_env.generator import NetworkConfig
+from primitives.executor import CONTROL_DT
 
 MODES = ("contact", "everywhere")
 NETWORK_CONFIG = {"n_fittings": 6, "planar": False, "allow_loops": True}
@@ -399,9 +401,18 @@ def phase_profile(first: int, n: int, physics: str = "contact") -> dict[str, Any
     }
 
 
-def phase_table(profile: dict[str, Any], control_dt: float = 0.02) -> str:
+def phase_table(profile: dict[str, Any], control_dt: float = CONTROL_DT) -> str:
     """The markdown tables of a :func:`phase_profile`: physics ticks per decision (and the
-    simulated seconds of physics, ``control_dt`` s a tick) by phase and by sequence."""
+    simulated seconds of physics, ``control_dt`` s a tick) by phase and by sequence. A
+    profile of no networks (no time stepped) is refused."""
+    if not profile["steps_s"] > 0.0:
+        raise fail(
+            "profile['steps_s']",
+            profile["steps_s"],
+            "above 0 s (a profile of at least one network)",
+            "no episode was stepped",
+            where="phase_table",
+        )
     dec = max(profile["decisions"], 1)
     out = [
         f"physics={profile['physics']}: {profile['episodes']} episodes, "

@@ -28,9 +28,10 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from detector.options import StructureOption
+from pipe_env.envs.actions import BACK_ROW
 
 #: Rows of the action space that are ways on (the last row backs out).
-_ROW_NAMES = {5: "back out"}
+_ROW_NAMES = {BACK_ROW: "back out"}
 
 
 def option_text(o: StructureOption | dict[str, Any]) -> str:
@@ -100,13 +101,13 @@ def trace_episode(
     """Run held-out episode ``index`` of ``agent`` in ``fidelity`` and trace it; each line is
     passed to ``emit`` as it is made. Returns the final info (without the action mask) and
     the trace lines under ``"trace"``."""
-    from agents.evaluate import EVAL_POOL_SEED, _env_setup, _worker_env, pool_network
+    from agents.evaluate import EVAL_POOL_SEED, env_setup, pool_network, worker_env
     from benchmarks.bench_transfer import env_kwargs
 
     kwargs = env_kwargs(fidelity, network_config)
-    wrapped, actor = _worker_env(agent, "pipenav/PipeNav-v0", kwargs)
+    wrapped, actor = worker_env(agent, "pipenav/PipeNav-v0", kwargs)
     env: Any = wrapped.unwrapped
-    cfg, _ = _env_setup(kwargs)
+    cfg, _ = env_setup(kwargs)
     lines: list[str] = []
 
     def say(items: list[str]) -> None:

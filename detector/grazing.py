@@ -124,8 +124,10 @@ def find_ring_holes(
     thr = np.maximum(cfg.hole_min_step, cfg.hole_noise_k * sigma_r)
     bump = ok & (step > thr) & (xyz[0] < before)
     unseen = None if unseen_wall is None else unseen_wall & valid & (xyz[0] < before)
-    n_unseen = 0 if unseen is None else int(np.count_nonzero(unseen))
-    if np.count_nonzero(bump) + n_unseen < cfg.hole_min_returns:
+    # (cheap exit: a return both a bump and unseen counts once; the count below only shrinks
+    # from here, so this exit never drops a hole the full test would keep)
+    n_any = np.count_nonzero(bump if unseen is None else bump | unseen)
+    if n_any < cfg.hole_min_returns:
         return []
     # ... between rings that lie on the wall (the run goes on past the hole)
     on_wall = (

@@ -466,7 +466,7 @@ def _with_ring_holes(
         cloud.beam_step,
         cfg,
         cloud.sigma_range_grid()[:, c0:c1],
-        None if unseen is None else cloud._grid(unseen, False)[:, c0:c1],
+        None if unseen is None else cloud.grid(unseen, False)[:, c0:c1],
     )
     if not holes or (weak and len(holes) < sum(not o.is_straight_on for o in det.options)):
         return det  # (nothing, or fewer ways than the openings the fit had to explain)
@@ -508,7 +508,7 @@ def _past_incidence(
 ) -> NDArray[np.bool_] | None:
     """Which returns (compact order) lie on the wall radius ``big_r`` (m, within
     ``cfg.hole_wall_band`` and ``cfg.hole_noise_k`` times their radial noise) where the beam
-    would meet a straight wall beyond the sensor's largest incidence (less
+    would meet a straight wall beyond the sensor's largest incidence (plus
     ``cfg.incidence_jitter_k`` times its beam-angle jitter): no straight wall returns there,
     so they come from a surface facing the sensor, the far side of a hole in the wall (a
     branch far ahead of a sensor that loses the grazing wall around it). ``None`` when the

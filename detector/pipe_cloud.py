@@ -63,7 +63,10 @@ class PipeCloud:
     def n(self) -> int:
         return int(self.cell.size)
 
-    def _grid(self, values: NDArray, fill: float | bool) -> NDArray:
+    def grid(self, values: NDArray, fill: float | bool) -> NDArray:
+        """Per-return ``values`` in compact order, ``(n,)`` or ``(c, n)``, scattered into the
+        ``(G, K)`` (or ``(c, G, K)``) grid of this cloud's cells; cells without a return hold
+        ``fill``."""
         g, k = self.shape
         if values.ndim == 1:
             return _scatter(values[None, :], self.cell, g * k, fill).reshape(g, k)
@@ -73,21 +76,21 @@ class PipeCloud:
     def valid(self) -> NDArray[np.bool_]:
         """(G, K) True where the cell holds a return."""
         if self._valid is None:
-            self._valid = self._grid(np.ones(self.n, dtype=bool), False)
+            self._valid = self.grid(np.ones(self.n, dtype=bool), False)
         return self._valid
 
     @property
     def sigma_r(self) -> NDArray[np.float64]:
         """(G, K) radial noise of each return (0 where none)."""
         if self._sigma is None:
-            self._sigma = self._grid(self.sigma_v, 0.0)
+            self._sigma = self.grid(self.sigma_v, 0.0)
         return self._sigma
 
     @property
     def xyz(self) -> NDArray[np.float64]:
         """(3, G, K) pipe-frame points (0 where there is no return)."""
         if self._xyz is None:
-            self._xyz = self._grid(self.xyz_v, 0.0)
+            self._xyz = self.grid(self.xyz_v, 0.0)
         return self._xyz
 
     @property
@@ -97,7 +100,7 @@ class PipeCloud:
 
     def sigma_range_grid(self) -> NDArray[np.float64]:
         """(G, K) range noise of each return (0 where none), m."""
-        return self._grid(self.sigma_range_v, 0.0)
+        return self.grid(self.sigma_range_v, 0.0)
 
     def sigma_percentile(self, q: float) -> float:
         """The ``q``-th percentile of the returns' radial noise (m; computed once; the

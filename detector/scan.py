@@ -80,7 +80,8 @@ NO_RETURN_REASONS: tuple[str, ...] = (
 
 #: Entries of ``Scan.spec`` the detector reads (the ``LidarSpec`` fields of the same names),
 #: with their unit and the values allowed: ``">= 0"`` a finite number >= 0, ``"finite"`` any
-#: finite number, ``"> 0"`` a number > 0 (``inf``: unlimited).
+#: finite number, ``"> 0"`` a number > 0 (``inf``: unlimited), ``"(0, pi/2]"`` an angle above 0
+#: up to a right angle (radians: 80 degrees given as ``80`` is refused).
 SPEC_NUMBERS: dict[str, tuple[str, str]] = {
     "noise_sigma": ("m", ">= 0"),
     "noise_sigma_rel": ("", ">= 0"),
@@ -89,6 +90,7 @@ SPEC_NUMBERS: dict[str, tuple[str, str]] = {
     "bias": ("m", "finite"),
     "min_range": ("m", ">= 0"),
     "max_range": ("m", "> 0"),
+    "max_incidence": ("rad", "(0, pi/2]"),
 }
 
 
@@ -379,13 +381,15 @@ def _first(mask: NDArray[np.bool_]) -> tuple[int, ...]:
 
 def _spec_number_problem(value: Any, rule: str) -> str | None:
     """What is wrong with ``value`` as a :data:`SPEC_NUMBERS` entry of ``rule`` (``">= 0"``,
-    ``"finite"`` or ``"> 0"``, where inf is allowed), or ``None``."""
+    ``"finite"``, ``"> 0"``, where inf is allowed, or ``"(0, pi/2]"``), or ``None``."""
     if not isinstance(value, numbers.Real) or isinstance(value, bool):
         return "not a number"
     v = float(value)
     if math.isnan(v) or (math.isinf(v) and rule != "> 0"):
         return "not finite"
     if (rule == ">= 0" and v < 0.0) or (rule == "> 0" and v <= 0.0):
+        return "out of range"
+    if rule == "(0, pi/2]" and not 0.0 < v <= 0.5 * math.pi:
         return "out of range"
     return None
 
@@ -407,6 +411,7 @@ def _check_spec(spec: Any) -> None:
                 ">= 0": f"a finite number >= 0{u}",
                 "finite": f"a finite number{u}",
                 "> 0": f"a number > 0{u}, inf: unlimited",
+                "(0, pi/2]": f"above 0 to pi/2{u}",
             }[rule]
             raise fail(f"spec[{key!r}]", spec[key], allowed, problem, where="Scan")
     if "min_range" in spec and "max_range" in spec:

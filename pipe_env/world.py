@@ -48,7 +48,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from detector.validation import check_number
+from detector.validation import check_bool, check_number, fail
 from pipe_env.contact_walls import BoxPanel, HullPiece, fitting_pieces, run_panels
 from pipe_env.meshes import TriangleMesh, fitting_shell, run_shell, to_triangle_mesh
 from pipe_env.network import PipeNetwork
@@ -114,7 +114,13 @@ class PipeWorld:
             return self
         if self._complete is None:
             if self._rebuild is None:
-                raise ValueError("this world has no ray meshes and no way to build them")
+                raise fail(
+                    "ray_meshes",
+                    False,
+                    "a world built with ray meshes, or by build_world (which can rebuild it)",
+                    "no ray meshes and no way to build them",
+                    where="PipeWorld.complete",
+                )
             self._complete = self._rebuild()
         full = self._complete
         src, dst = self.data, full.data
@@ -192,6 +198,8 @@ def build_world(
             :meth:`PipeWorld.complete`; see the module docstring).
     """
     timestep = check_number("timestep", timestep, *TIMESTEP_RANGE, unit="s", where="build_world")
+    contact_walls = check_bool("contact_walls", contact_walls, where="build_world")
+    ray_meshes = check_bool("ray_meshes", ray_meshes, where="build_world")
     network.validate()
     spec = mujoco.MjSpec()
     spec.modelname = f"pipenav_{network.name}"
@@ -322,7 +330,7 @@ def _no_island_discovery(spec: mujoco.MjSpec) -> None:
 
     Islands let the solver treat independent groups of constrained bodies apart; a world has one
     moving tree (the robot, its modules held by welds to their targets), so there is one island
-    and finding it is pure cost: about 2-8 % of an mj_step (``benchmarks/bench_step_cost.py``;
+    and finding it is pure cost: about 4-10 % of an mj_step (``benchmarks/bench_step_cost.py``;
     one Newton iteration solves a step, so the solver's own settings change nothing). The
     trajectories are bit for bit those with islands (the benchmark and a test compare them);
     sleeping (:func:`_static_walls_posed_once`) works without islands.

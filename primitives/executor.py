@@ -128,7 +128,11 @@ TIME_COMPRESSION = 1.0
 #: the V straightens at k = 3, the largest compression every tolerance and jam case of
 #: ``benchmarks/physics_step_study.py`` holds at for every motion. Measured
 #: (``benchmarks/bench_full_fidelity.py --phases``): straightening after the centring probes
-#: was 12 % of the physics ticks per decision.
+#: was 12 % of the physics ticks per decision. The one exception to ``NEAR_INTERVAL``: the
+#: near-contact chunks are sized from ``motion_dt``, so a straightening tick at k = 1.5 moves
+#: 60 ms of nominal motion in two 30 ms chunks, beyond the 25 ms interval. It is safe:
+#: straightening moves the robot's geoms away from the walls (the apex wheels lift off), so no
+#: wall piece the selection missed can be reached within the tick.
 RELEASE_COMPRESSION = 2.0
 #: A driven front trails its drive target by about this much time of travel at its physical
 #: speed (the weld's tracking delay; measured right after a 20 ms tick, 2 ms steps, a clamped
@@ -174,7 +178,8 @@ NEAR_REACH = 0.006
 NEAR_INTERVAL = 0.025
 #: Physics modes. ``"contact"``: a clamped (or unclamped, its V straight) robot driving
 #: straight (forward or back) in a run, away from fittings (see :meth:`Executor.free_straight`),
-#: moves kinematically along the pipe axis with the shape, clamp, sag and roll physics gave it,
+#: moves kinematically along the pipe axis with the shape, clamp, offset and roll physics gave
+#: it,
 #: then settles physically (a drive leaving the free run glides to its end, see
 #: ``KINEMATIC_SPLIT``); contact
 #: physics runs for everything else. ``"everywhere"``: contact physics for every motion (the
@@ -410,7 +415,10 @@ class Executor:
         #: period split as evenly as possible into the fewest chunks of at most
         #: ``NEAR_INTERVAL`` of nominal motion each (a motion moves the robot's geoms no further
         #: between two selections than in one uncompressed 20-25 ms period, which the
-        #: selection's reach is set for; the whole period at the defaults)
+        #: selection's reach is set for; the whole period at the defaults). Sized from
+        #: ``motion_dt``: a straightening tick (``release_dt``, see :data:`RELEASE_COMPRESSION`)
+        #: exceeds ``NEAR_INTERVAL`` per chunk, safe since straightening moves geoms away from
+        #: the walls
         chunks = max(1, math.ceil(self.motion_dt / NEAR_INTERVAL - 1e-9))
         chunks = min(chunks, self.substeps)
         base, extra = divmod(self.substeps, chunks)
@@ -829,9 +837,10 @@ class Executor:
         return axis, back, ahead
 
     def _glide(self, distance: float, speed: float, axis: NDArray[np.float64]) -> None:
-        """Move the clamped robot ``distance`` m (negative: backwards) along the unit world
-        ``axis`` kinematically: every body, drive target and the driven path translate
-        together (joint angles, clamp, sag and roll as physics left them), the clock advances
+        """Move the robot (clamped, or unclamped with its V straight) ``distance`` m
+        (negative: backwards) along the unit world ``axis`` kinematically: every body, drive
+        target and the driven path translate together (joint angles, clamp, offset and roll as
+        physics left them), the clock advances
         by the drive's duration, and the robot settles for ``SETTLE_TIME`` s of physics."""
         m, d = self.model, self.data
         step = abs(distance)

@@ -104,3 +104,6 @@ def test_the_phase_profile_counts_every_physics_tick_and_restores_the_executor()
     }
     text = bench.phase_table(profile)
     assert "| centre: probes |" in text and "(resets)" in text and "| total (steps) |" in text
+    empty = dict(profile, episodes=0, decisions=0, steps_s=0.0, reset_s=0.0)
+    with pytest.raises(ValueError, match=r"phase_table: profile\['steps_s'\] = 0.0: no episode"):
+        bench.phase_table(empty)

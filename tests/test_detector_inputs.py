@@ -77,6 +77,26 @@ def test_sensor_number_message_names_the_unit_and_the_range():
     )
 
 
+@pytest.mark.parametrize("value", [80.0, 90, -0.1, 0.0, math.nan, math.inf, "1.2", None, True])
+def test_bad_max_incidence_is_rejected(value):
+    # (degrees given as radians, 80, used to pass unchecked: the detector then took every
+    # incidence as seen and never looked for returns beyond the grazing wall)
+    with pytest.raises(
+        ValueError, match=rf"Scan: spec\['max_incidence'\] = {re.escape(repr(value))}: "
+    ):
+        _scan(spec={"max_incidence": value})
+
+
+def test_max_incidence_message_names_radians_and_the_range():
+    with pytest.raises(ValueError) as err:
+        _scan(spec={"max_incidence": 80})
+    assert str(err.value) == (
+        "Scan: spec['max_incidence'] = 80: out of range; allowed: above 0 to pi/2 (rad)"
+    )
+    for ok in (math.radians(80), 0.5 * math.pi, 1e-3):
+        assert _scan(spec={"max_incidence": ok}).spec["max_incidence"] == ok
+
+
 def test_spec_must_be_a_dictionary():
     with pytest.raises(ValueError, match=r"Scan: spec = .*: not a dict; allowed: a dict"):
         _scan(spec=["noise_sigma", 0.002])

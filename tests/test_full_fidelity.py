@@ -54,8 +54,8 @@ def _axis_error(plant: PhysicalPlant, net) -> tuple[float, float]:
 @pytest.mark.parametrize("follow", [True, False])
 def test_the_robot_follows_the_axis_its_sweeps_measure(follow: bool, monkeypatch) -> None:
     """After a 45 deg turn upwards, over 1.3 m of 110 mm pipe, the robot stays on the axis
-    steering by its sweeps; without the steering it sags and noses down (what made 3D routes
-    misread the far wall as a turn)."""
+    steering by its sweeps; without the steering it drifts off the axis and noses down
+    (tracking lag and wall contact; what made 3D routes misread the far wall as a turn)."""
     net = layouts.mitre_bend(0.11, math.radians(45), math.pi / 2, distance=0.4, outlet_length=1.5)
     if not follow:
         monkeypatch.setattr(PhysicalPlant, "_follow_axis", lambda self, *a: None)

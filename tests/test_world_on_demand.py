@@ -10,6 +10,7 @@ reference).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import mujoco
@@ -115,6 +116,21 @@ def test_physics_without_ray_meshes_is_bit_identical() -> None:
         states += [ex.data.qpos.tobytes(), ex.data.ncon]
         runs.append((out.status, out.travelled, ex.physics_ticks, states))
     assert runs[0] == runs[1]
+
+
+def test_a_world_without_ray_meshes_or_a_rebuild_fails_in_the_shared_format() -> None:
+    net = layouts.t_junction(0.09, direction=0.0, distance=0.5)
+    lean = dataclasses.replace(build_world(net, ray_meshes=False), _rebuild=None)
+    with pytest.raises(ValueError, match=r"^PipeWorld.complete: ray_meshes = False: no ray meshes"):
+        lean.complete()
+
+
+@pytest.mark.parametrize("field", ["ray_meshes", "contact_walls"])
+@pytest.mark.parametrize("value", [0, 1, "yes", None])
+def test_build_world_flags_must_be_booleans(field: str, value: object) -> None:
+    net = layouts.t_junction(0.09, direction=0.0, distance=0.5)
+    with pytest.raises(ValueError, match=rf"^build_world: {field} = .*: not a boolean; allowed"):
+        build_world(net, **{field: value})
 
 
 def test_complete_gives_the_world_with_ray_meshes_in_the_same_state() -> None:

@@ -335,9 +335,10 @@ class PhysicalPlant:
         point ``AXIS_LOOKAHEAD`` ahead). The improved detector's pipe-frame fit gives the
         sensor's offset from the axis and the axis direction; the thesis method and the
         ground-truth oracle give none, so the improved fit runs for them too: driving is the
-        same robot whatever detector proposes the options. Without it the robot sags and
-        noses down over a metre of pipe (gravity against the soft drive), the clamp reading
-        drops and the far wall looks like a turn."""
+        same robot whatever detector proposes the options. Without it the robot drifts off
+        the axis and noses down over a metre of pipe (tracking lag and wall contact; the
+        modules are gravity-compensated), the clamp reading drops and the far wall looks like
+        a turn."""
         if det is None or "sensor_offset_pipe" not in det.diagnostics:
             det = detection.detect(scan, clamped_diameter, method="improved")
         dg = det.diagnostics
