@@ -949,10 +949,13 @@ class Executor:
             self._set_targets()
         self._settle(self._ticks(CLAMP_SETTLE))
 
-    def _unclamp(self) -> None:
+    def _unclamp(self, settle_straight: bool = False) -> None:
         """Straighten the V (compressed by :data:`RELEASE_COMPRESSION`) and settle; a V
-        already straight moves nothing and settles nothing."""
+        already straight moves nothing and settles nothing, unless ``settle_straight`` (a
+        centring probe about to fold the V, see :meth:`_probe`)."""
         if self.vclamp.alpha <= 0.0:
+            if settle_straight:
+                self._settle(self._ticks(UNCLAMP_SETTLE))
             return
         rate = CLAMP_RATE * self.release_dt
         while self.vclamp.alpha > 0:
@@ -967,7 +970,13 @@ class Executor:
         wall (m), or None if the V folded fully without touching; the V is straightened
         again."""
         c = self.config
-        self._unclamp()
+        # the robot settles before the V folds, straight or not (the probe's pose as the
+        # reference's, which settled every unclamping): a probe near an opening is sensitive
+        # to sub-millimetre pose differences; folding where a module's body or a side wheel,
+        # not the apex wheels, meets an opening's edge, it does not register the touch and
+        # folds on until the module is pushed off its path (held-out network 69: without
+        # this settle a probe past a junction jammed, module 4 pushed 22 mm off its path)
+        self._unclamp(settle_straight=True)
         self.vclamp.side = side
         a_max = math.radians(75.0)
         h = None

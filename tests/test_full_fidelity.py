@@ -115,3 +115,16 @@ def test_a_long_straight_is_driven_to_the_bend_at_its_end_and_the_goal_after_it(
         _, res = plant.advance(goal)
     assert res.status == "goal"
     assert plant.edge_position().run_id == "r_out0"
+
+
+@pytest.mark.slow
+def test_held_out_network_69_passes_a_junction_without_a_probe_jamming() -> None:
+    """Held-out network 69 (route planner, full fidelity): after driving straight through a
+    junction, the centring probes run next to an opening; each probe settles the robot before
+    folding the V (see ``Executor._probe``). Without that settle a probe folded a module, not
+    its apex, onto the opening's edge and jammed three times (2 decisions, no goal)."""
+    from benchmarks.bench_transfer import NETWORK_CONFIG, run_episode
+
+    res = run_episode("route_planner", "full", 69, NETWORK_CONFIG)
+    assert res["success"]
+    assert res["jams"] == 0

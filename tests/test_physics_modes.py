@@ -191,3 +191,7 @@ def test_straightening_the_v_is_compressed_and_a_straight_v_settles_nothing() ->
         ticks, t0 = ex.physics_ticks, ex.time
         ex.run(Sequence("release", (Unclamp(),)))
         assert (ex.physics_ticks, ex.time) == (ticks, t0)
+        # a centring probe's straightening settles a straight V before folding it
+        ex._unclamp(settle_straight=True)
+        assert ex.physics_ticks - ticks == settle
+        assert ex.time - t0 == pytest.approx(settle * ex.control_dt)
