@@ -77,13 +77,15 @@ AGENTS = {
 #: contact mode's default: the same single decision, success, 0 jams and return, with
 #: slightly different poses and clock; and again when straight drives leaving the free run
 #: began to glide up to its end and straightening the V was compressed further: the same
-#: decision, success, 0 jams and return 10.6287, the clock 238.91 -> 238.36 s)
+#: decision, success, 0 jams and return 10.6287, the clock 238.91 -> 238.36 s; and again when
+#: a centring probe began to settle a straight V before folding it: the same decision, success,
+#: 0 jams and return 10.6287, the clock 238.36 -> 239.00 s)
 DIGESTS = {
     "explore_left_hand": "8c2a5ae92d1ac4f4ddbd7da2febf1385e756d2fe1afe0a918d4f42e296a2f487",
     "explore_random_no_auto": "37aef68cf7bb088b67409edcf3752e556b66507e3cf0fb2c1a8bb78e76b10f29",
     "nav_improved_random": "c9a69c2d09268c9b27215433f6994e790ef94f9ed79053e2059e213a6fe88bb8",
     "nav_route_planner": "7eeac160b58e4954e866750503d8292e8233af10a697158578c70f8b97c2f21a",
-    "nav_full_route_planner": "2aa4930b0302a9b1c84949c8dfeb36e4d7d07380ae496b772ef7639341ac58cb",
+    "nav_full_route_planner": "a8663a11999b03e40b40f60847f134a0317c139d5ca0c7b32d900e767ea52ca1",
     "nav_thesis_greedy": "5e6b045ff94e4d9720cb5a84b2f5b079fabf0de2d9b629e3bc639a74fa2b2434",
     "nav_truth_pool_scan": "3f344f5bdff376e512d2bff3da22839d0f2ae229755720894c7bfb4c25236b16",
 }
