@@ -13,7 +13,9 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    stretch of wall runs (from the given pose), not the first, wider one. A refinement is dropped
    when its cylinder misses its own wall returns by more than their noise explains, and the
    given pose stands when less than ``short_wall_view`` of straight wall is in view before the
-   structure and the pose explains it (near the start of a wide bend's arc a cylinder tilted
+   structure and the pose explains it (keeps ``short_wall_given_share`` of its returns within
+   the tolerance; a sensor tilted a degree or two and a few millimetres off the axis keeps
+   fewer, and a structure fitted where its wall drifts off is a phantom) (near the start of a wide bend's arc a cylinder tilted
    about the nearest wall fits the arc), unless a refined axis explains as many returns and fits
    ``long_wall_span`` or more of straight wall to ``long_wall_rms`` of the scatter allowed (the
    given pose is then the misaligned one, its wall drifting off the tolerance a little way
@@ -315,8 +317,13 @@ def _choose_pose(
     # noise fitted a curved wall (the arc of a wide bend filling the whole view): the
     # given pose stands when it explains the wall
     rms_cap = straight_wall_rms(cloud)
+    # (the given pose explains that wall only when it keeps most of those returns within
+    # the tolerance itself, not just within twice it: a sensor tilted by a degree or two and
+    # a few millimetres off the axis sees the wall drift off the tolerance a few centimetres
+    # ahead, and a structure fitted there under it is a phantom)
+    given_explains = given_fits and scores[0] >= config.short_wall_given_share * counts[0][1]
     for k, (_, inf) in enumerate(candidates):
-        if k and given_fits and inf.get("axis_rms", 0.0) > rms_cap:
+        if k and given_explains and inf.get("axis_rms", 0.0) > rms_cap:
             scores[k] = -1
     # (of the poses explaining as many returns, the one that fits them most closely:
     # a cylinder tilted onto the start of a gentle taper explains no more of them, within
@@ -335,7 +342,7 @@ def _choose_pose(
     if best and given_fits and u_start0 - u_nearest < config.short_wall_view:
         # hardly any straight wall in view before the structure: a refinement can only
         # lean on the structure (a cylinder tilted about the nearest wall, pivoting
-        # onto the arc of a turn); the given pose stands, as it explains that wall,
+        # onto the arc of a turn); the given pose stands when it explains that wall,
         # unless a refinement explains as many returns and fits a long straight wall
         # to a fraction of its noise (then the given pose is the misaligned one, its
         # wall drifting off the tolerance some way ahead)
@@ -347,7 +354,7 @@ def _choose_pose(
             and candidates[k][1].get("axis_span", 0.0) >= config.long_wall_span
             and candidates[k][1].get("axis_rms", 1.0) <= config.long_wall_rms * rms_cap
         ]
-        best = long_straight[-1] if long_straight else 0
+        best = long_straight[-1] if long_straight else (0 if given_explains else best)
     pose, info = candidates[best]
     diag.update(info)
     diag["axis_pass"] = passes[best]
