@@ -15,11 +15,11 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    given pose stands when less than ``short_wall_view`` of straight wall is in view before the
    structure and the pose explains it (keeps ``short_wall_given_share`` of its returns within
    the tolerance; a sensor tilted a degree or two and a few millimetres off the axis keeps
-   fewer, and a structure fitted where its wall drifts off is a phantom) (near the start of a wide bend's arc a cylinder tilted
-   about the nearest wall fits the arc), unless a refined axis explains as many returns and fits
-   ``long_wall_span`` or more of straight wall to ``long_wall_rms`` of the scatter allowed (the
-   given pose is then the misaligned one, its wall drifting off the tolerance a little way
-   ahead). Of candidate poses explaining as
+   fewer, and a structure fitted where its wall drifts off is a phantom; near the start of a
+   wide bend's arc a cylinder tilted about the nearest wall fits the arc), unless a refined
+   axis explains as many returns and fits ``long_wall_span`` or more of straight wall to
+   ``long_wall_rms`` of the scatter allowed (the given pose is then the misaligned one, its
+   wall drifting off the tolerance a little way ahead). Of candidate poses explaining as
    many wall returns, the one that fits them most closely is kept (a cylinder tilted onto the
    first centimetres of a gentle taper or arc explains no more of them, only more loosely). A
    long bend's arc and a taper leave the wall so gently that the wall a pose was chosen on can
