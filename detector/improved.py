@@ -138,7 +138,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from detector.axis_fit import (
-    _axis_pose,
+    axis_pose,
     common_wall_fit,
     count_wall_returns,
     measure_wall_radius,
@@ -833,7 +833,7 @@ def _outlet_pose(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> SensorI
         x = _outlet_fit(cloud, big_r, cfg)
         if x is None:
             return None
-        cloud.set_pose(_axis_pose(x[:4], cloud.pose.position).compose(cloud.pose))
+        cloud.set_pose(axis_pose(x[:4], cloud.pose.position).compose(cloud.pose))
     pose = cloud.pose
     # (the physical range: relative to the pose the check started from)
     axis = pose.rotation[0] @ start.rotation[0]
@@ -863,7 +863,7 @@ def _outlet_fit(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> NDArray[
     origin = cloud.pose.position
 
     def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        corr = _axis_pose(x[:4], origin)  # (current pipe frame -> the fitted one)
+        corr = axis_pose(x[:4], origin)  # (current pipe frame -> the fitted one)
         q = corr.rotation @ sub + corr.position[:, None]
         return np.hypot(q[1], q[2]) - x[4]
 
