@@ -195,3 +195,38 @@ def test_straightening_the_v_is_compressed_and_a_straight_v_settles_nothing() ->
         ex._unclamp(settle_straight=True)
         assert ex.physics_ticks - ticks == settle
         assert ex.time - t0 == pytest.approx(settle * ex.control_dt)
+
+
+def test_each_centring_probe_settles_the_robot_before_folding_the_v() -> None:
+    """Between two probes of a centring the V rests straight for the previous probe's
+    straightening settle plus the next probe's own (``UNCLAMP_SETTLE`` each): the fold starts
+    from a robot at rest, as in the reference (held-out network 69 jammed without it)."""
+    from primitives.executor import UNCLAMP_SETTLE
+    from primitives.sequences import Sequence
+    from primitives.steps import Centre
+
+    net = layouts.straight(0.09, distance=1.0)
+    ex = Executor.for_network(net, lidar=None, time_compression=1.5)
+    alphas: list[float] = []
+    tick = ex._tick
+
+    def logged(lag_axis: np.ndarray | None = None, clock: float | None = None) -> float:
+        lag = tick(lag_axis, clock)
+        alphas.append(ex.vclamp.alpha)
+        return lag
+
+    ex._tick = logged  # type: ignore[method-assign]
+    ex.run(Sequence("centre", (Centre(),)))
+    straight = np.asarray(alphas) == 0.0
+    # the runs of straight-V ticks between two folds (the first fold starts from the clamp)
+    runs, n, folded = [], 0, False
+    for s in straight:
+        if s:
+            n += 1
+            continue
+        if folded and n:
+            runs.append(n)
+        folded, n = True, 0
+    # the first run: the clamped V straightened and settled once before the first probe
+    assert len(runs) >= 4
+    assert min(runs[1:]) >= 2 * round(UNCLAMP_SETTLE / ex.control_dt)
