@@ -10,7 +10,7 @@
   goal is reached, or - failing safe - when the sensor goes blind (too few returns to see the
   pipe ahead: the LS02 in a small pipe). A blind stop is offered as a dead end. A structure
   confirmed closer than ``CLOSE_DECISION`` (first seen after a turn's run-out) is backed away
-  from to the trigger distance and sensed again before deciding. A structure
+  from to the trigger distance and swept again before deciding. A structure
   first seen within the trigger distance is swept again in place until confirmed. After every
   sweep the robot steers onto the pipe axis the sweep measures (the improved fit's sensor
   offset and axis direction, whatever detector proposes the options). A goal between the robot
@@ -97,16 +97,17 @@ SPARSE_REACH = 0.6
 #: passes everything with one grid step of margin (k = 2 passes every case).
 TIME_COMPRESSION = 1.5
 SPARSE_INTERVAL = 0.15
-#: A structure confirmed closer than this to the sensor (m) when the robot stops to decide -
-#: seen first from inside this range: a short run after a turn, whose run-out leaves the
-#: sensor 0.2-0.35 m further than the trigger distance allows - is backed away from to the
-#: trigger distance and sensed again before deciding. Closer than about a diameter the
-#: detector no longer sees a fitting's outline (a reducer 7 cm ahead reads as a bend; the
-#: tracker's ``near_distance`` and ``handover_distance`` are 0.10-0.12 m), and the primitives
-#: plan from the trigger distance: a tight turn's arc starts 0.65 D + 6.5 mm before the
-#: reference point, 0.03 m behind the sensor (the LiDAR's offset), so from 2 cm before a
-#: 90 mm tee the arc starts 15 mm late and the front stalls against the branch's far corner.
-#: Normal decisions come at 0.15-0.225 m (a contested structure one sweep later).
+#: A structure confirmed closer than this to the sensor (m) when the robot stops to decide is
+#: backed away from (along the driven path) to the trigger distance and swept once more there
+#: before deciding. It happens on a short run after a turn: the turn's run-out leaves the full
+#: robot 0.2-0.35 m further than the fast plant, so the next fitting is first seen from a few
+#: centimetres. The primitives plan from the trigger distance: a tight turn's arc starts
+#: 0.65 D + 6.5 mm before the reference point, with the sensor 0.03 m ahead of the front
+#: module, so from 2 cm before a 90 mm tee the arc starts 15 mm late and the front stalls at
+#: the branch's far corner (held-out network 95: three jams at one spot). 0.1 m is the
+#: tracker's ``near_distance`` (closer sweeps weigh no more) and clears the latest arc start
+#: of the robot's largest pipes; normal decisions come at 0.15-0.225 m (a contested
+#: structure one sweep later), so they are unchanged.
 CLOSE_DECISION = 0.1
 
 
@@ -464,9 +465,12 @@ class PhysicalPlant:
 
     def _back_off(self, distance: float, out: PlantOutcome) -> bool:
         """Reverse ``distance`` m along the driven path (unclamped, clamped again at the
-        diameter the encoders read here) and forget the tracked structure, so the next
-        sweeps judge it afresh from there. Returns True if the robot backed off (False: it
-        could not, a jam; it decides where it stopped)."""
+        diameter the encoders read here). The tracked structure is kept: its estimate is
+        anchored in the odometry frame, so the next sweep re-expresses it from the new pose
+        and adds its own reading (forgetting it threw away the sweeps from 0.2-0.5 m: a tee
+        swept again from behind a turn's exit then confirmed as its branch alone). Returns
+        True if the robot backed off (False: it could not, a jam; it decides where it
+        stopped)."""
         from primitives.sequences import back_out
 
         back = self.executor.run(back_out(distance, diameter=self.read_clamp()), rng=self.rng)
@@ -474,8 +478,6 @@ class PhysicalPlant:
         self._odometer -= abs(float(back.travelled))
         if back.status != SequenceStatus.DONE:
             return False
-        self.tracker.reset()
-        self._track_state = None
         return True
 
     def _decision(self, why: str | None) -> Decision:
