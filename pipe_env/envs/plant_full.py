@@ -109,6 +109,13 @@ SPARSE_INTERVAL = 0.15
 #: of the robot's largest pipes; normal decisions come at 0.15-0.225 m (a contested
 #: structure one sweep later), so they are unchanged.
 CLOSE_DECISION = 0.1
+#: A structure confirmed within ``CLOSE_DECISION`` is backed away from only if a way on it
+#: turns by at least this much (rad: the turn primitive's own limit, below which it drives
+#: straight through). Driving through (straight on, a reducer) plans
+#: from the option's distance wherever the robot stands, and from close up the detector's
+#: phantoms (a 2 mm "reducer" just after a bend in a 60 mm pipe) move with the robot: backed
+#: away from, one read 0.2 m ahead and the drive through it ran into the closure behind.
+TURN_MIN_ANGLE = math.radians(3.0)
 
 
 def scan_image(scan: Scan, shape: tuple[int, int] = SCAN_SHAPE) -> NDArray[np.float32]:
@@ -414,8 +421,9 @@ class PhysicalPlant:
         why, outcome, confirmed = self._drive(goal, out, self._limit)
         if (
             why == "confirmed"
-            and confirmed < CLOSE_DECISION < self.trigger_distance
-            and self._back_off(self.trigger_distance - confirmed, out)
+            and confirmed[0] < CLOSE_DECISION < self.trigger_distance
+            and any(o.angle >= TURN_MIN_ANGLE for o in confirmed[1])
+            and self._back_off(self.trigger_distance - confirmed[0], out)
         ):
             why, outcome, _ = self._drive(goal, out, self._limit)
         ahead = self._goal_ahead(goal) if why in ("confirmed", "blind") else None
@@ -437,11 +445,13 @@ class PhysicalPlant:
         self.decision = self._decision(why)
         return self.decision, out
 
-    def _drive(self, goal: Any, out: PlantOutcome, limit: float) -> tuple[str | None, Any, float]:
+    def _drive(
+        self, goal: Any, out: PlantOutcome, limit: float
+    ) -> tuple[str | None, Any, tuple[float, list[StructureOption]]]:
         """Stop-and-scan forward in legs of ``MAX_DRIVE`` until a sweep stops the robot (the
         goal, a confirmed structure, blind), a jam, or ``limit`` metres driven. Returns why it
-        stopped (None: none of those), the last drive's outcome and the distance (m) of the
-        confirmed structure the last sweep saw (inf: none)."""
+        stopped (None: none of those), the last drive's outcome and the distance (m, inf:
+        none) and options of the confirmed structure the last sweep saw."""
         driven = 0.0
         while True:
             sensing = self._sensing(goal)
@@ -461,7 +471,7 @@ class PhysicalPlant:
                 break
             if abs(float(outcome.travelled)) < 1e-6:
                 break  # nothing driven (a zero-length leg): decide here
-        return why, outcome, sensing.confirmed
+        return why, outcome, (sensing.confirmed, sensing.confirmed_options)
 
     def _back_off(self, distance: float, out: PlantOutcome) -> bool:
         """Reverse ``distance`` m along the driven path (unclamped, clamped again at the
@@ -709,8 +719,9 @@ class SweepSensing:
         self.goal = goal
         #: why the drive stopped: ``"goal"``, ``"confirmed"``, ``"blind"`` or None
         self.why: str | None = None
-        #: distance (m) of the confirmed structure the last sweep saw (inf: none)
+        #: distance (m) and options of the confirmed structure the last sweep saw (inf, [])
         self.confirmed = math.inf
+        self.confirmed_options: list[StructureOption] = []
         self.interval = plant.scan_interval
         self.blind = 0
         self.rescans = 0
@@ -734,6 +745,7 @@ class SweepSensing:
         diameter = float(state.clamped_diameter)
         reading = self.source.read(scan, diameter, truth, plant.tracker)
         self.confirmed = reading.confirmed
+        self.confirmed_options = reading.options if math.isfinite(reading.confirmed) else []
         plant._follow_axis(scan, reading.fit, diameter)
         if reading.track is not None:
             plant._track_state = reading.track
