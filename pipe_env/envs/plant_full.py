@@ -9,8 +9,8 @@
   when a structure is confirmed with its reference point within the trigger distance, when the
   goal is reached, or - failing safe - when the sensor goes blind (too few returns to see the
   pipe ahead: the LS02 in a small pipe). A blind stop is offered as a dead end. A structure
-  confirmed closer than ``CLOSE_DECISION`` (first seen after a turn's run-out) is backed away
-  from to the trigger distance and swept again before deciding. A structure
+  with a turning way confirmed closer than ``CLOSE_DECISION`` (first seen after a turn's
+  run-out) is backed away from to the trigger distance and swept again before deciding. A structure
   first seen within the trigger distance is swept again in place until confirmed. After every
   sweep the robot steers onto the pipe axis the sweep measures (the improved fit's sensor
   offset and axis direction, whatever detector proposes the options). A goal between the robot
