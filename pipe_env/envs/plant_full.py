@@ -412,8 +412,9 @@ class PhysicalPlant:
 
     def advance(self, goal: Any = None) -> tuple[Decision | None, PlantOutcome]:
         """Drive and scan until a structure is confirmed, the goal is reached, or blind. A
-        structure confirmed closer than :data:`CLOSE_DECISION` is backed away from to the
-        trigger distance and sensed again (once per call) before deciding."""
+        structure with a way turning by :data:`TURN_MIN_ANGLE` or more, confirmed closer
+        than :data:`CLOSE_DECISION`, is backed away from to the trigger distance and swept
+        again (once per call) before deciding."""
         out = PlantOutcome()
         # a long straight is normal pipe: the robot drives on in legs of MAX_DRIVE until a
         # structure, a dead end (blind) or the goal stops it, or it jams; the whole network's
