@@ -29,7 +29,7 @@ from detector.transforms import SensorInPipe
 
 
 # --------------------------------------------------------------------------- axis refinement
-def _axis_pose(params: NDArray[np.float64], sensor_origin: NDArray[np.float64]) -> SensorInPipe:
+def axis_pose(params: NDArray[np.float64], sensor_origin: NDArray[np.float64]) -> SensorInPipe:
     """Correction pose: pipe frame whose axis passes through (0, y0, z0) with slopes (a, b)."""
     y0, z0, a, b = (float(v) for v in params)
     n = math.sqrt(1.0 + a * a + b * b)
@@ -100,7 +100,7 @@ def refine_wall_axis(
         return cloud.pose, info
     if math.hypot(x[2], x[3]) > math.tan(math.radians(8.0)):
         return cloud.pose, info
-    return _axis_pose(x, cloud.pose.position).compose(cloud.pose), info
+    return axis_pose(x, cloud.pose.position).compose(cloud.pose), info
 
 
 @njit(cache=True)

@@ -13,11 +13,13 @@ clamped diameter and (optionally) the sensor pose in the pipe.
    stretch of wall runs (from the given pose), not the first, wider one. A refinement is dropped
    when its cylinder misses its own wall returns by more than their noise explains, and the
    given pose stands when less than ``short_wall_view`` of straight wall is in view before the
-   structure and the pose explains it (near the start of a wide bend's arc a cylinder tilted
-   about the nearest wall fits the arc), unless a refined axis explains as many returns and fits
-   ``long_wall_span`` or more of straight wall to ``long_wall_rms`` of the scatter allowed (the
-   given pose is then the misaligned one, its wall drifting off the tolerance a little way
-   ahead). Of candidate poses explaining as
+   structure and the pose explains it (keeps ``short_wall_given_share`` of its returns within
+   the tolerance; a sensor tilted a degree or two and a few millimetres off the axis keeps
+   fewer, and a structure fitted where its wall drifts off is a phantom; near the start of a
+   wide bend's arc a cylinder tilted about the nearest wall fits the arc), unless a refined
+   axis explains as many returns and fits ``long_wall_span`` or more of straight wall to
+   ``long_wall_rms`` of the scatter allowed (the given pose is then the misaligned one, its
+   wall drifting off the tolerance a little way ahead). Of candidate poses explaining as
    many wall returns, the one that fits them most closely is kept (a cylinder tilted onto the
    first centimetres of a gentle taper or arc explains no more of them, only more loosely). A
    long bend's arc and a taper leave the wall so gently that the wall a pose was chosen on can
@@ -133,8 +135,10 @@ from typing import Any
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
+from scipy.optimize import least_squares
 
 from detector.axis_fit import (
+    axis_pose,
     common_wall_fit,
     count_wall_returns,
     measure_wall_radius,
@@ -158,10 +162,12 @@ from detector.pipe_cloud import (
     azimuth_coverage,
     azimuth_uniformity,
     classify_counted,
+    even_indices,
     fit_confidence,
     partial_percentile,
     prepare_cloud,
     significant_regions,
+    wall_tolerance,
 )
 from detector.robust import mad_sigma
 from detector.scan import Scan
@@ -315,8 +321,13 @@ def _choose_pose(
     # noise fitted a curved wall (the arc of a wide bend filling the whole view): the
     # given pose stands when it explains the wall
     rms_cap = straight_wall_rms(cloud)
+    # (the given pose explains that wall only when it keeps most of those returns within
+    # the tolerance itself, not just within twice it: a sensor tilted by a degree or two and
+    # a few millimetres off the axis sees the wall drift off the tolerance a few centimetres
+    # ahead, and a structure fitted there under it is a phantom)
+    given_explains = given_fits and scores[0] >= config.short_wall_given_share * counts[0][1]
     for k, (_, inf) in enumerate(candidates):
-        if k and given_fits and inf.get("axis_rms", 0.0) > rms_cap:
+        if k and given_explains and inf.get("axis_rms", 0.0) > rms_cap:
             scores[k] = -1
     # (of the poses explaining as many returns, the one that fits them most closely:
     # a cylinder tilted onto the start of a gentle taper explains no more of them, within
@@ -335,7 +346,7 @@ def _choose_pose(
     if best and given_fits and u_start0 - u_nearest < config.short_wall_view:
         # hardly any straight wall in view before the structure: a refinement can only
         # lean on the structure (a cylinder tilted about the nearest wall, pivoting
-        # onto the arc of a turn); the given pose stands, as it explains that wall,
+        # onto the arc of a turn); the given pose stands when it explains that wall,
         # unless a refinement explains as many returns and fits a long straight wall
         # to a fraction of its noise (then the given pose is the misaligned one, its
         # wall drifting off the tolerance some way ahead)
@@ -347,7 +358,7 @@ def _choose_pose(
             and candidates[k][1].get("axis_span", 0.0) >= config.long_wall_span
             and candidates[k][1].get("axis_rms", 1.0) <= config.long_wall_rms * rms_cap
         ]
-        best = long_straight[-1] if long_straight else 0
+        best = long_straight[-1] if long_straight else (0 if given_explains else best)
     pose, info = candidates[best]
     diag.update(info)
     diag["axis_pass"] = passes[best]
@@ -805,6 +816,117 @@ def _short_wall_pose_check(
     return _given_pose_again(cloud, cfg, diag_pose, given, "short_wall_pose_check", rms, stands)
 
 
+def _outlet_pose(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> SensorInPipe | None:
+    """The pipe axis from the narrower pipe beyond a contraction: a cylinder of free radius
+    fitted (robust least squares, soft cut-off ``cfg.outlet_fit_scale``) to the returns inside
+    the wall of radius ``big_r`` (m) between the percentiles ``cfg.outlet_from`` and
+    ``cfg.outlet_until`` of their distance along the axis (past the taper, short of what lies
+    beyond the pipe), at most ``cfg.axis_points`` of them, chosen again under the fitted axis
+    and fitted again
+    (``cfg.outlet_fits`` fits: under a tilted axis part of the narrower pipe's wall lies beyond
+    the wall radius, and the first fit leans away from it). ``None`` when fewer than
+    ``cfg.outlet_min_returns`` returns lie there or the fit leaves the physical range (a radius
+    not below ``big_r``, off the incoming axis by more than the pipe's radius, tilted by more
+    than 8 deg). Leaves the cloud under the fitted axis (or a part of the way there)."""
+    start = cloud.pose
+    for _ in range(cfg.outlet_fits):
+        x = _outlet_fit(cloud, big_r, cfg)
+        if x is None:
+            return None
+        cloud.set_pose(axis_pose(x[:4], cloud.pose.position).compose(cloud.pose))
+    pose = cloud.pose
+    # (the physical range: relative to the pose the check started from)
+    axis = pose.rotation[0] @ start.rotation[0]
+    if axis < math.cos(math.radians(8.0)):
+        return None
+    return pose
+
+
+def _outlet_fit(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> NDArray[np.float64] | None:
+    """One fit of :func:`_outlet_pose` under the cloud's pose: ``(y0, z0, a, b, radius)``
+    (the correction's axis offset, m, and slopes, and the narrower pipe's radius, m)."""
+    u, r = cloud.xyz_v[0], cloud.r_v
+    inside = r < big_r - wall_tolerance(cloud, cfg)
+    if np.count_nonzero(inside) < 2 * cfg.outlet_min_returns:
+        return None
+    # (not the farthest returns: an end wall or a structure down the narrower pipe)
+    u_in = u[inside]
+    far = (
+        inside
+        & (u > partial_percentile(u_in, cfg.outlet_from))
+        & (u < partial_percentile(u_in, cfg.outlet_until))
+    )
+    sub = cloud.xyz_v[:, far]
+    sub = sub[:, even_indices(sub.shape[1], cfg.axis_points)]
+    if sub.shape[1] < cfg.outlet_min_returns:
+        return None
+    origin = cloud.pose.position
+
+    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        corr = axis_pose(x[:4], origin)  # (current pipe frame -> the fitted one)
+        q = corr.rotation @ sub + corr.position[:, None]
+        return np.hypot(q[1], q[2]) - x[4]
+
+    x0 = np.array([0.0, 0.0, 0.0, 0.0, float(np.median(np.hypot(sub[1], sub[2])))])
+    fit = least_squares(residuals, x0, loss="soft_l1", f_scale=cfg.outlet_fit_scale)
+    x = fit.x
+    if not (fit.success and np.all(np.isfinite(x)) and 0.0 < x[4] < big_r):
+        return None
+    if math.hypot(x[0], x[1]) > big_r or math.hypot(x[2], x[3]) > math.tan(math.radians(8.0)):
+        return None
+    return x
+
+
+def _outlet_pose_check(
+    cloud: PipeCloud,
+    det: Detection,
+    cfg: ImprovedConfig,
+    diag_pose: dict[str, Any],
+    given: GivenPose,
+    big_r: float,
+) -> tuple[float, Detection] | None:
+    """A sensor tilted by 2-3 deg a few centimetres before a concentric contraction sees no
+    wall before its taper (the minimum range): neither the given pose nor an axis refined on
+    the taper is the pipe's, and under them one side of the cone and of the narrower pipe lies
+    beyond the wall radius and the other inside, which reads as a 25 deg turn keeping a fraction
+    of its returns. The narrower pipe is coaxial with the incoming one: when a turn (or a
+    junction) keeps less than ``cfg.taper_pose_poor_support`` of its returns and most of the
+    returns off the wall lie inside it, the axis is fitted to the narrower pipe
+    (:func:`_outlet_pose`) and the structure detected again; its reducer stands when it keeps
+    ``cfg.taper_pose_min_support`` of its returns and fits them at least as closely (rms).
+    ``(radius, detection)`` then, else ``None`` (the cloud keeps its pose)."""
+    rms = _fit_rms(det)
+    g = det.diagnostics
+    if det.kind not in (Kind.BEND, Kind.JUNCTION) or rms is None:
+        return None
+    if _fit_share(det) >= cfg.taper_pose_poor_support:
+        return None
+    if g.get("n_inside", 0) < cfg.outlet_inside_share * (
+        g.get("n_inside", 0) + g.get("n_beyond", 0)
+    ):
+        return None
+    chosen, xyz_chosen, floor = cloud.pose, cloud.xyz_v, cloud.floor
+    if _outlet_pose(cloud, big_r, cfg) is None:
+        cloud.restore(chosen, xyz_chosen)
+        return None
+    sub = _pose_diagnostics(diag_pose, {"axis_pass": 4})
+    if floor is not None:
+        sub["tolerance_floor"] = floor
+    redone = _detect_in_pipe_frame(cloud, big_r, cfg, sub)
+    rms0 = _fit_rms(redone)
+    if (
+        redone.kind == Kind.REDUCER
+        and rms0 is not None
+        and rms0 <= rms
+        and redone.diagnostics.get("axisymmetric_support", 0.0) >= cfg.taper_pose_min_support
+    ):
+        redone.diagnostics["outlet_pose_check"] = {"chosen_rms": rms, "outlet_rms": rms0}
+        return big_r, redone
+    cloud.restore(chosen, xyz_chosen)
+    cloud.floor = floor
+    return None
+
+
 def _fit_share(det: Detection) -> float:
     """The share of its returns a turn's or junction's fit keeps (0 when unknown)."""
     g = det.diagnostics
@@ -861,6 +983,7 @@ POSE_CHECKS: tuple[tuple[str, PoseCheck], ...] = (
     ("torus_pose_check", _torus_pose_check),
     ("taper_pose_check", _taper_pose_check),
     ("short_wall_pose_check", _short_wall_pose_check),
+    ("outlet_pose_check", _outlet_pose_check),
     ("taper_radius_check", _taper_radius_check),
 )
 

@@ -99,6 +99,24 @@ class ImprovedConfig:
             ``long_wall_rms`` of the scatter a straight wall may show (a sensor misaligned by
             20 % of D and 4 deg sees its wall drift off the tolerance 12 cm ahead under the
             given pose).
+        short_wall_given_share: the given pose explains the wall before a structure (and
+            stands against a refinement on a short view of it, or one fitting it loosely)
+            only when it keeps at least this share of those wall returns within the wall
+            tolerance: a sensor tilted by 1.3 deg and 2 mm off the axis keeps two in five of
+            them, the rest within twice the tolerance, and under it a straight pipe (or a
+            concentric reducer) showed a 25 deg bend 5 to 10 cm ahead; a sensor centred
+            before the arc of a wide bend keeps all but a few.
+        outlet_inside_share, outlet_min_returns, outlet_fit_scale, outlet_fits, outlet_from,
+            outlet_until: a turn or junction keeping less than ``taper_pose_poor_support``
+            of its returns, with at least ``outlet_inside_share`` of the returns off the wall
+            inside it, is looked at again under the axis of the narrower pipe beyond: a
+            cylinder of free radius fitted to the inside returns between the percentiles
+            ``outlet_from`` and ``outlet_until`` (%) of their distance along the axis (past
+            the taper, short of an end wall down the pipe), at least ``outlet_min_returns``
+            of them, with a soft cut-off at ``outlet_fit_scale`` (m); the returns chosen
+            again under the fitted axis and fitted again, ``outlet_fits`` fits in all. A
+            sensor tilted 2-3 deg right before a concentric contraction sees no wall before
+            its taper, and under its given pose the reducer read as a 25 deg turn.
         near_wall: the wall this far along the axis beyond the nearest returns (m) gives the
             first estimate of the pipe radius.
         gentle_start_margin: the pose of a long-radius bend or a reducer is chosen again on the
@@ -215,6 +233,13 @@ class ImprovedConfig:
     short_wall_view: float = 0.05
     long_wall_span: float = 0.1
     long_wall_rms: float = 0.25
+    short_wall_given_share: float = 0.8
+    outlet_inside_share: float = 0.6
+    outlet_min_returns: int = 100
+    outlet_fit_scale: float = 0.002
+    outlet_fits: int = 2
+    outlet_from: float = 50.0
+    outlet_until: float = 85.0
     near_wall: float = 0.03
     gentle_start_margin: float = 0.01
     torus_pose_ratio: float = 1.5
@@ -310,6 +335,13 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "short_wall_view": (float, 0.0, True, 10.0, "a number in [0, 10] m"),
     "long_wall_span": (float, 0.0, True, 10.0, "a number in [0, 10] m"),
     "long_wall_rms": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "short_wall_given_share": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "outlet_inside_share": (float, 0.0, True, 1.0, "a number in [0, 1]"),
+    "outlet_min_returns": (int, 1, True, math.inf, "an integer >= 1"),
+    "outlet_fit_scale": (float, 0.0, False, 1.0, "a number in (0, 1] m"),
+    "outlet_fits": (int, 1, True, 10, "an integer in [1, 10]"),
+    "outlet_from": (float, 0.0, True, 100.0, "a number in [0, 100] (%)"),
+    "outlet_until": (float, 0.0, True, 100.0, "a number in [0, 100] (%)"),
     "near_wall": (float, 0.0, True, 10.0, "a number in [0, 10] m"),
     "gentle_start_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
     "torus_pose_ratio": (float, 0.0, True, 100.0, "a number in [0, 100]"),
