@@ -130,3 +130,33 @@ def test_held_out_network_69_passes_a_junction_without_a_probe_jamming() -> None
     res = run_episode("route_planner", "full", 69, NETWORK_CONFIG)
     assert res["success"]
     assert res["jams"] == 0
+
+
+@pytest.mark.parametrize(("detector", "start"), [("ground_truth", 0.02), ("improved", 0.04)])
+def test_a_structure_first_seen_from_close_up_is_backed_away_from_before_deciding(
+    detector: str, start: float
+) -> None:
+    """The robot starts ``start`` m before a 90 mm tee with a 58 mm branch, as a turn's
+    run-out leaves it on a short run (held-out network 95 of the transfer table: 2 cm; the
+    improved detector does not see a tee it starts 2 cm before, hence 4 cm). It backs off to
+    decide from where the primitives plan (a tight turn's arc starts 0.65 D + 6.5 mm before
+    the reference point, the sensor 3 cm ahead of the front module: from 2 cm the arc starts
+    late and the front stalls at the branch's far corner) and then takes the branch."""
+    from pipe_env.envs.plant_full import CLOSE_DECISION
+
+    assert CLOSE_DECISION == pytest.approx(0.1)
+    net = layouts.t_junction(0.09, branch_diameter=0.058, direction=0.0, distance=start)
+    plant = PhysicalPlant(net, detector=detector)
+    goal = EdgePosition("r_out1", 0.3, edge_length(net, "r_out1"))
+    dec, out = plant.advance(goal)
+    assert dec is not None and out.status == "done"
+    assert dec.node_id == "s"
+    assert min(o.distance for o in dec.truth) >= 0.1
+    branch = [o for o in dec.options if o.angle > 1.0]
+    assert branch
+    res = plant.execute(branch[0], goal)
+    assert res.status != "jammed", res.note
+    if res.status != "goal":
+        _, res = plant.advance(goal)
+    assert res.status == "goal"
+    assert plant.edge_position().run_id == "r_out1"

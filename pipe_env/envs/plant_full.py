@@ -9,6 +9,8 @@
   when a structure is confirmed with its reference point within the trigger distance, when the
   goal is reached, or - failing safe - when the sensor goes blind (too few returns to see the
   pipe ahead: the LS02 in a small pipe). A blind stop is offered as a dead end. A structure
+  with a turning way confirmed closer than ``CLOSE_DECISION`` (first seen after a turn's
+  run-out) is backed away from to the trigger distance and swept again before deciding. A structure
   first seen within the trigger distance is swept again in place until confirmed. After every
   sweep the robot steers onto the pipe axis the sweep measures (the improved fit's sensor
   offset and axis direction, whatever detector proposes the options). A goal between the robot
@@ -95,6 +97,25 @@ SPARSE_REACH = 0.6
 #: passes everything with one grid step of margin (k = 2 passes every case).
 TIME_COMPRESSION = 1.5
 SPARSE_INTERVAL = 0.15
+#: A structure confirmed closer than this to the sensor (m) when the robot stops to decide is
+#: backed away from (along the driven path) to the trigger distance and swept once more there
+#: before deciding. It happens on a short run after a turn: the turn's run-out leaves the full
+#: robot 0.2-0.35 m further than the fast plant, so the next fitting is first seen from a few
+#: centimetres. The primitives plan from the trigger distance: a tight turn's arc starts
+#: 0.65 D + 6.5 mm before the reference point, with the sensor 0.03 m ahead of the front
+#: module, so from 2 cm before a 90 mm tee the arc starts 15 mm late and the front stalls at
+#: the branch's far corner (held-out network 95: three jams at one spot). 0.1 m is the
+#: tracker's ``near_distance`` (closer sweeps weigh no more) and clears the latest arc start
+#: of the robot's largest pipes; normal decisions come at 0.15-0.225 m (a contested
+#: structure one sweep later), so they are unchanged.
+CLOSE_DECISION = 0.1
+#: A structure confirmed within ``CLOSE_DECISION`` is backed away from only if a way on it
+#: turns by at least this much (rad: the turn primitive's own limit, below which it drives
+#: straight through). Driving through (straight on, a reducer) plans
+#: from the option's distance wherever the robot stands, and from close up the detector's
+#: phantoms (a 2 mm "reducer" just after a bend in a 60 mm pipe) move with the robot: backed
+#: away from, one read 0.2 m ahead and the drive through it ran into the closure behind.
+TURN_MIN_ANGLE = math.radians(3.0)
 
 
 def scan_image(scan: Scan, shape: tuple[int, int] = SCAN_SHAPE) -> NDArray[np.float32]:
@@ -390,12 +411,48 @@ class PhysicalPlant:
         return self.sparse_interval
 
     def advance(self, goal: Any = None) -> tuple[Decision | None, PlantOutcome]:
-        """Drive and scan until a structure is confirmed, the goal is reached, or blind."""
+        """Drive and scan until a structure is confirmed, the goal is reached, or blind. A
+        structure with a way turning by :data:`TURN_MIN_ANGLE` or more, confirmed closer
+        than :data:`CLOSE_DECISION`, is backed away from to the trigger distance and swept
+        again (once per call) before deciding."""
         out = PlantOutcome()
         # a long straight is normal pipe: the robot drives on in legs of MAX_DRIVE until a
         # structure, a dead end (blind) or the goal stops it, or it jams; the whole network's
         # pipe length bounds the drive (a robot cannot drive further without a structure)
-        limit = self._limit
+        why, outcome, confirmed = self._drive(goal, out, self._limit)
+        if (
+            why == "confirmed"
+            and confirmed[0] < CLOSE_DECISION < self.trigger_distance
+            and any(o.angle >= TURN_MIN_ANGLE for o in confirmed[1])
+            and self._back_off(self.trigger_distance - confirmed[0], out)
+        ):
+            why, outcome, _ = self._drive(goal, out, self._limit)
+        ahead = self._goal_ahead(goal) if why in ("confirmed", "blind") else None
+        if ahead is not None and 0.0 <= ahead <= self.trigger_distance + self.scan_interval:
+            # the goal lies between the robot and the structure it stopped for (a goal near a
+            # dead end): drive up to it, as the fast fidelity does
+            from primitives.sequences import go_straight
+
+            last = self.executor.run(go_straight(max(ahead, 0.001)), rng=self.rng)
+            self._account(last, out)
+            self._odometer += abs(float(last.travelled))
+            why = "goal" if last.status == SequenceStatus.DONE else why
+        if why == "goal":
+            out.status = PlantStatus.GOAL
+            return None, out
+        if outcome.status == SequenceStatus.JAMMED:
+            out.status = PlantStatus.JAMMED
+            out.note = f"jammed while driving: {outcome.reason}"
+        self.decision = self._decision(why)
+        return self.decision, out
+
+    def _drive(
+        self, goal: Any, out: PlantOutcome, limit: float
+    ) -> tuple[str | None, Any, tuple[float, list[StructureOption]]]:
+        """Stop-and-scan forward in legs of ``MAX_DRIVE`` until a sweep stops the robot (the
+        goal, a confirmed structure, blind), a jam, or ``limit`` metres driven. Returns why it
+        stopped (None: none of those), the last drive's outcome and the distance (m, inf:
+        none) and options of the confirmed structure the last sweep saw."""
         driven = 0.0
         while True:
             sensing = self._sensing(goal)
@@ -415,24 +472,24 @@ class PhysicalPlant:
                 break
             if abs(float(outcome.travelled)) < 1e-6:
                 break  # nothing driven (a zero-length leg): decide here
-        ahead = self._goal_ahead(goal) if why in ("confirmed", "blind") else None
-        if ahead is not None and 0.0 <= ahead <= self.trigger_distance + self.scan_interval:
-            # the goal lies between the robot and the structure it stopped for (a goal near a
-            # dead end): drive up to it, as the fast fidelity does
-            from primitives.sequences import go_straight
+        return why, outcome, (sensing.confirmed, sensing.confirmed_options)
 
-            last = self.executor.run(go_straight(max(ahead, 0.001)), rng=self.rng)
-            self._account(last, out)
-            self._odometer += abs(float(last.travelled))
-            why = "goal" if last.status == SequenceStatus.DONE else why
-        if why == "goal":
-            out.status = PlantStatus.GOAL
-            return None, out
-        if outcome.status == SequenceStatus.JAMMED:
-            out.status = PlantStatus.JAMMED
-            out.note = f"jammed while driving: {outcome.reason}"
-        self.decision = self._decision(why)
-        return self.decision, out
+    def _back_off(self, distance: float, out: PlantOutcome) -> bool:
+        """Reverse ``distance`` m along the driven path (unclamped, clamped again at the
+        diameter the encoders read here). The tracked structure is kept: its estimate is
+        anchored in the odometry frame, so the next sweep re-expresses it from the new pose
+        and adds its own reading (forgetting it threw away the sweeps from 0.2-0.5 m: a tee
+        swept again from behind a turn's exit then confirmed as its branch alone). Returns
+        True if the robot backed off (False: it could not, a jam; it decides where it
+        stopped)."""
+        from primitives.sequences import back_out
+
+        back = self.executor.run(back_out(distance, diameter=self.read_clamp()), rng=self.rng)
+        self._account(back, out)
+        self._odometer -= abs(float(back.travelled))
+        if back.status != SequenceStatus.DONE:
+            return False
+        return True
 
     def _decision(self, why: str | None) -> Decision:
         pose = self.pose()
@@ -663,6 +720,9 @@ class SweepSensing:
         self.goal = goal
         #: why the drive stopped: ``"goal"``, ``"confirmed"``, ``"blind"`` or None
         self.why: str | None = None
+        #: distance (m) and options of the confirmed structure the last sweep saw (inf, [])
+        self.confirmed = math.inf
+        self.confirmed_options: list[StructureOption] = []
         self.interval = plant.scan_interval
         self.blind = 0
         self.rescans = 0
@@ -685,6 +745,8 @@ class SweepSensing:
             return "stop"
         diameter = float(state.clamped_diameter)
         reading = self.source.read(scan, diameter, truth, plant.tracker)
+        self.confirmed = reading.confirmed
+        self.confirmed_options = reading.options if math.isfinite(reading.confirmed) else []
         plant._follow_axis(scan, reading.fit, diameter)
         if reading.track is not None:
             plant._track_state = reading.track
