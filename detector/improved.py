@@ -872,7 +872,7 @@ def _outlet_fit(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> NDArray[
     x = fit.x
     if not (fit.success and np.all(np.isfinite(x)) and 0.0 < x[4] < big_r):
         return None
-    if math.hypot(x[0], x[1]) > big_r or math.hypot(x[2], x[3]) > math.tan(math.radians(8.0)):
+    if math.hypot(x[0], x[1]) > big_r or math.hypot(x[2], x[3]) > math.tan(cfg.outlet_max_tilt):
         return None
     return x
 

@@ -114,7 +114,9 @@ class ImprovedConfig:
             ``outlet_from`` and ``outlet_until`` (%) of their distance along the axis (past
             the taper, short of an end wall down the pipe), at least ``outlet_min_returns``
             of them, with a soft cut-off at ``outlet_fit_scale`` (m); the returns chosen
-            again under the fitted axis and fitted again, ``outlet_fits`` fits in all. A
+            again under the fitted axis and fitted again, ``outlet_fits`` fits in all; a fit
+            whose axis is more than ``outlet_max_tilt`` (rad) off the sensor's or passes
+            farther than the wall radius from it is not the pipe's. A
             sensor tilted 2-3 deg right before a concentric contraction sees no wall before
             its taper, and under its given pose the reducer read as a 25 deg turn.
         near_wall: the wall this far along the axis beyond the nearest returns (m) gives the
@@ -240,6 +242,7 @@ class ImprovedConfig:
     outlet_fits: int = 2
     outlet_from: float = 50.0
     outlet_until: float = 85.0
+    outlet_max_tilt: float = math.radians(8.0)
     near_wall: float = 0.03
     gentle_start_margin: float = 0.01
     torus_pose_ratio: float = 1.5
@@ -342,6 +345,7 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "outlet_fits": (int, 1, True, 10, "an integer in [1, 10]"),
     "outlet_from": (float, 0.0, True, 100.0, "a number in [0, 100] (%)"),
     "outlet_until": (float, 0.0, True, 100.0, "a number in [0, 100] (%)"),
+    "outlet_max_tilt": (float, 0.0, False, math.pi / 2, "a number in (0, pi/2] rad"),
     "near_wall": (float, 0.0, True, 10.0, "a number in [0, 10] m"),
     "gentle_start_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
     "torus_pose_ratio": (float, 0.0, True, 100.0, "a number in [0, 100]"),
