@@ -827,7 +827,8 @@ def _outlet_pose(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> SensorI
     the wall radius, and the first fit leans away from it). ``None`` when fewer than
     ``cfg.outlet_min_returns`` returns lie there or the fit leaves the physical range (a radius
     not below ``big_r``, off the incoming axis by more than the pipe's radius, tilted by more
-    than 8 deg). Leaves the cloud under the fitted axis (or a part of the way there)."""
+    than ``cfg.outlet_max_tilt``). Leaves the cloud under the fitted axis (or a part of the way
+    there)."""
     start = cloud.pose
     for _ in range(cfg.outlet_fits):
         x = _outlet_fit(cloud, big_r, cfg)
@@ -837,7 +838,7 @@ def _outlet_pose(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> SensorI
     pose = cloud.pose
     # (the physical range: relative to the pose the check started from)
     axis = pose.rotation[0] @ start.rotation[0]
-    if axis < math.cos(math.radians(8.0)):
+    if axis < math.cos(cfg.outlet_max_tilt):
         return None
     return pose
 

@@ -286,6 +286,14 @@ class ImprovedConfig:
             if not ok:
                 raise fail(f.name, value, allowed, "out of range or wrong type", "ImprovedConfig")
             object.__setattr__(self, f.name, kind(value))
+        if self.outlet_from >= self.outlet_until:
+            raise fail(
+                "outlet_from",
+                self.outlet_from,
+                f"a number below outlet_until ({self.outlet_until})",
+                "the outlet's percentile band is empty",
+                "ImprovedConfig",
+            )
 
 
 #: Allowed values of each :class:`ImprovedConfig` field: (type, lower bound, lower bound

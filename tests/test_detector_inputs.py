@@ -243,3 +243,11 @@ def test_sweep_yawing_in_place_is_compensated(yaw):
     assert np.ptp(scan.nominal_positions, axis=0).max() == 0.0
     det = detect(scan, 0.1)
     assert det.kind == "straight", det.describe()
+
+
+@pytest.mark.parametrize(("lo", "hi"), [(85.0, 50.0), (60.0, 60.0)])
+def test_improved_config_rejects_an_empty_outlet_band(lo: float, hi: float) -> None:
+    """The outlet's percentile band must not be empty (it would switch the check off)."""
+    with pytest.raises(ValueError, match=r"ImprovedConfig: outlet_from = .*outlet_until"):
+        ImprovedConfig(outlet_from=lo, outlet_until=hi)
+    assert ImprovedConfig(outlet_from=10.0, outlet_until=90.0).outlet_until == 90.0

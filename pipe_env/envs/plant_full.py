@@ -480,16 +480,18 @@ class PhysicalPlant:
         anchored in the odometry frame, so the next sweep re-expresses it from the new pose
         and adds its own reading (forgetting it threw away the sweeps from 0.2-0.5 m: a tee
         swept again from behind a turn's exit then confirmed as its branch alone). Returns
-        True if the robot backed off (False: it could not, a jam; it decides where it
-        stopped)."""
+        True if the robot backed off (False: it could not; it decides where it stopped, and a
+        jam is reported in ``out`` like any other)."""
         from primitives.sequences import back_out
 
         back = self.executor.run(back_out(distance, diameter=self.read_clamp()), rng=self.rng)
         self._account(back, out)
         self._odometer -= abs(float(back.travelled))
-        if back.status != SequenceStatus.DONE:
-            return False
-        return True
+        if back.status == SequenceStatus.JAMMED:
+            # (a jam is a jam wherever it happens: the env counts it and senses again)
+            out.status = PlantStatus.JAMMED
+            out.note = f"jammed backing off a close structure: {back.reason}"
+        return back.status == SequenceStatus.DONE
 
     def _decision(self, why: str | None) -> Decision:
         pose = self.pose()
