@@ -41,6 +41,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
@@ -48,7 +49,10 @@ from typing import Any
 
 from scipy import stats
 
-from benchmarks.workers import run_plan
+# Runnable as a script from anywhere: the repository root holds the benchmarks package.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.workers import run_plan  # noqa: E402
 from detector.atomic import atomic_write_text
 
 FIDELITIES = ("fast", "full")

@@ -24,8 +24,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from collections.abc import Callable, Iterable
+from pathlib import Path
 from typing import Any
+
+# Runnable as a script from anywhere: the repository root holds the benchmarks package.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from detector.options import StructureOption
 from pipe_env.envs.actions import BACK_ROW
