@@ -91,6 +91,20 @@ def test_a_goal_driven_over_by_a_turn_counts_as_reached() -> None:
     assert res.status == "goal"
 
 
+def test_a_goal_before_a_dead_end_the_run_out_stops_at_counts_as_reached() -> None:
+    """Held-out network 99: an expander (59 to 79 mm) followed by 19 cm of pipe to a closure,
+    the goal 12 cm past the taper. The reducer's run-out is longer than that run: the drive
+    stalls at the closure with the sensor past the goal, which the robot has reached."""
+    net = layouts.reducer(0.059, 0.079, taper_length=0.14, distance=0.4, outlet_length=0.19)
+    (out_run,) = [r.id for r in net.runs if r.diameter > 0.07]
+    plant = PhysicalPlant(net, detector="ground_truth")
+    goal = EdgePosition(out_run, 0.12, edge_length(net, out_run))
+    dec, _ = plant.advance(goal)
+    assert dec is not None and dec.kind == "reducer"
+    res = plant.execute(dec.options[0], goal)
+    assert res.status == "goal", res.note
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("detector", ["ground_truth", "improved"])
 def test_a_long_straight_is_driven_to_the_bend_at_its_end_and_the_goal_after_it(
