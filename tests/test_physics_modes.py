@@ -11,6 +11,7 @@ import pytest
 
 import pipe_env  # noqa: F401
 from pipe_env import layouts
+from pipe_env.envs.env import PipeNavEnv
 from pipe_env.envs.plant import KinematicPlant, Plant
 from pipe_env.envs.plant_full import PhysicalPlant
 from primitives.executor import Executor
@@ -90,17 +91,23 @@ def test_the_model_is_built_once_per_network_and_reset_between_episodes() -> Non
     net = layouts.t_junction(0.1, direction=0.0, distance=0.3).with_goals([[0, 0.5, 0]])
     env = gym.make("pipenav/PipeNav-v0", fidelity="full", network=net, detector="ground_truth")
     base = env.unwrapped
+    assert isinstance(base, PipeNavEnv)
     env.reset(seed=4)
-    plant, model = base.plant, base.plant.world.model
+    plant = base.plant
+    assert isinstance(plant, PhysicalPlant) and plant.world is not None
+    model = plant.world.model
     env.step(int(np.flatnonzero(base.action_masks())[0]))
     obs, _ = env.reset(seed=5)
-    assert base.plant is plant and base.plant.world.model is model
+    assert plant.world is not None and plant.world.model is model
+    assert base.plant is plant
     assert isinstance(model, mujoco.MjModel)
     fresh = gym.make("pipenav/PipeNav-v0", fidelity="full", network=net, detector="ground_truth")
     obs2, _ = fresh.reset(seed=5)
+    fresh_env = fresh.unwrapped
+    assert isinstance(fresh_env, PipeNavEnv) and fresh_env.plant is not None
     for k in obs:
         assert np.array_equal(obs[k], obs2[k]), k
-    assert np.array_equal(base.plant.pose().position, fresh.unwrapped.plant.pose().position)
+    assert np.array_equal(base.plant.pose().position, fresh_env.plant.pose().position)
 
 
 def test_the_free_run_ends_the_clearance_inside_the_port_plane() -> None:

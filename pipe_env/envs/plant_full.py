@@ -96,6 +96,9 @@ SPARSE_REACH = 0.6
 #: 4 jams at k = 2, 3, 4, none at 1 and 1.5; at 4 modules are pushed off their paths). k = 1.5
 #: passes everything with one grid step of margin (k = 2 passes every case).
 TIME_COMPRESSION = 1.5
+#: The default ``sparse_interval``: metres driven between sweeps while nothing is within
+#: ``SPARSE_REACH`` (three times the default 5 cm ``scan_interval``; a sparse drive ends at
+#: least 0.45 m before a structure first seen at the reach's edge), m.
 SPARSE_INTERVAL = 0.15
 #: A structure confirmed closer than this to the sensor (m) when the robot stops to decide is
 #: backed away from (along the driven path) to the trigger distance and swept once more there
