@@ -61,6 +61,7 @@ def test_the_robot_follows_the_axis_its_sweeps_measure(follow: bool, monkeypatch
         monkeypatch.setattr(PhysicalPlant, "_follow_axis", lambda self, *a: None)
     plant = PhysicalPlant(net, detector="ground_truth")
     dec, _ = plant.advance(None)
+    assert dec is not None
     assert plant.execute(dec.options[0]).status == "done"
     errors = []
     original = SweepSensing.__call__
@@ -86,6 +87,7 @@ def test_a_goal_driven_over_by_a_turn_counts_as_reached() -> None:
     plant = PhysicalPlant(net, detector="ground_truth")
     goal = EdgePosition("r_out1", 0.1, edge_length(net, "r_out1"))
     dec, _ = plant.advance(goal)
+    assert dec is not None
     branch = [o for o in dec.options if o.angle > 1.0]
     res = plant.execute(branch[0], goal)
     assert res.status == "goal"
@@ -174,3 +176,17 @@ def test_a_structure_first_seen_from_close_up_is_backed_away_from_before_decidin
         _, res = plant.advance(goal)
     assert res.status == "goal"
     assert plant.edge_position().run_id == "r_out1"
+
+
+def test_a_jam_while_backing_off_a_close_structure_is_reported() -> None:
+    """Backing away from a structure confirmed too close (``CLOSE_DECISION``) can jam like any
+    motion: here the robot reverses 1 m into the start's closure, which lies nearer behind it.
+    The back-off says it did not back off, and the plant's outcome reports the jam."""
+    from pipe_env.envs.plant import PlantOutcome
+
+    net = layouts.t_junction(0.09, direction=0.0, distance=0.3)
+    plant = PhysicalPlant(net, detector="ground_truth")
+    out = PlantOutcome()
+    assert not plant._back_off(1.0, out)
+    assert out.status == "jammed"
+    assert "backing off" in out.note
