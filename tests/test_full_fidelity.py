@@ -178,15 +178,27 @@ def test_a_structure_first_seen_from_close_up_is_backed_away_from_before_decidin
     assert plant.edge_position().run_id == "r_out1"
 
 
-def test_a_jam_while_backing_off_a_close_structure_is_reported() -> None:
+@pytest.mark.parametrize("room", [0.03, 0.08])
+def test_a_jam_while_backing_off_a_close_structure_is_reported_and_swept_again(
+    room: float,
+) -> None:
     """Backing away from a structure confirmed too close (``CLOSE_DECISION``) can jam like any
-    motion: here the robot reverses 1 m into the start's closure, which lies nearer behind it.
-    The back-off says it did not back off, and the plant's outcome reports the jam."""
-    from pipe_env.envs.plant import PlantOutcome
+    motion: here the start's closure lies ``room`` m behind the robot's rear, short of the
+    back-off. The jam is reported, and the robot decides on the structure as seen from where
+    it stalled (held-out network 51: deciding on the distances of the sweep before the
+    back-off started the turn 21 cm early and jammed again)."""
+    from pipe_env.network import Fitting, PipeNetwork
 
-    net = layouts.t_junction(0.09, direction=0.0, distance=0.3)
-    plant = PhysicalPlant(net, detector="ground_truth")
-    out = PlantOutcome()
-    assert not plant._back_off(1.0, out)
-    assert out.status == "jammed"
-    assert "backing off" in out.note
+    start = 0.04  # m before the tee (see the test above)
+    tee = layouts.t_junction(0.09, branch_diameter=0.058, direction=0.0, distance=start)
+    assert tee.start_pose is not None
+    entry = Fitting("entry", "closure", (tee.start_pose.position[0] - 0.3 - room, 0.0, 0.0))
+    net = PipeNetwork((entry, *tee.fittings[1:]), tee.runs, tee.start_pose, (), "tee", {})
+    plant = PhysicalPlant(net, detector="improved")
+    goal = EdgePosition("r_out1", 0.3, edge_length(net, "r_out1"))
+    dec, out = plant.advance(goal)
+    assert out.status == "jammed" and "backing off" in out.note, out.note
+    assert dec is not None and dec.kind == "junction"
+    here = min(o.distance for o in dec.truth)
+    assert here > start + 0.02  # it did back off part of the way
+    assert all(abs(o.distance - here) < 0.02 for o in dec.options)

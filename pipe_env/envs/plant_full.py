@@ -427,8 +427,12 @@ class PhysicalPlant:
             why == "confirmed"
             and confirmed[0] < CLOSE_DECISION < self.trigger_distance
             and any(o.angle >= TURN_MIN_ANGLE for o in confirmed[1])
-            and self._back_off(self.trigger_distance - confirmed[0], out)
         ):
+            # sweep again from where the back-off ended, even if it stalled on the way (held-out
+            # network 51, GoalGreedy: 21 cm back, then a probe jammed; deciding on the last
+            # sweep's distances started the turn 21 cm early): the fused estimate is anchored
+            # in the odometry frame, the new sweep re-expresses it from here
+            self._back_off(self.trigger_distance - confirmed[0], out)
             why, outcome, _ = self._drive(goal, out, self._limit)
         ahead = self._goal_ahead(goal) if why in ("confirmed", "blind") else None
         if ahead is not None and 0.0 <= ahead <= self.trigger_distance + self.scan_interval:
@@ -483,8 +487,8 @@ class PhysicalPlant:
         anchored in the odometry frame, so the next sweep re-expresses it from the new pose
         and adds its own reading (forgetting it threw away the sweeps from 0.2-0.5 m: a tee
         swept again from behind a turn's exit then confirmed as its branch alone). Returns
-        True if the robot backed off (False: it could not; it decides where it stopped, and a
-        jam is reported in ``out`` like any other)."""
+        True if the robot backed off (False: it could not; a jam is reported in ``out`` like
+        any other, and the robot sweeps again where it stopped)."""
         from primitives.sequences import back_out
 
         back = self.executor.run(back_out(distance, diameter=self.read_clamp()), rng=self.rng)
