@@ -233,19 +233,12 @@ CLAMP_TIMEOUT = 8.0
 #: held-out network 23's walls held the front 20.5 deg off a 70 deg turn in a 90 deg bend for
 #: the whole run-out, the driven path (which the rear modules follow) went on at 70 deg and
 #: the rear modules ended bent against the walls (there and in its next bend, 67 deg of 75, at
-#: 7.9 deg). Transients coming off the arc reach 2.5 deg.
+#: 7.9 deg): the clamp read 87 mm in a 95 mm pipe, the next sweeps showed a phantom junction
+#: and the back-out jammed. Transients coming off the arc reach 2.5 deg. (Counting the
+#: run-out from where the walls stop turning the front was tried too: not needed once they
+#: take over early, and a tee 40 cm after a bend turned the front again late in the run-out,
+#: which then drove the robot into it.)
 COMPLY_ONSET = math.radians(4.0)
-#: A complying drive (``Drive.comply``, out of a long bend's arc) counts its distance from where
-#: the walls stop turning the front: the front turned on once its heading moved this far from
-#: where it last turned, rad. Held-out networks 23 and 97: the sensor saw 70 deg of a 90 deg
-#: long bend; the walls turned the front the last 20 deg during the run-out, which ended with
-#: the rear modules still in the bend (their joints bent 20-30 deg, the clamp reading 87 mm in
-#: a 95 mm pipe, the next sweeps a phantom junction, the back-out jammed).
-COMPLY_TURN_STEP = math.radians(2.0)
-#: ... and drives at most this many times its commanded distance; the front's heading steady
-#: over this many metres ends the bend (a reducer's taper further on turns it again), m.
-COMPLY_MAX_STRETCH = 2.0
-COMPLY_STEADY = 0.05
 
 #: The executor's outcome statuses as plain strings, in :class:`SequenceStatus` order.
 STATUSES: tuple[str, ...] = tuple(s.value for s in SequenceStatus)
@@ -725,9 +718,6 @@ class Executor:
         k = self.time_compression if cmd.curvature == 0.0 and not cmd.hold_heading else 1.0
         ds_tick = step.speed * k * self.control_dt
         complying = False
-        turn_mark: NDArray[np.float64] | None = None  # the front's heading where it last turned
-        turned_at = 0.0  # ... and the odometer there, m
-        stretch = (COMPLY_MAX_STRETCH - 1.0) * step.distance if step.comply else 0.0
         self._lag_allowance = self._speed_lag(step.speed, k)
         while remaining > 1e-9:
             ds = min(ds_tick, remaining)
@@ -750,17 +740,6 @@ class Executor:
                     if complying:  # the bend goes on: the walls set the heading
                         self.command.hold_heading = False
                         self.command.heading = self._front_pose()[1]
-                        front = self.command.heading[:, 0]
-                        if turn_mark is None or float(front @ turn_mark) < math.cos(
-                            COMPLY_TURN_STEP
-                        ):
-                            # still turning: the run-out counts from here
-                            turn_mark, turned_at = front.copy(), self.odometer
-                            extra = min(step.distance - remaining, stretch)
-                            remaining += extra
-                            stretch -= extra
-                        elif self.odometer - turned_at > COMPLY_STEADY:
-                            stretch = 0.0  # out of the bend: a later fitting does not stretch
                 if self.command.curvature != 0.0 or self.command.hold_heading:
                     self._check_steer()
             except _Jam:

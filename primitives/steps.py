@@ -67,9 +67,7 @@ class Drive(Step):
     ``comply``: coming out of a long bend's arc, where the arc may go on beyond what the sensor
     saw, the turn's heading is held only while the walls agree; once they force the front off
     it (the bend goes on), the walls set the heading and the commanded heading follows them
-    instead of the drive reporting a stalled steering, and ``distance`` counts from where they
-    stop turning it (at most twice ``distance`` in all: see ``primitives.executor.COMPLY_*``),
-    so the rear modules leave the bend too."""
+    instead of the drive reporting a stalled steering (``primitives.executor.COMPLY_ONSET``)."""
 
     op: ClassVar[str] = "drive"
     distance: float

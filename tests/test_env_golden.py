@@ -85,7 +85,7 @@ DIGESTS = {
     "explore_random_no_auto": "37aef68cf7bb088b67409edcf3752e556b66507e3cf0fb2c1a8bb78e76b10f29",
     "nav_improved_random": "c9a69c2d09268c9b27215433f6994e790ef94f9ed79053e2059e213a6fe88bb8",
     "nav_route_planner": "7eeac160b58e4954e866750503d8292e8233af10a697158578c70f8b97c2f21a",
-    "nav_full_route_planner": "e7fec5261d08924d992626dbf201fa78de1498b23c356baa0abfd9ba02660b2c",
+    "nav_full_route_planner": "63cd595fce9c7922c2a27a3255353cd0a5fff6968885732bd8fa6647fe0072fe",
     "nav_thesis_greedy": "5e6b045ff94e4d9720cb5a84b2f5b079fabf0de2d9b629e3bc639a74fa2b2434",
     "nav_truth_pool_scan": "3f344f5bdff376e512d2bff3da22839d0f2ae229755720894c7bfb4c25236b16",
 }
