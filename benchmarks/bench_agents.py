@@ -34,6 +34,9 @@ import time
 from pathlib import Path
 from typing import TextIO
 
+# Runnable as a script from anywhere: the repository root holds the benchmarks package.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 import gymnasium as gym
 import numpy as np
 import torch

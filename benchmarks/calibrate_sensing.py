@@ -21,6 +21,9 @@ import sys
 import time
 from pathlib import Path
 
+# Runnable as a script from anywhere: the repository root holds the benchmarks package.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 import numpy as np
 
 import detector

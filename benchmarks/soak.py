@@ -31,7 +31,11 @@ import gc
 import os
 import sys
 import time
+from pathlib import Path
 from typing import Any
+
+# Runnable as a script from anywhere: the repository root holds the benchmarks package.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import gymnasium as gym
 import numpy as np
