@@ -447,12 +447,9 @@ def _errors(rows: list[dict[str, Any]], key: str) -> np.ndarray:
 
 def mcnemar_exact(a: list[bool], b: list[bool]) -> float:
     """Two-sided exact McNemar p-value of paired successes ``a`` against ``b``."""
-    only_a = sum(1 for x, y in zip(a, b) if x and not y)
-    only_b = sum(1 for x, y in zip(a, b) if y and not x)
-    n = only_a + only_b
-    if n == 0:
-        return 1.0
-    return float(stats.binomtest(only_a, n, 0.5).pvalue)
+    from benchmarks.bench_transfer import mcnemar_exact as paired_test
+
+    return paired_test(a, b)[2]
 
 
 def summarise(results: dict[str, list[dict[str, Any]]]) -> tuple[dict[str, Any], str]:
@@ -544,20 +541,22 @@ def summarise(results: dict[str, list[dict[str, Any]]]) -> tuple[dict[str, Any],
     sc = [r["success"] for r in results["contact"]]
     se = [r["success"] for r in results["everywhere"]]
     p_success = mcnemar_exact(sc, se)
+    from benchmarks.bench_transfer import paired_difference_interval
+
     diff = np.array(sc, dtype=float) - np.array(se, dtype=float)
-    half = 1.96 * float(diff.std(ddof=1)) / math.sqrt(len(diff)) if len(diff) > 1 else math.nan
+    low, high = paired_difference_interval(sc, se)
     jc = np.array([r["jams"] for r in results["contact"]])
     je = np.array([r["jams"] for r in results["everywhere"]])
     p_jams = float(stats.wilcoxon(jc, je).pvalue) if np.any(jc != je) else 1.0
     out["tests"] = {
         "success_mcnemar_p": p_success,
         "success_diff": float(diff.mean()),
-        "success_diff_ci95": [float(diff.mean() - half), float(diff.mean() + half)],
+        "success_diff_ci95": [low, high],
         "jams_wilcoxon_p": p_jams,
     }
     lines.append(
         f"\nsuccess: McNemar exact p = {p_success:.3f} (difference {diff.mean():+.3f}, 95 % "
-        f"interval [{diff.mean() - half:+.3f}, {diff.mean() + half:+.3f}]); jams/episode: "
+        f"interval [{low:+.3f}, {high:+.3f}], Newcombe); jams/episode: "
         f"Wilcoxon signed-rank p = {p_jams:.3f}; detection errors: two-sample KS p above. "
         "p > 0.05: no difference detectable at this sample size."
     )

@@ -98,6 +98,38 @@ def mcnemar_exact(a: Sequence[bool], b: Sequence[bool]) -> tuple[int, int, float
     return only_a, only_b, float(stats.binomtest(only_a, only_a + only_b, 0.5).pvalue)
 
 
+def paired_difference_interval(
+    a: Sequence[bool], b: Sequence[bool], z: float = Z95
+) -> tuple[float, float]:
+    """Interval of the difference of paired success rates ``mean(a) - mean(b)``: Newcombe's
+    hybrid score interval for paired proportions (Newcombe 1998, method 10: the marginal
+    rates' Wilson intervals combined with the pairs' correlation), which keeps its width with no
+    discordant pair (the Wald interval then collapses to a point); ``(nan, nan)`` if empty."""
+    if len(a) != len(b):
+        raise ValueError(
+            f"paired_difference_interval: len(a) = {len(a)}, len(b) = {len(b)}; allowed: equal"
+        )
+    n = len(a)
+    if n == 0:
+        return (math.nan, math.nan)
+    both = sum(1 for x, y in zip(a, b) if x and y)
+    only_a = sum(1 for x, y in zip(a, b) if x and not y)
+    only_b = sum(1 for x, y in zip(a, b) if y and not x)
+    neither = n - both - only_a - only_b
+    p1, p2 = (both + only_a) / n, (both + only_b) / n
+    l1, u1 = wilson_interval(both + only_a, n, z)
+    l2, u2 = wilson_interval(both + only_b, n, z)
+    denom = math.sqrt((both + only_a) * (only_b + neither) * (both + only_b) * (only_a + neither))
+    cross = both * neither - only_a * only_b
+    # the pairs' correlation, shrunk towards 0 by n/2 when positive (as in Altman et al.,
+    # Statistics with Confidence, 2000, section 6)
+    shrunk = max(cross - n / 2, 0.0) if cross > 0 else cross
+    phi = 0.0 if denom == 0 else shrunk / denom
+    delta = math.sqrt(max((p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2) + (u2 - p2) ** 2, 0))
+    eps = math.sqrt(max((u1 - p1) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2) + (p2 - l2) ** 2, 0))
+    return (p1 - p2 - delta, p1 - p2 + eps)
+
+
 def _mean(values: Iterable[float]) -> float:
     vals = list(values)
     return sum(vals) / len(vals) if vals else math.nan

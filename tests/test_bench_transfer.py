@@ -173,3 +173,19 @@ def test_script_end_to_end_on_one_network_and_extended(
     # a merge-only run summarises the earlier episodes again
     fig = bt.main(["--networks", "0", "--agents", "route_planner", "--merge", str(first)])
     assert fig == data["figures"]
+
+
+def test_paired_difference_interval_is_newcombes() -> None:
+    # 12 pairs both succeeded, 5 only a, 2 only b, 21 neither (values of this implementation,
+    # which follows Altman et al.'s formulas; the interval is asymmetric about 3/40)
+    both, only_a, only_b, neither = 12, 5, 2, 21
+    a = [True] * (both + only_a) + [False] * (only_b + neither)
+    b = [True] * both + [False] * only_a + [True] * only_b + [False] * neither
+    low, high = bt.paired_difference_interval(a, b)
+    assert low < 3 / 40 < high
+    assert (low, high) == (pytest.approx(-0.0594, abs=5e-4), pytest.approx(0.2046, abs=5e-4))
+    # no discordant pair: the interval keeps the width the sample size allows (Wald: a point)
+    low, high = bt.paired_difference_interval([True] * 48, [True] * 48)
+    assert high == pytest.approx(-low) and 0.07 < high < 0.08
+    with pytest.raises(ValueError, match="len"):
+        bt.paired_difference_interval([True], [True, False])
