@@ -736,7 +736,9 @@ class Executor:
             try:
                 self._tick(self.command.rotation[:, 0], k * self.control_dt)
                 if step.comply and cmd.curvature == 0.0 and (complying or cmd.hold_heading):
-                    complying = complying or self._steer_error() > COMPLY_ONSET
+                    complying = complying or self._steer_error() > min(
+                        COMPLY_ONSET, self.config.jam_hold
+                    )
                     if complying:  # the bend goes on: the walls set the heading
                         self.command.hold_heading = False
                         self.command.heading = self._front_pose()[1]

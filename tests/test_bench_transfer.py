@@ -184,8 +184,13 @@ def test_paired_difference_interval_is_newcombes() -> None:
     low, high = bt.paired_difference_interval(a, b)
     assert low < 3 / 40 < high
     assert (low, high) == (pytest.approx(-0.0594, abs=5e-4), pytest.approx(0.2046, abs=5e-4))
-    # no discordant pair: the interval keeps the width the sample size allows (Wald: a point)
-    low, high = bt.paired_difference_interval([True] * 48, [True] * 48)
-    assert high == pytest.approx(-low) and 0.07 < high < 0.08
+    # swapping the two sides mirrors the interval
+    low_ba, high_ba = bt.paired_difference_interval(b, a)
+    assert (low_ba, high_ba) == (pytest.approx(-high), pytest.approx(-low))
+    # no discordant pair: the interval keeps the width the sample size allows (Wald: a point);
+    # with every pair a success it is +-(1 - Wilson's lower bound of n/n) = +-z^2 / (n + z^2)
+    n, z = 48, bt.Z95
+    low, high = bt.paired_difference_interval([True] * n, [True] * n)
+    assert (low, high) == (pytest.approx(-z * z / (n + z * z)), pytest.approx(z * z / (n + z * z)))
     with pytest.raises(ValueError, match="len"):
         bt.paired_difference_interval([True], [True, False])

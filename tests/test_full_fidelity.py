@@ -105,6 +105,7 @@ def test_a_goal_before_a_dead_end_the_run_out_stops_at_counts_as_reached() -> No
     assert dec is not None and dec.kind == "reducer"
     res = plant.execute(dec.options[0], goal)
     assert res.status == "goal", res.note
+    assert res.note.startswith("reached the goal ("), res.note  # the stopped sequence's path
 
 
 @pytest.mark.slow
@@ -202,3 +203,6 @@ def test_a_jam_while_backing_off_a_close_structure_is_reported_and_swept_again(
     here = min(o.distance for o in dec.truth)
     assert here > start + 0.02  # it did back off part of the way
     assert all(abs(o.distance - here) < 0.02 for o in dec.options)
+    # clamped again where it stalled (not centred: it reads 93 mm; the open V read 47 mm)
+    assert plant.clamped_diameter == pytest.approx(0.09, abs=0.005)
+    assert all(abs(o.diameter - 0.09) < 0.005 for o in dec.options if o.angle < 0.1)

@@ -2,8 +2,8 @@
 
 - a long bend seen only in part (its arc goes on beyond what the sweep sees: a 90 deg bend of
   2.7 D radius looks like 55 deg from before it) is still passed: after the sensed arc the
-  walls take over the heading instead of the steering stalling, and the run-out counts from
-  where they stop turning the robot, so the whole robot leaves the bend;
+  walls take over the heading instead of the steering stalling, early enough that the whole
+  robot leaves the bend along them (the clamp then reads the pipe);
 - repeated sweeps from one place (rescans in place) confirm a structure only where scans from
   elsewhere saw one: a detector's systematic error repeats in every sweep from the same pose;
 - a way's angle is its deflection from the pipe axis the detector fitted, not from the

@@ -61,7 +61,7 @@ from pipe_env.envs.plant import (
 from pipe_env.ground_truth import fitting_ahead, options_at
 from pipe_env.lidar import LidarSpec
 from pipe_env.network import PipeNetwork
-from pipe_env.routing import EdgePosition, edge_length, locate
+from pipe_env.routing import EdgePosition, edge_length, edge_path, locate
 from pipe_env.world import PipeWorld
 from primitives.steps import SequenceStatus
 
@@ -392,6 +392,21 @@ class PhysicalPlant:
         run = self.network.run_by_id[here.run_id]
         return gp.s - here.s if towards == run.b else here.s - gp.s
 
+    def _drove_over_goal(self, goal: Any, outcome: Any) -> bool:
+        """True if the sensor went over ``goal`` during ``outcome``'s motion (its recorded
+        sensor path, and where it stands, pass within the goal's tolerance of the goal's point
+        on the centreline) and stands at or past it on the goal's run. The path test keeps a
+        robot stalled inside a junction, which ``locate`` may place on another run of it,
+        from counting a goal it never reached."""
+        if goal is None or not (self._goal_reached(goal) or self._goal_passed(goal)):
+            return False
+        gp = self._goal_edge(goal)
+        point, _ = edge_path(self.network, gp.run_id).point_tangent(gp.s)
+        path = [np.asarray(p, dtype=float) for p in outcome.telemetry.get("sensor_position", [])]
+        path.append(self.pose().position)
+        reach = GOAL_TOLERANCE + 0.5 * self.scan_interval
+        return min(float(np.linalg.norm(p - point)) for p in path) <= reach
+
     def _goal_passed(self, goal: Any) -> bool:
         """True if ``goal`` lies on the run the robot is in, between the fitting it entered the
         run by and where it stands: a sequence (a turn's run-out) drove over it."""
@@ -491,13 +506,22 @@ class PhysicalPlant:
         any other, and the robot sweeps again where it stopped)."""
         from primitives.sequences import back_out
 
-        back = self.executor.run(back_out(distance, diameter=self.read_clamp()), rng=self.rng)
+        diameter = self.read_clamp()
+        back = self.executor.run(back_out(distance, diameter=diameter), rng=self.rng)
         self._account(back, out)
         self._odometer -= abs(float(back.travelled))
         if back.status == SequenceStatus.JAMMED:
             # (a jam is a jam wherever it happens: the env counts it and senses again)
             out.status = PlantStatus.JAMMED
             out.note = f"jammed backing off a close structure: {back.reason}"
+            # the jam skipped the back-out's clamping: clamp where it stopped, at the diameter
+            # read before backing off, so the sweeps that follow get the pipe's diameter (an
+            # open V reads 47-60 mm) and drive_until can re-centre
+            from primitives.sequences import Sequence
+            from primitives.steps import Clamp
+
+            again = self.executor.run(Sequence("clamp", (Clamp(diameter),)), rng=self.rng)
+            self._account(again, out)
         return back.status == SequenceStatus.DONE
 
     def _decision(self, why: str | None) -> Decision:
@@ -561,9 +585,9 @@ class PhysicalPlant:
         self._account(outcome, out)
         self._odometer += abs(float(outcome.travelled))
         status = outcome.status
-        if status != SequenceStatus.DONE and (self._goal_reached(goal) or self._goal_passed(goal)):
+        if status != SequenceStatus.DONE and self._drove_over_goal(goal, outcome):
             # the sequence stopped (held-out network 99: a reducer's run-out driven into the
-            # dead end 19 cm after it) with the sensor at or past the goal: the robot got
+            # dead end 19 cm after it) after the sensor went over the goal: the robot got
             # there, as the fast fidelity's move ends at a goal just past the fitting
             self.tracker.reset()
             self._track_state = None
