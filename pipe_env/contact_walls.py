@@ -276,7 +276,24 @@ def _junction_pieces(g: FittingGeometry) -> list[HullPiece]:
     return pieces
 
 
-def _torus_pieces(g: FittingGeometry) -> list[HullPiece]:
+@dataclass(frozen=True)
+class BendSlices:
+    """How a long bend's wall is sliced into hull pieces: the arc's ``centre`` (m), unit
+    ``normal``, radius ``bend_r`` and the pipe radius ``r`` (m); the slice boundaries ``psis``
+    along the arc (rad from port ``a``, padded by ``SEAM_OVERLAP`` at both ends); the in-plane
+    unit vectors ``u0`` (towards port ``a``) and ``w0``."""
+
+    centre: NDArray[np.float64]
+    normal: NDArray[np.float64]
+    bend_r: float
+    r: float
+    psis: NDArray[np.float64]
+    u0: NDArray[np.float64]
+    w0: NDArray[np.float64]
+
+
+def bend_slices(g: FittingGeometry) -> BendSlices:
+    """The slicing of long bend ``g``'s wall (see :class:`BendSlices`)."""
     a, _ = g.ports
     centre, normal, bend_r, angle = g.bend_arc()
     r = a.radius
@@ -288,7 +305,13 @@ def _torus_pieces(g: FittingGeometry) -> list[HullPiece]:
     psis[0] -= pad
     psis[-1] += pad
     u0 = (a.position - centre) / bend_r
-    w0 = np.cross(normal, u0)
+    return BendSlices(centre, normal, bend_r, r, psis, u0, np.cross(normal, u0))
+
+
+def _torus_pieces(g: FittingGeometry) -> list[HullPiece]:
+    sl = bend_slices(g)
+    centre, normal, bend_r, r, psis = sl.centre, sl.normal, sl.bend_r, sl.r, sl.psis
+    u0, w0 = sl.u0, sl.w0
     delta = 2 * math.pi / SECTORS
     k_in = _chord_radius(1.0, delta)
     k_arc = _chord_radius(1.0, psis[1] - psis[0])

@@ -232,19 +232,11 @@ def test_run_panels_are_the_per_panel_formulas_bit_for_bit(
 
 def _torus_one_by_one(g) -> list[np.ndarray]:
     """The per-slice, per-sector formulas ``_torus_pieces`` replaced."""
-    from pipe_env.contact_walls import ARC_SAG
+    from pipe_env.contact_walls import bend_slices
 
-    a, _ = g.ports
-    centre, normal, bend_r, angle = g.bend_arc()
-    r = a.radius
-    step = 2.0 * math.acos(1.0 - ARC_SAG / (bend_r + r))
-    n_arc = max(2, math.ceil(angle / step))
-    psis = np.linspace(0.0, angle, n_arc + 1)
-    pad = SEAM_OVERLAP / bend_r
-    psis[0] -= pad
-    psis[-1] += pad
-    u0 = (a.position - centre) / bend_r
-    w0 = np.cross(normal, u0)
+    sl = bend_slices(g)  # the slicing is shared; the pieces are built one by one
+    centre, normal, bend_r, r, psis = sl.centre, sl.normal, sl.bend_r, sl.r, sl.psis
+    u0, w0 = sl.u0, sl.w0
     delta = 2 * math.pi / SECTORS
     k_in = _chord_radius(1.0, delta)
     k_arc = _chord_radius(1.0, psis[1] - psis[0])

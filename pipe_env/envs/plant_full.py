@@ -496,14 +496,13 @@ class PhysicalPlant:
                 break  # nothing driven (a zero-length leg): decide here
         return why, outcome, (sensing.confirmed, sensing.confirmed_options)
 
-    def _back_off(self, distance: float, out: PlantOutcome) -> bool:
+    def _back_off(self, distance: float, out: PlantOutcome) -> None:
         """Reverse ``distance`` m along the driven path (unclamped, clamped again at the
         diameter the encoders read here). The tracked structure is kept: its estimate is
         anchored in the odometry frame, so the next sweep re-expresses it from the new pose
         and adds its own reading (forgetting it threw away the sweeps from 0.2-0.5 m: a tee
-        swept again from behind a turn's exit then confirmed as its branch alone). Returns
-        True if the robot backed off (False: it could not; a jam is reported in ``out`` like
-        any other, and the robot sweeps again where it stopped)."""
+        swept again from behind a turn's exit then confirmed as its branch alone). A jam on
+        the way is reported in ``out`` like any other; the robot clamps where it stopped."""
         from primitives.sequences import back_out
 
         diameter = self.read_clamp()
@@ -522,7 +521,6 @@ class PhysicalPlant:
 
             again = self.executor.run(Sequence("clamp", (Clamp(diameter),)), rng=self.rng)
             self._account(again, out)
-        return back.status == SequenceStatus.DONE
 
     def _decision(self, why: str | None) -> Decision:
         pose = self.pose()
