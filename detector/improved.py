@@ -137,6 +137,7 @@ from numba import njit
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from detector import fit_kernels
 from detector.axis_fit import (
     axis_pose,
     common_wall_fit,
@@ -861,15 +862,27 @@ def _outlet_fit(cloud: PipeCloud, big_r: float, cfg: ImprovedConfig) -> NDArray[
     sub = sub[:, even_indices(sub.shape[1], cfg.axis_points)]
     if sub.shape[1] < cfg.outlet_min_returns:
         return None
-    origin = cloud.pose.position
+    # the distance to the axis through (0, y0, z0) along (1, a, b) less the radius: the
+    # compiled wall-cylinder model, its radius a fifth parameter (d r / d radius = -1)
+    data = np.ascontiguousarray(sub)
+    n = data.shape[1]
+    res, jt = np.empty(n), np.empty((5, n))
+    jt[4] = -1.0
 
     def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        corr = axis_pose(x[:4], origin)  # (current pipe frame -> the fitted one)
-        q = corr.rotation @ sub + corr.position[:, None]
-        return np.hypot(q[1], q[2]) - x[4]
+        fit_kernels.model_eval(
+            fit_kernels.MODEL_CYLINDER, data, fit_kernels.NO_INTS, x[4:5], x[:4], res, jt, False
+        )
+        return res.copy()
+
+    def jacobian(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        fit_kernels.model_eval(
+            fit_kernels.MODEL_CYLINDER, data, fit_kernels.NO_INTS, x[4:5], x[:4], res, jt, True
+        )
+        return jt.T.copy()
 
     x0 = np.array([0.0, 0.0, 0.0, 0.0, float(np.median(np.hypot(sub[1], sub[2])))])
-    fit = least_squares(residuals, x0, loss="soft_l1", f_scale=cfg.outlet_fit_scale)
+    fit = least_squares(residuals, x0, jac=jacobian, loss="soft_l1", f_scale=cfg.outlet_fit_scale)
     x = fit.x
     if not (fit.success and np.all(np.isfinite(x)) and 0.0 < x[4] < big_r):
         return None
