@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -143,7 +144,8 @@ def _end_wall_seen_through(
     aimed (nominally, the beam's jitter moves it by its radial noise) inside the rim returns
     from it, one aimed outside it does not (it grazes the wall on the way). So a ring that
     mostly returns from the plane from outside the rim (where a cap would return at most
-    ``cfg.rim_cap_share`` of it) means the pipe widens before the end wall; the ring after
+    ``cfg.rim_cap_share`` of it), or returns ``cfg.rim_share_excess`` more of its beams from
+    there than a cap would, means the pipe widens before the end wall; the ring after
     the outermost one returning, aimed inside the rim (a cap would return most of it) and
     hardly returning, means it narrows. From far away (or under a sensor that loses grazing
     returns) the reducer's own wall does not return: its start is bounded by the last wall
@@ -166,7 +168,10 @@ def _end_wall_seen_through(
             for r, sg in zip(radii, sigmas)
         ]
     )
-    wide = returning & round_ring & (radii > big_r) & (cap_share_out <= cfg.rim_cap_share)
+    beyond_cap = (returning & (cap_share_out <= cfg.rim_cap_share)) | (
+        shares >= cap_share_out + cfg.rim_share_excess
+    )
+    wide = round_ring & (radii > big_r) & beyond_cap
     wider = bool(np.any(wide))
     narrower = False
     if not wider and np.any(returning):
@@ -197,7 +202,7 @@ def _end_wall_seen_through(
     if dist - start < cfg.rim_wall_gap * big_r:
         return None
     if wider:
-        r2 = float(radii[wide].max())
+        r2 = _wider_rim(shares, radii, sigmas, cap_share_out, wide, cloud, cfg)
         # (the beams beyond the rim crossed the wall radius before the widening ended)
         start = min(start, dist * big_r / r2)
     else:
@@ -212,6 +217,33 @@ def _end_wall_seen_through(
     diag.update(end_wall_seen_through="wider" if wider else "narrower", reducer_r2=r2)
     opt = StructureOption("reducer", max(start, 0.0), 2.0 * r2, 0.0, 0.0, 0.5 * conf)
     return Detection("reducer", [opt], 0.5 * conf, diag)
+
+
+def _wider_rim(
+    shares: NDArray[np.float64],
+    radii: NDArray[np.float64],
+    sigmas: NDArray[np.float64],
+    cap_shares: NDArray[np.float64],
+    wide: NDArray[np.bool_],
+    cloud: PipeCloud,
+    cfg: ImprovedConfig,
+) -> float:
+    """The radius (m) of a wider pipe's end wall seen through a widening, from its rings of
+    beams (``shares``, median ``radii``, radial noise ``sigmas``; ``cap_shares``: what a cap
+    of the incoming pipe would return of each; ``wide``: the rings judged to lie beyond its
+    rim). A ring that returns most of its beams lies inside the rim. One that returns fewer
+    than half, but at least ``cfg.hole_min_returns`` beams more than a cap would, straddles
+    it: its beams return where the angular jitter bends them inside the rim, so the rim lies
+    ``sigma Phi^-1(share)`` from the ring's radius (``Phi``: the normal CDF)."""
+    g = max(cloud.shape[0], 1)
+    rim = 0.0
+    for j in np.flatnonzero(radii >= float(radii[wide].min())):
+        share = float(shares[j])
+        if share >= 0.5:
+            rim = max(rim, float(radii[j])) if wide[j] else rim
+        elif (share - float(cap_shares[j])) * g >= cfg.hole_min_returns:
+            rim = max(rim, float(radii[j]) + float(sigmas[j]) * NormalDist().inv_cdf(share))
+    return rim if rim > 0.0 else float(radii[wide].max())
 
 
 def _refit_without_end_wall(
@@ -479,12 +511,28 @@ def _widening_start(
     if not np.any(before):
         return default, False
     lo = float(u[before].max())
+    hi = min(hi, _next_beam_crossing(cloud, big_r, lo))
     if n_cone:
         u_c, e_c = float(np.median(uc[first])), float(np.median(ec[first]))
         k = (rise - margin) / max(e_c, 1e-6)
         if k > 1.0:
             lo = max(lo, (k * u_c - u_f) / (k - 1.0))
     return (0.5 * (lo + hi) if lo <= hi else hi), False
+
+
+def _next_beam_crossing(cloud: PipeCloud, big_r: float, u_last: float) -> float:
+    """Where (m along the axis) the beam after the one that returned from the wall at
+    ``u_last`` would have met the wall of radius ``big_r``, had the wall gone on: the wall
+    ends before it when that beam would have met it within the sensor's
+    ``max_incidence`` (its return would be there). ``inf`` when the beam's incidence there
+    lies beyond it (the wall may go on unseen) or the sweep's beam step is unknown."""
+    step = cloud.beam_step + cloud.angular_jitter
+    if step <= 0.0 or u_last <= 0.0:
+        return math.inf
+    alpha = math.atan2(big_r, u_last) - step  # the next beam's angle off the axis
+    if alpha <= 0.5 * math.pi - cloud.max_incidence:
+        return math.inf
+    return big_r / math.tan(alpha)
 
 
 def _ring_hinge_start(

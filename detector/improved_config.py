@@ -147,7 +147,11 @@ class ImprovedConfig:
         rim_ring_share, rim_cap_share, rim_margin: an end wall seen head-on is no cap of the
             incoming pipe (:func:`detector.axisymmetric._end_wall_seen_through`) when a ring of
             beams (at least ``rim_ring_share`` of its beams on the plane) returns from outside
-            the rim where a cap would return at most ``rim_cap_share`` of it, or the ring after
+            the rim where a cap would return at most ``rim_cap_share`` of it, or returns a
+            share at least ``rim_share_excess`` above what a cap would (a cap returns a ring
+            aimed outside its rim only where the beams' angular jitter bends them inside it;
+            that share is known, and a ring of a hundred-odd beams measures it to a few
+            hundredths), or the ring after
             the outermost returning one, aimed inside the rim (a cap would return at least half
             of it), returns at most ``rim_cap_share`` times what a cap would; the rim
             less ``rim_margin`` (m) and the sensor's offset from the axis. It is a reducer
@@ -256,6 +260,7 @@ class ImprovedConfig:
     fit_cost_tol: float = 1e-4
     rim_ring_share: float = 0.3
     rim_cap_share: float = 0.25
+    rim_share_excess: float = 0.2
     rim_margin: float = 0.0005
     rim_ring_spread: float = 0.5
     rim_wall_gap: float = 1.0
@@ -367,6 +372,7 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "fit_cost_tol": (float, 0.0, True, 1.0, "a number in [0, 1]"),
     "rim_ring_share": (float, 0.0, False, 1.0, "a number in (0, 1]"),
     "rim_cap_share": (float, 0.0, True, 0.5, "a number in [0, 0.5]"),
+    "rim_share_excess": (float, 0.0, False, 1.0, "a number in (0, 1]"),
     "rim_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
     "rim_ring_spread": (float, 0.0, True, 100.0, "a number in [0, 100] (beam spacings)"),
     "rim_wall_gap": (float, 0.0, True, 1000.0, "a number in [0, 1000] (radii)"),
