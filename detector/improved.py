@@ -243,7 +243,7 @@ def detect_improved(
         det = _detect_in_pipe_frame(cloud, big_r, config, diag)
         if given is not None:
             big_r, det = _check_pose_again(cloud, det, config, diag_pose, given, big_r)
-        det = _with_ring_holes(cloud, big_r, det, config)
+        det = _with_ring_holes(cloud, big_r, _with_opposite_way(cloud, big_r, det, config), config)
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as exc:  # never crash/NaN
         diag["error"] = f"{type(exc).__name__}: {exc}"
         det = Detection.straight(confidence=0.0, **diag)
@@ -1107,16 +1107,97 @@ def _across_sides_open(cloud: PipeCloud, big_r: float, alt: Detection, cfg: Impr
     past = np.abs(u - big_l) < cfg.across_side_band * big_r
     view = (u > big_l - cfg.across_view_band * big_r) & (u < big_l - big_r)
     on_wall = np.abs(cloud.r_v - big_r) <= cfg.hole_min_step + cfg.across_wall_k * cloud.sigma_v
-    y_axis, z_axis = cloud.pose.rotation[:, 1], cloud.pose.rotation[:, 2]
     ways = [o for o in alt.options if not o.is_straight_on]
     if len(ways) != 2:
         return False
     for o in ways:
-        perp = math.cos(o.direction) * y_axis + math.sin(o.direction) * z_axis
-        roll = math.atan2(float(perp[2]), float(perp[1]))
+        roll = _way_roll(cloud, o)
         near_roll = np.abs(np.angle(np.exp(1j * (phi - roll)))) < cfg.across_side_roll
         if np.count_nonzero(past & on_wall & near_roll) >= cfg.hole_min_returns:
             return False
         if np.count_nonzero(view & on_wall & near_roll) < cfg.hole_min_returns:
             return False
     return True
+
+
+def _way_roll(cloud: PipeCloud, option: StructureOption) -> float:
+    """The roll (rad, about the pipe axis from the pipe frame's y axis) towards which the way
+    ``option`` leaves, in the cloud's pipe frame (options give their direction in the sensor's
+    frame)."""
+    y_axis, z_axis = cloud.pose.rotation[:, 1], cloud.pose.rotation[:, 2]
+    perp = math.cos(option.direction) * y_axis + math.sin(option.direction) * z_axis
+    return math.atan2(float(perp[2]), float(perp[1]))
+
+
+def _with_opposite_way(
+    cloud: PipeCloud, big_r: float, det: Detection, cfg: ImprovedConfig
+) -> Detection:
+    """``det``, or a junction with one more way: the way opposite a single way that leaves at
+    90 deg (a cross or a tee from its stem whose other opening the branch fit missed, its
+    returns a few millimetres beyond the wall that no region of the classification held)
+    when that side shows the opening too. Near the place (a branch radius before and after
+    it along the axis; ``cfg.opposite_side_roll`` of the roll) returns beyond the wall by more
+    than their noise lie on the opposite side about as many as on the found way's and many
+    more than on the sides square to it, and the wall there ends before the place, where a
+    turn's outer wall runs on to its far wall (``cfg.opposite_*``). The new way mirrors the
+    found one: same place, deflection and diameter."""
+    if det.kind not in (Kind.JUNCTION, Kind.BEND) or det.diagnostics.get("model") == "torus":
+        return det
+    ways = [o for o in det.options if not o.is_straight_on]
+    if len(ways) != 1 or abs(ways[0].angle - 0.5 * math.pi) > cfg.opposite_max_off_square:
+        return det
+    way = ways[0]
+    rho = 0.5 * way.diameter
+    u = cloud.xyz_v[0]
+    phi = np.arctan2(cloud.xyz_v[2], cloud.xyz_v[1])
+    e = cloud.r_v - big_r
+    noise = np.maximum(cfg.hole_min_step, cfg.opposite_noise_k * cloud.sigma_v)
+    at_place = (u > way.distance - rho) & (u < way.distance + rho)
+    beyond = at_place & (e > noise)
+    on_wall_before = (u > way.distance - rho) & (u < way.distance) & (np.abs(e) <= noise)
+
+    def side(offset: float) -> tuple[int, int]:
+        near = np.abs(np.angle(np.exp(1j * (phi - _way_roll(cloud, way) - offset))))
+        near_roll = near < cfg.opposite_side_roll
+        return int(np.count_nonzero(beyond & near_roll)), int(
+            np.count_nonzero(on_wall_before & near_roll)
+        )
+
+    found, opposite = side(0.0), side(math.pi)
+    square = [side(0.5 * math.pi), side(-0.5 * math.pi)]
+    baseline = max(s[0] for s in square)
+    wall = min(s[1] for s in square)
+    det.diagnostics["opposite_way_counts"] = {
+        "found": found,
+        "opposite": opposite,
+        "square": square,
+    }
+    if not (
+        opposite[0]
+        >= max(
+            2 * cfg.hole_min_returns,
+            cfg.opposite_min_share * found[0],
+            cfg.opposite_baseline_factor * (baseline + 1),
+        )
+        and wall >= 2 * cfg.hole_min_returns
+        and opposite[1] <= cfg.opposite_wall_share * wall
+    ):
+        return det
+    turned = way.direction + math.pi
+    mirrored = StructureOption(
+        "junction",
+        way.distance,
+        way.diameter,
+        math.atan2(math.sin(turned), math.cos(turned)),
+        way.angle,
+        way.confidence,
+    )
+    options = [
+        StructureOption("junction", o.distance, o.diameter, o.direction, o.angle, o.confidence)
+        for o in det.options
+    ]
+    options.append(mirrored)
+    options.sort(key=option_order)
+    diag = dict(det.diagnostics)
+    diag.update(opposite_way=True, replaced_kind=det.kind)
+    return Detection("junction", options, det.confidence, diag)

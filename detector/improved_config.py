@@ -52,6 +52,18 @@ class ImprovedConfig:
             looks flat within the range noise when the wall's curvature is at least this
             likely (likelihood ratio of a quadratic surface over a plane): an end wall is
             flat, so a wall that curves this clearly is not one.
+        opposite_max_off_square, opposite_side_roll, opposite_noise_k, opposite_min_share,
+            opposite_baseline_factor, opposite_wall_share: a turn or junction with one way
+            leaving at 90 deg (within ``opposite_max_off_square`` rad) gains the way opposite
+            it (a cross, or a tee from its stem, one of whose openings the fit missed) when,
+            within ``opposite_side_roll`` (rad) of the opposite roll and a branch radius of
+            the place along the axis, at least ``hole_min_returns`` twice, and
+            ``opposite_min_share`` of what the found way's side holds, of the returns lie
+            beyond the wall by ``opposite_noise_k`` times their radial noise (and
+            ``hole_min_step``), ``opposite_baseline_factor`` times what the sides square to
+            the way hold; and the wall on the opposite side ends before the place: it keeps at
+            most ``opposite_wall_share`` of the returns the square sides keep on the wall
+            there (a turn's outer side runs on to the far wall).
         all_round: a region of returns beyond the wall covering this fraction of the azimuth
             goes all round the axis (and is split into its deep parts).
         snap_within: a junction's branch fitted within this angle of a standard fitting angle
@@ -213,6 +225,12 @@ class ImprovedConfig:
     across_side_roll: float = math.radians(45.0)
     across_wall_k: float = 3.0
     across_view_band: float = 2.5
+    opposite_max_off_square: float = math.radians(15.0)
+    opposite_side_roll: float = math.radians(30.0)
+    opposite_noise_k: float = 3.0
+    opposite_min_share: float = 0.5
+    opposite_baseline_factor: float = 4.0
+    opposite_wall_share: float = 0.5
     all_round: float = 0.75
     snap_within: float = math.radians(25.0)
     snap_lr: float = 10.0
@@ -325,6 +343,12 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "across_view_band": (float, 1.0, False, 100.0, "a number in (1, 100] (radii)"),
     "far_wall_fit_points": (int, 10, True, 100000, "an integer in [10, 100000]"),
     "across_min_curvature_lr": (float, 0.0, True, 1e6, "a number in [0, 1e6]"),
+    "opposite_max_off_square": (float, 0.0, True, math.pi / 2, "an angle in [0, pi/2] rad"),
+    "opposite_side_roll": (float, 0.0, False, math.pi / 2, "an angle in (0, pi/2] rad"),
+    "opposite_noise_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
+    "opposite_min_share": (float, 0.0, True, 10.0, "a number in [0, 10]"),
+    "opposite_baseline_factor": (float, 0.0, True, 1000.0, "a number in [0, 1000]"),
+    "opposite_wall_share": (float, 0.0, True, 1.0, "a number in [0, 1]"),
     "all_round": (float, 0.0, False, 1.0, "a number in (0, 1]"),
     "snap_within": (float, 0.0, True, math.pi / 2, "a number in [0, pi/2] rad"),
     "snap_lr": (float, 0.0, True, math.inf, "a finite number >= 0"),
