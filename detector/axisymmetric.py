@@ -143,9 +143,9 @@ def _end_wall_seen_through(
     tolerance takes in the outer rings), ring of beams by ring. A cap fills the pipe: a beam
     aimed (nominally, the beam's jitter moves it by its radial noise) inside the rim returns
     from it, one aimed outside it does not (it grazes the wall on the way). So a ring that
-    mostly returns from the plane from outside the rim (where a cap would return at most
-    ``cfg.rim_cap_share`` of it), or returns ``cfg.rim_share_excess`` more of its beams from
-    there than a cap would, means the pipe widens before the end wall; the ring after
+    mostly returns from the plane from outside the rim, where a cap would return at most
+    ``cfg.rim_cap_share`` of it or ``cfg.rim_share_excess`` less than it returns, means the
+    pipe widens before the end wall; the ring after
     the outermost one returning, aimed inside the rim (a cap would return most of it) and
     hardly returning, means it narrows. From far away (or under a sensor that loses grazing
     returns) the reducer's own wall does not return: its start is bounded by the last wall
@@ -168,10 +168,10 @@ def _end_wall_seen_through(
             for r, sg in zip(radii, sigmas)
         ]
     )
-    beyond_cap = (returning & (cap_share_out <= cfg.rim_cap_share)) | (
+    beyond_cap = (cap_share_out <= cfg.rim_cap_share) | (
         shares >= cap_share_out + cfg.rim_share_excess
     )
-    wide = round_ring & (radii > big_r) & beyond_cap
+    wide = returning & round_ring & (radii > big_r) & beyond_cap
     wider = bool(np.any(wide))
     narrower = False
     if not wider and np.any(returning):
@@ -195,14 +195,16 @@ def _end_wall_seen_through(
     dr = r_all - big_r
     inner = (4.0 if wider else 1.0) * cloud.sigma_v + cfg.rim_margin
     on_wall = (dr >= -inner) & (dr <= 4.0 * cloud.sigma_v + cfg.rim_margin) & (u_all < dist - tol_u)
-    start = float(partial_percentile(u_all[on_wall], 99.0)) if np.any(on_wall) else 0.0
+    if not np.any(on_wall):  # (no wall before it to start from: nothing to say where)
+        return None
+    start = float(partial_percentile(u_all[on_wall], 99.0))
     # (a wall in view up to the end wall shows a cap, or a reducer, directly: the corner's
     # returns, on the wall beside the plane, are no view through anything)
     diag["end_wall_wall_gap"] = dist - start
     if dist - start < cfg.rim_wall_gap * big_r:
         return None
     if wider:
-        r2 = _wider_rim(shares, radii, sigmas, cap_share_out, wide, cloud, cfg)
+        r2 = _wider_rim(shares, radii, sigmas, cap_share_out, wide, round_ring, cloud, cfg)
         # (the beams beyond the rim crossed the wall radius before the widening ended)
         start = min(start, dist * big_r / r2)
     else:
@@ -225,19 +227,21 @@ def _wider_rim(
     sigmas: NDArray[np.float64],
     cap_shares: NDArray[np.float64],
     wide: NDArray[np.bool_],
+    round_ring: NDArray[np.bool_],
     cloud: PipeCloud,
     cfg: ImprovedConfig,
 ) -> float:
     """The radius (m) of a wider pipe's end wall seen through a widening, from its rings of
     beams (``shares``, median ``radii``, radial noise ``sigmas``; ``cap_shares``: what a cap
     of the incoming pipe would return of each; ``wide``: the rings judged to lie beyond its
-    rim). A ring that returns most of its beams lies inside the rim. One that returns fewer
-    than half, but at least ``cfg.hole_min_returns`` beams more than a cap would, straddles
-    it: its beams return where the angular jitter bends them inside the rim, so the rim lies
-    ``sigma Phi^-1(share)`` from the ring's radius (``Phi``: the normal CDF)."""
+    rim; ``round_ring``: the rings lying round the axis). A ring that returns most of its
+    beams lies inside the rim. A round one that returns fewer than half, but at least
+    ``cfg.hole_min_returns`` beams more than a cap would, straddles it: its beams return
+    where the angular jitter bends them inside the rim, so the rim lies ``sigma Phi^-1(share)``
+    from the ring's radius (``Phi``: the normal CDF)."""
     g = max(cloud.shape[0], 1)
     rim = 0.0
-    for j in np.flatnonzero(radii >= float(radii[wide].min())):
+    for j in np.flatnonzero(round_ring & (radii >= float(radii[wide].min()))):
         share = float(shares[j])
         if share >= 0.5:
             rim = max(rim, float(radii[j])) if wide[j] else rim
@@ -526,9 +530,11 @@ def _next_beam_crossing(cloud: PipeCloud, big_r: float, u_last: float) -> float:
     ends before it when that beam would have met it within the sensor's
     ``max_incidence`` (its return would be there). ``inf`` when the beam's incidence there
     lies beyond it (the wall may go on unseen) or the sweep's beam step is unknown."""
-    step = cloud.beam_step + cloud.angular_jitter
-    if step <= 0.0 or u_last <= 0.0:
+    if cloud.beam_step <= 0.0 or u_last <= 0.0:
         return math.inf
+    # (a beam jittered towards the axis meets the wall farther on: one step plus one jitter
+    # sigma keeps the bound on the safe side for most beams, not for all)
+    step = cloud.beam_step + cloud.angular_jitter
     alpha = math.atan2(big_r, u_last) - step  # the next beam's angle off the axis
     if alpha <= 0.5 * math.pi - cloud.max_incidence:
         return math.inf

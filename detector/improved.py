@@ -154,6 +154,7 @@ from detector.axis_fit import (
 from detector.axisymmetric import detect_axisymmetric
 from detector.branches import Lobe, detect_branches, find_lobes
 from detector.detection import Detection
+from detector.geometry import wrap_angle
 from detector.grazing import find_ring_holes
 from detector.improved_config import DEFAULT_CONFIG, ImprovedConfig
 from detector.options import StructureOption, option_order
@@ -1156,9 +1157,10 @@ def _with_opposite_way(
     beyond = at_place & (e > noise)
     on_wall_before = (u > way.distance - rho) & (u < way.distance) & (np.abs(e) <= noise)
 
+    roll = _way_roll(cloud, way)
+
     def side(offset: float) -> tuple[int, int]:
-        near = np.abs(np.angle(np.exp(1j * (phi - _way_roll(cloud, way) - offset))))
-        near_roll = near < cfg.opposite_side_roll
+        near_roll = np.abs(wrap_angle(phi - roll - offset)) < cfg.opposite_side_roll
         return int(np.count_nonzero(beyond & near_roll)), int(
             np.count_nonzero(on_wall_before & near_roll)
         )
@@ -1183,12 +1185,11 @@ def _with_opposite_way(
         and opposite[1] <= cfg.opposite_wall_share * wall
     ):
         return det
-    turned = way.direction + math.pi
     mirrored = StructureOption(
         "junction",
         way.distance,
         way.diameter,
-        math.atan2(math.sin(turned), math.cos(turned)),
+        wrap_angle(way.direction + math.pi),
         way.angle,
         way.confidence,
     )

@@ -60,10 +60,10 @@ class ImprovedConfig:
             the place along the axis, at least ``hole_min_returns`` twice, and
             ``opposite_min_share`` of what the found way's side holds, of the returns lie
             beyond the wall by ``opposite_noise_k`` times their radial noise (and
-            ``hole_min_step``), ``opposite_baseline_factor`` times what the sides square to
-            the way hold; and the wall on the opposite side ends before the place: it keeps at
-            most ``opposite_wall_share`` of the returns the square sides keep on the wall
-            there (a turn's outer side runs on to the far wall).
+            ``hole_min_step``), and ``opposite_baseline_factor`` times (one more than) what
+            the sides square to the way hold; and the wall on the opposite side ends before
+            the place: it keeps at most ``opposite_wall_share`` of the returns the square
+            sides keep on the wall there (a turn's outer side runs on to the far wall).
         all_round: a region of returns beyond the wall covering this fraction of the azimuth
             goes all round the axis (and is split into its deep parts).
         snap_within: a junction's branch fitted within this angle of a standard fitting angle
@@ -156,15 +156,15 @@ class ImprovedConfig:
         fit_anneal: the robust fits shrink their cut-off over this many iterations, then run
             to convergence ...
         fit_cost_tol: ... or until a step lowers the robust cost by less than this fraction.
-        rim_ring_share, rim_cap_share, rim_margin: an end wall seen head-on is no cap of the
-            incoming pipe (:func:`detector.axisymmetric._end_wall_seen_through`) when a ring of
-            beams (at least ``rim_ring_share`` of its beams on the plane) returns from outside
-            the rim where a cap would return at most ``rim_cap_share`` of it, or returns a
-            share at least ``rim_share_excess`` above what a cap would (a cap returns a ring
-            aimed outside its rim only where the beams' angular jitter bends them inside it;
-            that share is known, and a ring of a hundred-odd beams measures it to a few
-            hundredths), or the ring after
-            the outermost returning one, aimed inside the rim (a cap would return at least half
+        rim_ring_share, rim_cap_share, rim_share_excess, rim_margin: an end wall seen
+            head-on is no cap of the incoming pipe
+            (:func:`detector.axisymmetric._end_wall_seen_through`) when a ring of beams (at
+            least ``rim_ring_share`` of its beams on the plane) returns from outside the rim
+            where a cap would return at most ``rim_cap_share`` of it, or ``rim_share_excess``
+            less than the ring does (a cap returns a ring aimed outside its rim only where the
+            beams' angular jitter bends them inside it; that share is known, and a ring of a
+            hundred-odd beams measures it to a few hundredths), or the ring after the
+            outermost returning one, aimed inside the rim (a cap would return at least half
             of it), returns at most ``rim_cap_share`` times what a cap would; the rim
             less ``rim_margin`` (m) and the sensor's offset from the axis. It is a reducer
             then, seen through from too far for its own wall to return. Only rings spread

@@ -128,7 +128,8 @@ def differences(case: str, got: dict[str, np.ndarray], want: dict[str, np.ndarra
         if key == "numbers":
             close = np.array([not mismatches(json.loads(x), json.loads(y)) for x, y in zip(a, b)])
         elif a.dtype.kind == "f":
-            close = np.isclose(a, b, rtol=RTOL, atol=ATOL).reshape(len(a), -1).all(axis=1)
+            near = np.isclose(a, b, rtol=RTOL, atol=ATOL, equal_nan=True)
+            close = near.reshape(len(a), -1).all(axis=1)
         else:
             close = (a == b).reshape(len(a), -1).all(axis=1)
         if not close.all():

@@ -288,5 +288,5 @@ def test_full_fidelity_episodes_keep_one_world_and_renderer() -> None:
         counts.append(tuple(n - b for n, b in zip(alive(), before)))
     env.close()
     for worlds, plants, renderers, lidars in counts:
-        assert plants <= 1 and lidars <= 1 and renderers <= 1 and worlds <= 2, counts
+        assert plants == 1 and lidars == 1 and renderers <= 1 and worlds <= 2, counts
     assert counts[-1] == counts[0], counts
