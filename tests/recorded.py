@@ -14,29 +14,15 @@ from __future__ import annotations
 import math
 from typing import Any
 
-import numpy as np
-
 #: Relative and absolute tolerance of a float (metres, seconds, radians: 10 micrometres).
 RTOL, ATOL = 1e-6, 1e-5
-
-
-def plain(value: Any) -> Any:
-    """``value`` with numpy scalars and arrays, tuples and dict keys made JSON's own types."""
-    if isinstance(value, dict):
-        return {str(k): plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return plain(value.tolist())
-    if isinstance(value, (np.floating, np.integer, np.bool_)):
-        return value.item()
-    return value
 
 
 def mismatches(
     got: Any, want: Any, path: str = "", rtol: float = RTOL, atol: float = ATOL
 ) -> list[str]:
-    """Where ``got`` departs from the recorded ``want`` (both :func:`plain`): one line per
+    """Where ``got`` departs from the recorded ``want`` (both JSON's own types:
+    :func:`pipe_env.network_io.plain` makes them): one line per
     differing leaf, ``path: got != want``; empty when they agree."""
     if isinstance(want, dict) and isinstance(got, dict):
         if sorted(got) != sorted(want):

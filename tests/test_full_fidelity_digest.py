@@ -42,10 +42,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from recorded import mismatches, plain
+from recorded import mismatches
 
 from pipe_env import layouts
 from pipe_env.envs.plant_full import PhysicalPlant
+from pipe_env.network_io import plain
 from pipe_env.routing import EdgePosition, edge_length
 
 #: The recorded runs: ``run/<detector>`` of :func:`seeded_run`, ``episode`` of
