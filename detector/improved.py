@@ -1154,13 +1154,22 @@ def _with_opposite_way(
     e = cloud.r_v - big_r
     noise = np.maximum(cfg.hole_min_step, cfg.opposite_noise_k * cloud.sigma_v)
     at_place = (u > way.distance - rho) & (u < way.distance + rho)
-    beyond = at_place & (e > noise)
     on_wall_before = (u > way.distance - rho) & (u < way.distance) & (np.abs(e) <= noise)
-
     roll = _way_roll(cloud, way)
 
+    def near(offset: float) -> NDArray[np.bool_]:
+        return np.asarray(np.abs(wrap_angle(phi - roll - offset)) < cfg.opposite_side_roll)
+
+    # (from a stem narrower than the run, the run's wall lies beyond the stem's all round:
+    # the ways are what goes deeper than the sides square to them reach)
+    square_beyond = at_place & (e > noise) & (near(0.5 * math.pi) | near(-0.5 * math.pi))
+    depth = noise
+    if np.count_nonzero(square_beyond) >= 2 * cfg.hole_min_returns:
+        depth = np.maximum(noise, partial_percentile(e[square_beyond], 95.0))
+    beyond = at_place & (e > depth)
+
     def side(offset: float) -> tuple[int, int]:
-        near_roll = np.abs(wrap_angle(phi - roll - offset)) < cfg.opposite_side_roll
+        near_roll = near(offset)
         return int(np.count_nonzero(beyond & near_roll)), int(
             np.count_nonzero(on_wall_before & near_roll)
         )
