@@ -204,7 +204,7 @@ def _end_wall_seen_through(
     if dist - start < cfg.rim_wall_gap * big_r:
         return None
     if wider:
-        r2 = _wider_rim(shares, radii, sigmas, cap_share_out, wide, round_ring, cloud, cfg)
+        r2 = _wider_rim(shares, radii, sigmas, cap_share_out, wide, round_ring, big_r, cloud, cfg)
         # (the beams beyond the rim crossed the wall radius before the widening ended)
         start = min(start, dist * big_r / r2)
     else:
@@ -228,10 +228,12 @@ def _wider_rim(
     cap_shares: NDArray[np.float64],
     wide: NDArray[np.bool_],
     round_ring: NDArray[np.bool_],
+    big_r: float,
     cloud: PipeCloud,
     cfg: ImprovedConfig,
 ) -> float:
-    """The radius (m) of a wider pipe's end wall seen through a widening, from its rings of
+    """The radius (m, at least the incoming pipe's ``big_r``) of a wider pipe's end wall seen
+    through a widening, from its rings of
     beams (``shares``, median ``radii``, radial noise ``sigmas``; ``cap_shares``: what a cap
     of the incoming pipe would return of each; ``wide``: the rings judged to lie beyond its
     rim; ``round_ring``: the rings lying round the axis). A ring that returns most of its
@@ -247,7 +249,9 @@ def _wider_rim(
             rim = max(rim, float(radii[j])) if wide[j] else rim
         elif (share - float(cap_shares[j])) * g >= cfg.hole_min_returns:
             rim = max(rim, float(radii[j]) + float(sigmas[j]) * NormalDist().inv_cdf(share))
-    return rim if rim > 0.0 else float(radii[wide].max())
+    rim = rim if rim > 0.0 else float(radii[wide].max())
+    # (a ring just past the incoming rim, straddling it, places no wider rim inside that)
+    return max(rim, big_r)
 
 
 def _refit_without_end_wall(

@@ -1138,10 +1138,14 @@ def _with_opposite_way(
     returns a few millimetres beyond the wall that no region of the classification held)
     when that side shows the opening too. Near the place (a branch radius before and after
     it along the axis; ``cfg.opposite_side_roll`` of the roll) returns beyond the wall by more
-    than their noise lie on the opposite side about as many as on the found way's and many
-    more than on the sides square to it, and the wall there ends before the place, where a
-    turn's outer wall runs on to its far wall (``cfg.opposite_*``). The new way mirrors the
-    found one: same place, deflection and diameter."""
+    than their noise lie on the opposite side at least half as many as on the found way's and
+    many more than on the sides square to it, and the wall there ends before the place, where
+    a turn's outer wall runs on to its far wall (``cfg.opposite_*``). When each square side
+    holds about as many returns beyond the wall as the way's (a stem narrower than the run:
+    the run's wall lies beyond the stem's all round), only returns deeper than the 95th
+    percentile of theirs count (the baseline test then holds by construction; the wall test
+    still tells a turn). The new way mirrors the found one: same place, deflection and
+    diameter."""
     if det.kind not in (Kind.JUNCTION, Kind.BEND) or det.diagnostics.get("model") == "torus":
         return det
     ways = [o for o in det.options if not o.is_straight_on]
@@ -1162,9 +1166,14 @@ def _with_opposite_way(
 
     # (from a stem narrower than the run, the run's wall lies beyond the stem's all round:
     # the ways are what goes deeper than the sides square to them reach)
-    square_beyond = at_place & (e > noise) & (near(0.5 * math.pi) | near(-0.5 * math.pi))
+    # (the square sides' windows less the way's and the opposite one's, should they overlap)
+    square_side = (near(0.5 * math.pi) | near(-0.5 * math.pi)) & ~near(0.0) & ~near(math.pi)
+    beyond_wall = at_place & (e > noise)
+    square_beyond = beyond_wall & square_side
+    n_way = int(np.count_nonzero(beyond_wall & near(0.0)))
+    n_square = int(np.count_nonzero(square_beyond))
     depth = noise
-    if np.count_nonzero(square_beyond) >= 2 * cfg.hole_min_returns:
+    if n_square >= 2 * cfg.hole_min_returns and n_square >= cfg.opposite_min_share * 2 * n_way:
         depth = np.maximum(noise, partial_percentile(e[square_beyond], 95.0))
     beyond = at_place & (e > depth)
 

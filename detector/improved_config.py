@@ -60,10 +60,12 @@ class ImprovedConfig:
             the place along the axis, at least ``hole_min_returns`` twice, and
             ``opposite_min_share`` of what the found way's side holds, of the returns lie
             beyond the wall by ``opposite_noise_k`` times their radial noise (and
-            ``hole_min_step``; when the sides square to the way hold returns beyond it too,
-            as from a stem narrower than the run, beyond the 95th percentile of their
-            depth), and ``opposite_baseline_factor`` times (one more than) what the sides
-            square to the way hold; and the wall on the opposite side ends before
+            ``hole_min_step``; when the sides square to the way hold beyond it, on average,
+            ``opposite_min_share`` of what the way's side holds, and ``hole_min_returns``
+            twice, as from a stem narrower than the run, beyond the 95th percentile of
+            their depth), and
+            ``opposite_baseline_factor`` times (one more than) what the sides square to the
+            way hold; and the wall on the opposite side ends before
             the place: it keeps at most ``opposite_wall_share`` of the returns the square
             sides keep on the wall there (a turn's outer side runs on to the far wall).
         all_round: a region of returns beyond the wall covering this fraction of the azimuth
