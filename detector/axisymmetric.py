@@ -233,10 +233,10 @@ def _wider_rim(
     cfg: ImprovedConfig,
 ) -> float:
     """The radius (m, at least the incoming pipe's ``big_r``) of a wider pipe's end wall seen
-    through a widening, from its rings of
-    beams (``shares``, median ``radii``, radial noise ``sigmas``; ``cap_shares``: what a cap
-    of the incoming pipe would return of each; ``wide``: the rings judged to lie beyond its
-    rim; ``round_ring``: the rings lying round the axis). A ring that returns most of its
+    through a widening, from its rings of beams (``shares``, median ``radii``, radial noise
+    ``sigmas``; ``cap_shares``: what a cap of the incoming pipe would return of each;
+    ``wide``: the rings judged to lie beyond its rim; ``round_ring``: the rings lying round
+    the axis). A ring that returns most of its
     beams lies inside the rim. A round one that returns fewer than half, but at least
     ``cfg.hole_min_returns`` beams more than a cap would, straddles it: its beams return
     where the angular jitter bends them inside the rim, so the rim lies ``sigma Phi^-1(share)``
@@ -246,7 +246,8 @@ def _wider_rim(
     for j in np.flatnonzero(round_ring & (radii >= float(radii[wide].min()))):
         share = float(shares[j])
         if share >= 0.5:
-            rim = max(rim, float(radii[j])) if wide[j] else rim
+            if wide[j]:
+                rim = max(rim, float(radii[j]))
         elif (share - float(cap_shares[j])) * g >= cfg.hole_min_returns:
             rim = max(rim, float(radii[j]) + float(sigmas[j]) * NormalDist().inv_cdf(share))
     rim = rim if rim > 0.0 else float(radii[wide].max())

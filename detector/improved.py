@@ -129,7 +129,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -1113,7 +1113,7 @@ def _across_sides_open(cloud: PipeCloud, big_r: float, alt: Detection, cfg: Impr
         return False
     for o in ways:
         roll = _way_roll(cloud, o)
-        near_roll = np.abs(np.angle(np.exp(1j * (phi - roll)))) < cfg.across_side_roll
+        near_roll = np.abs(wrap_angle(phi - roll)) < cfg.across_side_roll
         if np.count_nonzero(past & on_wall & near_roll) >= cfg.hole_min_returns:
             return False
         if np.count_nonzero(view & on_wall & near_roll) < cfg.hole_min_returns:
@@ -1161,30 +1161,33 @@ def _with_opposite_way(
     on_wall_before = (u > way.distance - rho) & (u < way.distance) & (np.abs(e) <= noise)
     roll = _way_roll(cloud, way)
 
-    def near(offset: float) -> NDArray[np.bool_]:
-        return np.asarray(np.abs(wrap_angle(phi - roll - offset)) < cfg.opposite_side_roll)
-
+    # the windows of roll: the way's, the opposite one's and the two square to them
+    rel = np.abs(wrap_angle(phi - roll))
+    way_w = rel < cfg.opposite_side_roll
+    opposite_w = rel > math.pi - cfg.opposite_side_roll
+    square_ws = [
+        np.abs(wrap_angle(phi - roll - s)) < cfg.opposite_side_roll
+        for s in (0.5 * math.pi, -0.5 * math.pi)
+    ]
+    square_w = (square_ws[0] | square_ws[1]) & ~way_w & ~opposite_w  # (should they overlap)
     # (from a stem narrower than the run, the run's wall lies beyond the stem's all round:
     # the ways are what goes deeper than the sides square to them reach)
-    # (the square sides' windows less the way's and the opposite one's, should they overlap)
-    square_side = (near(0.5 * math.pi) | near(-0.5 * math.pi)) & ~near(0.0) & ~near(math.pi)
     beyond_wall = at_place & (e > noise)
-    square_beyond = beyond_wall & square_side
-    n_way = int(np.count_nonzero(beyond_wall & near(0.0)))
+    square_beyond = beyond_wall & square_w
+    n_way = int(np.count_nonzero(beyond_wall & way_w))
     n_square = int(np.count_nonzero(square_beyond))
     depth = noise
     if n_square >= 2 * cfg.hole_min_returns and n_square >= cfg.opposite_min_share * 2 * n_way:
         depth = np.maximum(noise, partial_percentile(e[square_beyond], 95.0))
     beyond = at_place & (e > depth)
 
-    def side(offset: float) -> tuple[int, int]:
-        near_roll = near(offset)
-        return int(np.count_nonzero(beyond & near_roll)), int(
-            np.count_nonzero(on_wall_before & near_roll)
+    def side(window: NDArray[np.bool_]) -> tuple[int, int]:
+        return int(np.count_nonzero(beyond & window)), int(
+            np.count_nonzero(on_wall_before & window)
         )
 
-    found, opposite = side(0.0), side(math.pi)
-    square = [side(0.5 * math.pi), side(-0.5 * math.pi)]
+    found, opposite = side(way_w), side(opposite_w)
+    square = [side(w) for w in square_ws]
     baseline = max(s[0] for s in square)
     wall = min(s[1] for s in square)
     det.diagnostics["opposite_way_counts"] = {
@@ -1203,19 +1206,8 @@ def _with_opposite_way(
         and opposite[1] <= cfg.opposite_wall_share * wall
     ):
         return det
-    mirrored = StructureOption(
-        "junction",
-        way.distance,
-        way.diameter,
-        wrap_angle(way.direction + math.pi),
-        way.angle,
-        way.confidence,
-    )
-    options = [
-        StructureOption("junction", o.distance, o.diameter, o.direction, o.angle, o.confidence)
-        for o in det.options
-    ]
-    options.append(mirrored)
+    options = [replace(o, kind="junction") for o in det.options]
+    options.append(replace(way, kind="junction", direction=wrap_angle(way.direction + math.pi)))
     options.sort(key=option_order)
     diag = dict(det.diagnostics)
     diag.update(opposite_way=True, replaced_kind=det.kind)

@@ -62,12 +62,11 @@ class ImprovedConfig:
             beyond the wall by ``opposite_noise_k`` times their radial noise (and
             ``hole_min_step``; when the sides square to the way hold beyond it, on average,
             ``opposite_min_share`` of what the way's side holds, and ``hole_min_returns``
-            twice, as from a stem narrower than the run, beyond the 95th percentile of
-            their depth), and
-            ``opposite_baseline_factor`` times (one more than) what the sides square to the
-            way hold; and the wall on the opposite side ends before
-            the place: it keeps at most ``opposite_wall_share`` of the returns the square
-            sides keep on the wall there (a turn's outer side runs on to the far wall).
+            twice, as from a stem narrower than the run, beyond the 95th percentile of their
+            depth), and ``opposite_baseline_factor`` times (one more than) what the sides
+            square to the way hold; and the wall on the opposite side ends before the place:
+            it keeps at most ``opposite_wall_share`` of the returns the square sides keep on
+            the wall there (a turn's outer side runs on to the far wall).
         all_round: a region of returns beyond the wall covering this fraction of the azimuth
             goes all round the axis (and is split into its deep parts).
         snap_within: a junction's branch fitted within this angle of a standard fitting angle
