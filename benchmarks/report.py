@@ -3,7 +3,8 @@
 Each benchmark script prints its tables and, with ``--write-docs``, calls
 :func:`write_section` with a section name and its markdown. The section replaces the previous
 one of that name between HTML comment markers (current figures only; history goes into
-``CHANGELOG.md``) and is stamped with the commit, the date, the machine and the thread count.
+``CHANGELOG.md``) and is stamped with the commit, the date, the machine, the thread count and
+the load average (figures are comparable only between runs on an otherwise idle machine).
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ DOCS_PATH = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
 HEADER = (
     "# Benchmark figures\n\n"
     "Written by the scripts in `benchmarks/` (`--write-docs`); each section holds the current\n"
-    "figures of one script, stamped with the commit, date, machine and thread count of its run.\n"
+    "figures of one script, stamped with the commit, date, machine, thread count and load\n"
+    "average of its run (a load above the run's own threads: other work shared the machine).\n"
     "Rerun a script to refresh its section. Ratios compare methods measured in the same run.\n"
 )
 
@@ -54,13 +56,27 @@ def threads() -> str:
     return f"OMP_NUM_THREADS={omp}" if omp else f"default ({os.cpu_count()} cores)"
 
 
+def load() -> str:
+    """The machine's load averages over the last 1 and 5 minutes (runnable processes, the
+    benchmark's own included) as ``"1.0 / 1.0"``, or ``"unknown"`` where the system does not
+    report them. Other processes
+    running beside a benchmark slow it, in CPU time too (they share the caches and memory):
+    a load above the benchmark's own thread count flags figures taken on a busy machine."""
+    try:
+        one, five, _ = os.getloadavg()
+        return f"{one:.1f} / {five:.1f}"
+    except (AttributeError, OSError):
+        return "unknown"
+
+
 def stamp() -> str:
-    """One line: commit, UTC date, machine (CPU, cores) and thread setting."""
+    """One line: commit, UTC date, machine (CPU, cores), thread setting and load average."""
     machine = platform.processor() or platform.machine()
     date = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     return (
         f"_commit {_commit()}, {date}, {platform.system()} {machine}, "
-        f"{os.cpu_count()} cores, threads: {threads()}, Python {platform.python_version()}_"
+        f"{os.cpu_count()} cores, threads: {threads()}, load (1 / 5 min): {load()}, "
+        f"Python {platform.python_version()}_"
     )
 
 
