@@ -376,31 +376,17 @@ def _off_wall_entries(cell, g, k, wraps, u, r, tol, big_r, min_points):
             n_off += 1
     if n_off < min_points:
         return n_off, np.empty(0)
-    # the off-wall returns (grid cells) and, per grid cell, which of them it holds
-    which = np.full(g * k, -1, dtype=np.int64)
+    # the off-wall returns and their grid cells (ascending, as the returns' cells ascend)
     idx = np.empty(n_off, dtype=np.int64)
+    oc = np.empty(n_off, dtype=np.int64)
     m = 0
     for i in range(n):
         if off[i]:
-            which[cell[i]] = m
             idx[m] = i
+            oc[m] = cell[i]
             m += 1
     parent = np.arange(n_off)
-    for j in range(n_off):
-        c = cell[idx[j]]
-        row = c // k
-        col = c - row * k
-        # (the neighbours before it in raster order: left, and the row above; the first row
-        # also joins the last one when the grid wraps)
-        if col > 0 and which[c - 1] >= 0:
-            _union_roots(parent, j, which[c - 1])
-        for prev in (row - 1, g - 1 if (wraps and row == 0 and g > 1) else -1):
-            if prev < 0:
-                continue
-            for dc in (-1, 0, 1):
-                cc = col + dc
-                if 0 <= cc < k and which[prev * k + cc] >= 0:
-                    _union_roots(parent, j, which[prev * k + cc])
+    _join_neighbours(oc, parent, g, k, wraps and g > 1)
     counts = np.zeros(n_off, dtype=np.int64)
     for j in range(n_off):
         counts[_root(parent, j)] += 1
@@ -413,6 +399,40 @@ def _off_wall_entries(cell, g, k, wraps, u, r, tol, big_r, min_points):
             out[m] = min(u[i], uc)
             m += 1
     return n_off, out[:m]
+
+
+@njit(cache=True)
+def _join_neighbours(oc, parent, g, k, wraps):
+    """Join (union-find ``parent``) the returns at the ascending grid cells ``oc`` of a
+    ``(g, k)`` grid that are 8-neighbours: each with those before it in raster order (left,
+    and the three above it in the row above; the first row also with the last one when the
+    grid ``wraps``). Pointers into the ascending cells find them: ``q`` in the row above,
+    ``q_last`` in the last row."""
+    n = oc.size
+    last_row = g - 1 if wraps else -1
+    q = 0
+    q_last = 0
+    for j in range(n):
+        c = oc[j]
+        row = c // k
+        col = c - row * k
+        if col > 0 and j > 0 and oc[j - 1] == c - 1:
+            _union_roots(parent, j, j - 1)
+        above = row - 1 if row > 0 else last_row
+        if above < 0:
+            continue
+        lo = above * k + max(col - 1, 0)
+        hi = above * k + min(col + 1, k - 1)
+        t = q if row > 0 else q_last
+        while t < n and oc[t] < lo:
+            t += 1
+        if row > 0:
+            q = t
+        else:
+            q_last = t
+        while t < n and oc[t] <= hi:
+            _union_roots(parent, j, t)
+            t += 1
 
 
 @njit(cache=True)

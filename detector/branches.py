@@ -257,7 +257,7 @@ def _outgoing_returns(
     lobe_mask = np.zeros_like(keep)
     for lb in lobes:
         lobe_mask |= lb.mask
-    u_all = cloud.xyz[0]
+    u_all = cloud.u_grid
     u_hi = float(partial_percentile(u_all[lobe_mask], 95)) + 2.0 * big_r if lobe_mask.any() else 0.0
     near_inside = keep & ~lobe_mask & (u_all <= u_hi)
     lobe_sub = [
@@ -601,7 +601,7 @@ def _try_long_bend(bp: BranchProblem, om: OutgoingModel) -> OutgoingModel:
     p_fit = None
     if bp.noise_med <= bp.cfg.torus_polish_max_noise:
         arc_cells = np.flatnonzero((bp.lobe_mask | bp.near_inside).reshape(-1))
-        u_flat = bp.cloud.xyz[0].reshape(-1)
+        u_flat = bp.cloud.u_grid.reshape(-1)
         spread = spread_along_axis(arc_cells, u_flat[arc_cells], bp.cfg.fit_points)
         p_fit = np.ascontiguousarray(bp.cloud.points_at(spread))
     tor = fit_torus(
@@ -928,7 +928,7 @@ def _hole_prior(
     half-length, how far off they may be seen, and the branch radius (``R`` unless the hole
     is clearly narrower) of each lobe's hole; ``None`` (nothing changed) when a hole is not
     found for every lobe."""
-    u_grid = cloud.xyz[0]
+    u_grid = cloud.u_grid
     near_u = wall & (u_grid > u_edge - 2.0 * big_r) & (u_grid < u_edge + 8.0 * big_r)
     p_w = cloud.points(near_u)
     tol_w = float(np.median(tol[near_u])) if near_u.any() else 0.0
@@ -1041,7 +1041,7 @@ def _straight_on(
     cloud: PipeCloud, big_r: float, big_l: float, wall: NDArray[np.bool_], cfg: ImprovedConfig
 ) -> tuple[bool, float]:
     """Is the incoming pipe's wall seen again well beyond the structure, all around?"""
-    u = cloud.xyz[0]
+    u = cloud.u_grid
     far = wall & (u > big_l + 4.0 * big_r)
     if far.sum() < 10:
         return False, 0.0

@@ -529,13 +529,30 @@ def _past_incidence(
     limit = cloud.max_incidence + cfg.incidence_jitter_k * cloud.angular_jitter
     if limit >= 0.5 * math.pi:
         return None
-    d = cloud.xyz_v - np.asarray(cloud.pose.position, dtype=float)[:, None]
-    r = np.maximum(cloud.r_v, 1e-12)
-    # (the cosine of the incidence on a straight wall: the beam on the wall's normal there)
-    across = np.abs(d[1] * cloud.xyz_v[1] + d[2] * cloud.xyz_v[2]) / r
-    length = np.sqrt(np.sum(d * d, axis=0))
-    on_wall = np.abs(cloud.r_v - big_r) <= cfg.hole_wall_band + cfg.hole_noise_k * cloud.sigma_v
-    return on_wall & (d[0] > 0.0) & (across < math.cos(limit) * length)
+    position = np.asarray(cloud.pose.position, dtype=float)
+    return _past_incidence_kernel(
+        cloud.xyz_v, cloud.r_v, cloud.sigma_v, position[0], position[1], position[2], big_r,
+        cfg.hole_wall_band, cfg.hole_noise_k, math.cos(limit),
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _past_incidence_kernel(xyz, r_v, sigma, p0, p1, p2, big_r, band, noise_k, cos_limit):
+    """:func:`_past_incidence` for the points ``xyz`` ((3, N), pipe frame) at distances
+    ``r_v`` from the axis, seen from the sensor at ``(p0, p1, p2)``: one pass."""
+    n = r_v.size
+    out = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        d0 = xyz[0, i] - p0
+        d1 = xyz[1, i] - p1
+        d2 = xyz[2, i] - p2
+        r = max(r_v[i], 1e-12)
+        # (the cosine of the incidence on a straight wall: the beam on the wall's normal)
+        across = abs(d1 * xyz[1, i] + d2 * xyz[2, i]) / r
+        length = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        on_wall = abs(r_v[i] - big_r) <= band + noise_k * sigma[i]
+        out[i] = on_wall and d0 > 0.0 and across < cos_limit * length
+    return out
 
 
 @njit(cache=True)
@@ -1054,7 +1071,7 @@ def _detect_in_pipe_frame(
         diag.update(beyond_coverage=cov, beyond_uniformity=uniform)
         # (inside returns count only near the start of the widening: an end wall far down
         # the wider pipe is not part of the structure)
-        u_grid = cloud.xyz[0]
+        u_grid = cloud.u_grid
         u_start = partial_percentile(u_grid[beyond_k], 5.0)
         inside_near = inside_k & (u_grid <= u_start + 4.0 * big_r)
         if uniform >= 0.3 and np.count_nonzero(inside_near) < 0.3 * np.count_nonzero(beyond_k):
@@ -1153,12 +1170,15 @@ def _with_opposite_way(
         return det
     way = ways[0]
     rho = 0.5 * way.diameter
-    u = cloud.xyz_v[0]
-    phi = np.arctan2(cloud.xyz_v[2], cloud.xyz_v[1])
-    e = cloud.r_v - big_r
-    noise = np.maximum(cfg.hole_min_step, cfg.opposite_noise_k * cloud.sigma_v)
-    at_place = (u > way.distance - rho) & (u < way.distance + rho)
-    on_wall_before = (u > way.distance - rho) & (u < way.distance) & (np.abs(e) <= noise)
+    # (every count below is of returns within a branch radius of the place along the axis)
+    u_all = cloud.xyz_v[0]
+    near = np.flatnonzero((u_all > way.distance - rho) & (u_all < way.distance + rho))
+    u = u_all[near]
+    phi = np.arctan2(cloud.xyz_v[2, near], cloud.xyz_v[1, near])
+    e = cloud.r_v[near] - big_r
+    noise = np.maximum(cfg.hole_min_step, cfg.opposite_noise_k * cloud.sigma_v[near])
+    at_place = np.ones(near.size, dtype=bool)
+    on_wall_before = (u < way.distance) & (np.abs(e) <= noise)
     roll = _way_roll(cloud, way)
 
     # the windows of roll: the way's, the opposite one's and the two square to them

@@ -35,7 +35,7 @@ class PipeCloud:
 
     wraps: bool  # the grid's first and last rows are neighbours
     shape: tuple[int, int]  # (G, K) of the cropped grid
-    cell: NDArray[np.intp]  # (N,) flat grid cell of each return
+    cell: NDArray[np.intp]  # (N,) flat grid cell of each return, ascending (raster order)
     sensor_v: NDArray[np.float64]  # (3, N) sensor frame
     sigma_v: NDArray[np.float64]  # (N,) radial noise of each return
     sigma_range_v: NDArray[np.float64]  # (N,) range noise of each return
@@ -51,6 +51,7 @@ class PipeCloud:
     _valid: NDArray[np.bool_] | None = field(init=False, default=None)
     _sigma: NDArray[np.float64] | None = field(init=False, default=None)
     _xyz: NDArray[np.float64] | None = field(init=False, default=None)
+    _u: NDArray[np.float64] | None = field(init=False, default=None)
     _r_v: NDArray[np.float64] | None = field(init=False, default=None)
     _tol_v: NDArray[np.float64] | None = field(init=False, default=None)
     _sigma_pct: dict[float, float] = field(init=False, default_factory=dict)
@@ -94,6 +95,16 @@ class PipeCloud:
         return self._xyz
 
     @property
+    def u_grid(self) -> NDArray[np.float64]:
+        """(G, K) position of each return along the pipe axis (0 where there is no return):
+        ``xyz[0]``, without the other two components when they are not built."""
+        if self._xyz is not None:
+            return self._xyz[0]
+        if self._u is None:
+            self._u = self.grid(self.xyz_v[0], 0.0)
+        return self._u
+
+    @property
     def pts(self) -> NDArray[np.float64]:
         """(G, K, 3) view of the pipe-frame points."""
         return self.xyz.transpose(1, 2, 0)
@@ -126,14 +137,23 @@ class PipeCloud:
         return _masked_columns(np.ascontiguousarray(mask).reshape(-1), self.cell, self.xyz_v).T
 
     def points_at(self, flat_cells: NDArray[np.intp]) -> NDArray[np.float64]:
-        """(n, 3) pipe-frame points of the given flat grid cells."""
-        return np.take(self.xyz.reshape(3, -1), flat_cells, axis=1).T
+        """(n, 3) pipe-frame points of the given flat grid cells (0 where a cell holds no
+        return)."""
+        if self._xyz is not None or not self.n:
+            return np.take(self.xyz.reshape(3, -1), flat_cells, axis=1).T
+        # (the returns' cells ascend: each given cell's return found by bisection)
+        at = np.minimum(np.searchsorted(self.cell, flat_cells), self.n - 1)
+        pts = self.xyz_v[:, at]
+        missing = self.cell[at] != flat_cells
+        if missing.any():
+            pts[:, missing] = 0.0
+        return pts.T
 
     def set_pose(self, pose: SensorInPipe) -> None:
         self._stash()
         self.pose = pose
         self.xyz_v = _transform(pose, self.sensor_v)
-        self._xyz = self._r_v = self._tol_v = None
+        self._xyz = self._u = self._r_v = self._tol_v = None
 
     def _stash(self) -> None:
         """Keep the radii and tolerances computed under the current pose's points, for a
@@ -156,7 +176,7 @@ class PipeCloud:
         tolerances, when they were computed and kept)."""
         self._stash()
         self.pose, self.xyz_v = pose, xyz_v
-        self._xyz = self._r_v = self._tol_v = None
+        self._xyz = self._u = self._r_v = self._tol_v = None
         for points, r_v, tol_v in self._stashed:
             if points is xyz_v:
                 self._r_v, self._tol_v = r_v, tol_v
@@ -211,16 +231,37 @@ def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float
     return out
 
 
-#: Unrolled grid and beam directions per scan pattern (plane and beam angles), reused.
-_PATTERNS: dict[bytes, tuple[bool, int, NDArray, NDArray, NDArray, NDArray, float]] = {}
+@dataclass(frozen=True, eq=False)
+class ScanPattern:
+    """A scan pattern's (plane and beam angles) unrolled grid and beam directions, computed once
+    per pattern, in two forms: small per-row, per-column, per-beam and per-plane tables, all
+    that a still sweep reads (:func:`_gather_cropped`: its memory traffic is the scan's own
+    ranges), and the per-cell arrays a moving sweep gathers from (:func:`_gather_returns`)."""
+
+    wraps: bool  # the grid's first and last rows are neighbours
+    k_cols: int  # K, columns of the uncropped grid
+    beam_step: float  # angle between neighbouring beams of a plane, radians
+    row_plane: NDArray[np.intp]  # (G,) plane of each grid row
+    row_kind: NDArray[np.intp]  # (G,) the row of col_beam that holds the row's beams
+    col_beam: NDArray[np.intp]  # (U, K) beam of each column per kind of row (-1: none; U <= 2)
+    cos_b: NDArray[np.float64]  # (B,) cos(beta) of each beam
+    sin_b: NDArray[np.float64]  # (B,) sin(beta)
+    cos_a: NDArray[np.float64]  # (P,) cos(alpha), alpha the plane's servo angle
+    sin_a: NDArray[np.float64]  # (P,) sin(alpha)
+    src: NDArray[np.intp]  # (G*K,) flat scan index of each grid cell
+    dirs: NDArray[np.float64]  # (3, G*K) unit beam direction of each cell
+    trig: NDArray[np.float64]  # (2, G*K) |sin beta| and |cos beta| of each cell
+    missing: NDArray[np.intp]  # the cells where the half-plane has no such beam
+
+
+#: Scan patterns by their plane and beam angles, reused.
+_PATTERNS: dict[bytes, ScanPattern] = {}
 #: The pattern of the last scan with its angles (consecutive scans share one).
-_LAST_PATTERN: list[tuple[NDArray, NDArray, tuple] | None] = [None]
+_LAST_PATTERN: list[tuple[NDArray, NDArray, ScanPattern] | None] = [None]
 
 
-def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray, float]:
-    """(wraps, K, flat scan index of each grid cell (G*K,), unit beam direction (3, G*K),
-    |sin beta| and |cos beta| (2, G*K), the cells where the half-plane has no such beam, the
-    angle between neighbouring beams) of the scan's angle pattern."""
+def _pattern(scan: Scan) -> ScanPattern:
+    """The :class:`ScanPattern` of the scan's plane and beam angles (cached)."""
     last = _LAST_PATTERN[0]
     if (
         last is not None
@@ -240,18 +281,27 @@ def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray,
     missing = grid.beam.reshape(-1) < 0
     beam = np.maximum(grid.beam, 0).reshape(-1)
     plane = grid.plane.reshape(-1)
-    src = plane * scan.n_beams + beam
-    dirs = scan.directions()[plane, beam].T  # (3, G*K)
-    beta = scan.beam_angles[beam]
-    trig = np.stack([np.abs(np.sin(beta)), np.abs(np.cos(beta))])
-    hit = (
-        grid.wraps,
-        int(grid.beam.shape[1]),
-        src,
-        np.ascontiguousarray(dirs),
-        trig,
-        np.flatnonzero(missing),
-        beam_step,
+    # (the tables hold the very numbers scan.directions() computes, numpy's sines and cosines
+    # of the angles, so both forms give the same points to the last bit; the rows of one
+    # half-plane kind share their columns' beams)
+    beta = np.asarray(scan.beam_angles, dtype=float)
+    alpha = np.asarray(scan.plane_angles, dtype=float)
+    col_beam, row_kind = np.unique(grid.beam, axis=0, return_inverse=True)
+    hit = ScanPattern(
+        wraps=grid.wraps,
+        k_cols=int(grid.beam.shape[1]),
+        beam_step=beam_step,
+        row_plane=np.ascontiguousarray(grid.plane[:, 0], dtype=np.intp),
+        row_kind=np.ascontiguousarray(row_kind.reshape(-1), dtype=np.intp),
+        col_beam=np.ascontiguousarray(col_beam, dtype=np.intp),
+        cos_b=np.cos(beta),
+        sin_b=np.sin(beta),
+        cos_a=np.cos(alpha),
+        sin_a=np.sin(alpha),
+        src=plane * scan.n_beams + beam,
+        dirs=np.ascontiguousarray(scan.directions()[plane, beam].T),
+        trig=np.stack([np.abs(np.sin(beta[beam])), np.abs(np.cos(beta[beam]))]),
+        missing=np.flatnonzero(missing),
     )
     if len(_PATTERNS) >= 16:
         _PATTERNS.pop(next(iter(_PATTERNS)))
@@ -263,13 +313,14 @@ def _pattern(scan: Scan) -> tuple[bool, int, NDArray, NDArray, NDArray, NDArray,
 def prepare_cloud(
     scan: Scan, pose: SensorInPipe, range_bias: float, cfg: ImprovedConfig
 ) -> PipeCloud:
-    wraps, k_cols, src, dirs, trig, src_missing, beam_step = _pattern(scan)
-    g = src.size // max(k_cols, 1)
+    pat = _pattern(scan)
+    k_cols = pat.k_cols
+    g = pat.row_plane.size
     valid, ranges_in = scan.valid.reshape(-1), scan.ranges.reshape(-1)
     if _moves(scan):
         # (missing cells point at a copy of a real one and are dropped)
         cell, pb, ranges, local = _gather_returns(
-            valid, ranges_in, src, src_missing, dirs, range_bias
+            valid, ranges_in, pat.src, pat.missing, pat.dirs, range_bias
         )
         # continuous sweep: express every plane in the last plane's sensor frame (odometry)
         plane = pb // scan.n_beams
@@ -278,23 +329,24 @@ def prepare_cloud(
         local = scan.nominal_rotations[-1].T @ (world - scan.nominal_positions[-1][:, None])
         # (the returns within the horizon, on the grid cropped to the columns that hold
         # returns)
-        cell, ranges, local, tr, k = _crop(cell, ranges, local, trig, k_cols, cfg.horizon)
+        cell, ranges, local, tr, k = _crop(cell, ranges, local, pat.trig, k_cols, cfg.horizon)
     else:
         # (both steps in one pass: the sensor frame is the one frame of the sweep)
         cell, ranges, local, tr, k = _gather_cropped(
-            valid, ranges_in, src, src_missing, dirs, trig, range_bias, k_cols, cfg.horizon
-        )
+            valid, ranges_in, scan.n_beams, pat.row_plane, pat.row_kind, pat.col_beam,
+            pat.cos_b, pat.sin_b, pat.cos_a, pat.sin_a, range_bias, cfg.horizon,
+        )  # fmt: skip
     shape = (g, k)
     sigma_range, sigma_r = radial_noise(scan.spec, ranges, tr[0], tr[1])
     cloud = PipeCloud(
-        wraps,
+        pat.wraps,
         shape,
         cell,
         np.ascontiguousarray(local),
         sigma_r,
         sigma_range,
         pose,
-        beam_step,
+        pat.beam_step,
         spec_value(scan.spec, "max_incidence", 0.5 * math.pi),
         spec_value(scan.spec, "angular_jitter", 0.0),
     )
@@ -403,29 +455,36 @@ def _spread_exceeds(values, tol):
 
 
 @njit(cache=True)
-def _gather_cropped(valid, ranges, src, missing, dirs, trig, bias, k_cols, horizon):
-    """:func:`_gather_returns` then :func:`_crop` in one pass over the grid (a sweep whose
-    planes share one sensor frame): the returns nearer than ``horizon`` along the sensor's
-    axis, their cells on the grid cropped to the columns that hold them, ranges, points
-    ``(3, n)`` and ``|sin|, |cos|`` of their beam angles ``(2, n)``; and the cropped grid's
-    width."""
-    m = src.size
-    keep = np.ones(m, dtype=np.bool_)
-    for c in missing:
-        keep[c] = False
+def _gather_cropped(
+    valid, ranges, n_beams, row_plane, row_kind, col_beam, cos_b, sin_b, cos_a, sin_a, bias,
+    horizon,
+):  # fmt: skip
+    """:func:`_gather_returns` then :func:`_crop` in one pass over the grid, row by row, for a
+    sweep whose planes share one sensor frame (the directions from the pattern's per-beam and
+    per-plane tables, :class:`ScanPattern`): the returns nearer than ``horizon`` along the
+    sensor's axis, their cells on the grid cropped to the columns that hold them, ranges,
+    points ``(3, n)`` and ``|sin|, |cos|`` of their beam angles ``(2, n)``; and the cropped
+    grid's width."""
+    g = row_plane.size
+    k_cols = col_beam.shape[1]
+    m = g * k_cols
     kept = np.empty(m, dtype=np.intp)
     r_kept = np.empty(m)
     n = 0
     k0 = k_cols
     k1 = -1
-    for c in range(m):
-        if keep[c] and valid[src[c]]:
-            r = max(ranges[src[c]] - bias, 0.0)
-            if dirs[0, c] * r <= horizon:
-                kept[n] = c
+    for row in range(g):
+        kind = row_kind[row]
+        base = row_plane[row] * n_beams
+        for col in range(k_cols):
+            b = col_beam[kind, col]
+            if b < 0 or not valid[base + b]:
+                continue
+            r = max(ranges[base + b] - bias, 0.0)
+            if cos_b[b] * r <= horizon:
+                kept[n] = row * k_cols + col
                 r_kept[n] = r
                 n += 1
-                col = c % k_cols
                 k0 = min(k0, col)
                 k1 = max(k1, col)
     if n == 0:
@@ -438,12 +497,16 @@ def _gather_cropped(valid, ranges, src, missing, dirs, trig, bias, k_cols, horiz
         c = kept[j]
         r = r_kept[j]
         row = c // k_cols
-        out_cell[j] = row * width + (c - row * k_cols - k0)
-        out_local[0, j] = dirs[0, c] * r
-        out_local[1, j] = dirs[1, c] * r
-        out_local[2, j] = dirs[2, c] * r
-        out_trig[0, j] = trig[0, c]
-        out_trig[1, j] = trig[1, c]
+        col = c - row * k_cols
+        p = row_plane[row]
+        b = col_beam[row_kind[row], col]
+        out_cell[j] = row * width + (col - k0)
+        # (the products in the order scan.directions() takes them, then the range)
+        out_local[0, j] = cos_b[b] * r
+        out_local[1, j] = (sin_b[b] * cos_a[p]) * r
+        out_local[2, j] = (sin_b[b] * sin_a[p]) * r
+        out_trig[0, j] = abs(sin_b[b])
+        out_trig[1, j] = abs(cos_b[b])
     out_range = r_kept[:n].copy()
     return out_cell, out_range, out_local, out_trig, width
 

@@ -21,6 +21,7 @@ from detector.pipe_cloud import (
     _gather_cropped,
     _gather_returns,
     _masked_columns,
+    _pattern,
     _radii,
     _scatter,
     _sloped_tolerance,
@@ -34,6 +35,7 @@ from detector.pipe_cloud import (
     significant_regions,
 )
 from detector.robust import mad_sigma, median, robust_fit, robust_gauss_newton
+from detector.scan import Scan
 
 
 # --------------------------------------------------------------------------- numpy references
@@ -414,25 +416,52 @@ def test_off_wall_entries_match_the_whole_grid_labelled(
     np.testing.assert_array_equal(got[1], ref[1])
 
 
-@settings(max_examples=40, deadline=None)
+def _random_sweep(rng: np.random.Generator) -> Scan:
+    """A still sweep of random ranges and returns over a random pattern: 2-9 planes over the
+    half turn (evenly or not), 3-20 beams forward of the sensor, symmetric or not (so some
+    half-planes lack beams), the forward beam or not."""
+    p = int(rng.integers(2, 10))
+    planes = np.sort(rng.uniform(0.0, math.pi, p)) if rng.random() < 0.5 else None
+    if planes is None:
+        planes = np.linspace(0.0, math.pi, p, endpoint=False)
+    b = int(rng.integers(3, 21))
+    beams = np.sort(rng.uniform(-1.5, 1.5, b))
+    if rng.random() < 0.3:
+        beams[int(rng.integers(b))] = 0.0
+        beams = np.unique(beams)
+    ranges = rng.uniform(0.0, 2.0, (p, beams.size))
+    ranges[rng.random(ranges.shape) < 0.2] = np.inf
+    return Scan(
+        ranges=ranges,
+        valid=np.isfinite(ranges),
+        beam_angles=beams,
+        plane_angles=planes,
+        timestamps=np.arange(p, dtype=float),
+        positions=np.zeros((p, 3)),
+        rotations=np.tile(np.eye(3), (p, 1, 1)),
+        nominal_positions=np.zeros((p, 3)),
+        nominal_rotations=np.tile(np.eye(3), (p, 1, 1)),
+    )
+
+
+@settings(max_examples=60, deadline=None)
 @given(seeds, st.floats(0.0, 0.01), st.floats(0.05, 3.0))
 def test_gather_cropped_matches_gather_then_crop(seed: int, bias: float, horizon: float) -> None:
-    rng = np.random.default_rng(seed)
-    g, k = 12, 9
-    m = g * k
-    src = rng.permutation(m)
-    missing = np.flatnonzero(rng.random(m) < 0.1)
-    valid = rng.random(m) < 0.8
-    ranges = rng.uniform(0.0, 2.0, m)
-    dirs = rng.normal(size=(3, m))
-    dirs /= np.linalg.norm(dirs, axis=0)
-    trig = rng.random((2, m))
-    cell, _, rng_v, local = _gather_returns(valid, ranges, src, missing, dirs, bias)
-    ref = _crop(cell, rng_v, local, trig, k, horizon)
-    got = _gather_cropped(valid, ranges, src, missing, dirs, trig, bias, k, horizon)
+    """The still sweep's one pass over the pattern's small tables gives the moving sweep's
+    two passes over the per-cell arrays, to the last bit, and its cells ascend."""
+    scan = _random_sweep(np.random.default_rng(seed))
+    pat = _pattern(scan)
+    valid, ranges = scan.valid.reshape(-1), scan.ranges.reshape(-1)
+    cell, _, rng_v, local = _gather_returns(valid, ranges, pat.src, pat.missing, pat.dirs, bias)
+    ref = _crop(cell, rng_v, local, pat.trig, pat.k_cols, horizon)
+    got = _gather_cropped(
+        valid, ranges, scan.n_beams, pat.row_plane, pat.row_kind, pat.col_beam,
+        pat.cos_b, pat.sin_b, pat.cos_a, pat.sin_a, bias, horizon,
+    )  # fmt: skip
     for a, b in zip(got[:4], ref[:4]):
         np.testing.assert_array_equal(a, b)
     assert got[4] == ref[4]
+    assert np.all(np.diff(got[0]) > 0) and np.all(np.diff(ref[0]) > 0)
 
 
 @settings(max_examples=60, deadline=None)

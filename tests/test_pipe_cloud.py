@@ -113,3 +113,36 @@ def test_past_incidence_is_none_when_the_sensor_returns_at_any_incidence(
 ) -> None:
     cloud = _cloud(_wall([0.5, 1.0]), max_incidence=max_incidence, angular_jitter=jitter)
     assert _past_incidence(cloud, R, DEFAULT_CONFIG) is None
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 60), n_ask=st.integers(0, 40))
+def test_points_at_finds_each_cell_with_or_without_the_grid(seed: int, n: int, n_ask: int) -> None:
+    """A return's point by its cell, found by bisection in the ascending cells, is the grid's
+    point there (0 where the cell holds no return), before and after the grid is built; and a
+    pose's transform is the matrix product."""
+    rng = np.random.default_rng(seed)
+    g, k = 4, 30
+    cell = np.sort(rng.choice(g * k, size=min(n, g * k), replace=False)).astype(np.intp)
+    cloud = PipeCloud(
+        False,
+        (g, k),
+        cell,
+        rng.normal(size=(3, cell.size)),
+        np.zeros(cell.size),
+        np.zeros(cell.size),
+        SensorInPipe(),
+    )
+    pose = _pose(*rng.normal(scale=0.01, size=2), float(rng.normal(scale=0.1)))
+    cloud.set_pose(pose)
+    np.testing.assert_allclose(
+        cloud.xyz_v, pose.rotation @ cloud.sensor_v + pose.position[:, None], rtol=0, atol=1e-15
+    )
+    ask = rng.integers(0, g * k, size=n_ask).astype(np.intp)
+    bisected = cloud.points_at(ask).copy()
+    u_alone = cloud.u_grid.copy()
+    grid = cloud.xyz.reshape(3, -1)[:, ask].T  # (builds the grid)
+    np.testing.assert_array_equal(u_alone, cloud.xyz[0])
+    np.testing.assert_array_equal(bisected, grid)
+    np.testing.assert_array_equal(cloud.points_at(ask), grid)
+    np.testing.assert_array_equal(cloud.u_grid, cloud.xyz[0])
