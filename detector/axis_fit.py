@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 
 from detector.detection import Detection
 from detector.fit_kernels import MODEL_CYLINDER, wall_distances, wall_fit
+from detector.grid import find_root, join_neighbours
 from detector.improved_config import ImprovedConfig
 from detector.pipe_cloud import (
     PipeCloud,
@@ -386,69 +387,16 @@ def _off_wall_entries(cell, g, k, wraps, u, r, tol, big_r, min_points):
             oc[m] = cell[i]
             m += 1
     parent = np.arange(n_off)
-    _join_neighbours(oc, parent, g, k, wraps and g > 1)
+    join_neighbours(oc, parent, g, k, wraps and g > 1)
     counts = np.zeros(n_off, dtype=np.int64)
     for j in range(n_off):
-        counts[_root(parent, j)] += 1
+        counts[find_root(parent, j)] += 1
     out = np.empty(n_off)
     m = 0
     for j in range(n_off):
-        if counts[_root(parent, j)] >= min_points:
+        if counts[find_root(parent, j)] >= min_points:
             i = idx[j]
             uc = u[i] * big_r / max(r[i], 1e-9)
             out[m] = min(u[i], uc)
             m += 1
     return n_off, out[:m]
-
-
-@njit(cache=True)
-def _join_neighbours(oc, parent, g, k, wraps):
-    """Join (union-find ``parent``) the returns at the ascending grid cells ``oc`` of a
-    ``(g, k)`` grid that are 8-neighbours: each with those before it in raster order (left,
-    and the three above it in the row above; the first row also with the last one when the
-    grid ``wraps``). Pointers into the ascending cells find them: ``q`` in the row above,
-    ``q_last`` in the last row."""
-    n = oc.size
-    last_row = g - 1 if wraps else -1
-    q = 0
-    q_last = 0
-    for j in range(n):
-        c = oc[j]
-        row = c // k
-        col = c - row * k
-        if col > 0 and j > 0 and oc[j - 1] == c - 1:
-            _union_roots(parent, j, j - 1)
-        above = row - 1 if row > 0 else last_row
-        if above < 0:
-            continue
-        lo = above * k + max(col - 1, 0)
-        hi = above * k + min(col + 1, k - 1)
-        t = q if row > 0 else q_last
-        while t < n and oc[t] < lo:
-            t += 1
-        if row > 0:
-            q = t
-        else:
-            q_last = t
-        while t < n and oc[t] <= hi:
-            _union_roots(parent, j, t)
-            t += 1
-
-
-@njit(cache=True)
-def _root(parent, x):
-    """The root of ``x`` in the union-find forest ``parent`` (halving the path)."""
-    while parent[x] != x:
-        parent[x] = parent[parent[x]]
-        x = parent[x]
-    return x
-
-
-@njit(cache=True)
-def _union_roots(parent, a, b):
-    """Join the sets of ``a`` and ``b`` (the smaller root becomes the parent)."""
-    ra, rb = _root(parent, a), _root(parent, b)
-    if ra < rb:
-        parent[rb] = ra
-    elif rb < ra:
-        parent[ra] = rb

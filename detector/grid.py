@@ -94,7 +94,8 @@ def label_regions(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int3
 
 
 @njit(cache=True)
-def _find(parent: NDArray[np.int32], x: int) -> int:
+def find_root(parent: NDArray[np.int64], x: int) -> int:
+    """The root of ``x`` in the union-find forest ``parent`` (halving the path)."""
     while parent[x] != x:
         parent[x] = parent[parent[x]]
         x = parent[x]
@@ -102,8 +103,10 @@ def _find(parent: NDArray[np.int32], x: int) -> int:
 
 
 @njit(cache=True)
-def _union(parent: NDArray[np.int32], a: int, b: int) -> None:
-    ra, rb = _find(parent, a), _find(parent, b)
+def _union(parent: NDArray[np.int64], a: int, b: int) -> None:
+    """Join the sets of ``a`` and ``b`` (the smaller root becomes the parent: a set's root is
+    its first member)."""
+    ra, rb = find_root(parent, a), find_root(parent, b)
     if ra < rb:
         parent[rb] = ra
     elif rb < ra:
@@ -111,61 +114,73 @@ def _union(parent: NDArray[np.int32], a: int, b: int) -> None:
 
 
 @njit(cache=True)
-def _join_rows(mask: NDArray[np.bool_], parent: NDArray[np.int32], r: int, r_prev: int) -> None:
-    """Union every set cell of row ``r`` with its set 8-neighbours in row ``r_prev``."""
-    k = mask.shape[1]
-    for c in range(k):
-        if not mask[r, c]:
+def join_neighbours(
+    cells: NDArray[np.int64], parent: NDArray[np.int64], g: int, k: int, wraps: bool
+) -> None:
+    """Join (union-find ``parent``, one entry per cell) the set cells ``cells`` (ascending flat
+    indices of a ``(g, k)`` grid) that are 8-neighbours: each with those before it in raster
+    order, left and the three above it in the row above; the first row also with the last one
+    when the grid ``wraps``. Pointers into the ascending cells find them (``q`` in the row
+    above, ``q_last`` in the last row), so the work is in the set cells, not the grid."""
+    n = cells.size
+    last_row = g - 1 if wraps else -1
+    q = 0
+    q_last = 0
+    for j in range(n):
+        c = cells[j]
+        row = c // k
+        col = c - row * k
+        if col > 0 and j > 0 and cells[j - 1] == c - 1:
+            _union(parent, j, j - 1)
+        above = row - 1 if row > 0 else last_row
+        if above < 0:
             continue
-        for dc in (-1, 0, 1):
-            cc = c + dc
-            if 0 <= cc < k and mask[r_prev, cc]:
-                _union(parent, r * k + c, r_prev * k + cc)
-
-
-@njit(cache=True)
-def _join_within_row(mask: NDArray[np.bool_], parent: NDArray[np.int32], r: int) -> None:
-    """Union every set cell of row ``r`` with its set left neighbour."""
-    k = mask.shape[1]
-    for c in range(1, k):
-        if mask[r, c] and mask[r, c - 1]:
-            _union(parent, r * k + c, r * k + c - 1)
-
-
-@njit(cache=True)
-def _number_components(
-    mask: NDArray[np.bool_], parent: NDArray[np.int32]
-) -> tuple[NDArray[np.int32], int]:
-    """Labels 1..n of the union-find components of the set cells, in row-major order of their
-    first cell; 0 for unset cells."""
-    g, k = mask.shape
-    labels = np.zeros((g, k), dtype=np.int32)
-    number = np.zeros(g * k, dtype=np.int32)
-    n = 0
-    for r in range(g):
-        for c in range(k):
-            if mask[r, c]:
-                root = _find(parent, r * k + c)
-                if number[root] == 0:
-                    n += 1
-                    number[root] = n
-                labels[r, c] = number[root]
-    return labels, n
+        lo = above * k + max(col - 1, 0)
+        hi = above * k + min(col + 1, k - 1)
+        t = q if row > 0 else q_last
+        while t < n and cells[t] < lo:
+            t += 1
+        if row > 0:
+            q = t
+        else:
+            q_last = t
+        while t < n and cells[t] <= hi:
+            _union(parent, j, t)
+            t += 1
 
 
 @njit(cache=True)
 def label_grid(mask: NDArray[np.bool_], wraps: bool) -> tuple[NDArray[np.int32], int]:
     """The labelling of :func:`label_regions`, compiled (callable from other compiled code):
-    union-find; ``wraps``: the first and last rows are neighbours."""
+    union-find over the set cells alone (:func:`join_neighbours`); ``wraps``: the first and
+    last rows are neighbours."""
     g, k = mask.shape
-    parent = np.arange(g * k, dtype=np.int32)  # (half the memory of int64: a grid's worth)
+    n = 0
     for r in range(g):
-        _join_within_row(mask, parent, r)
-        if r > 0:
-            _join_rows(mask, parent, r, r - 1)
-    if wraps and g > 1:
-        _join_rows(mask, parent, g - 1, 0)
-    return _number_components(mask, parent)
+        for c in range(k):
+            if mask[r, c]:
+                n += 1
+    cells = np.empty(n, dtype=np.int64)
+    j = 0
+    for r in range(g):
+        for c in range(k):
+            if mask[r, c]:
+                cells[j] = r * k + c
+                j += 1
+    parent = np.arange(n)
+    join_neighbours(cells, parent, g, k, wraps and g > 1)
+    # (labels 1..n in the raster order of each region's first cell: its root)
+    labels = np.zeros((g, k), dtype=np.int32)
+    number = np.zeros(n, dtype=np.int32)
+    n_lab = 0
+    for j in range(n):
+        root = find_root(parent, j)
+        if number[root] == 0:
+            n_lab += 1
+            number[root] = n_lab
+        c = cells[j]
+        labels[c // k, c - (c // k) * k] = number[root]
+    return labels, n_lab
 
 
 def region_stats(labels: NDArray[np.int32], n_lab: int) -> tuple[NDArray, NDArray]:
