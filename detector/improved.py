@@ -1147,6 +1147,21 @@ def _way_roll(cloud: PipeCloud, option: StructureOption) -> float:
     return math.atan2(float(perp[2]), float(perp[1]))
 
 
+def _opposite_wall_open(
+    n_opposite: int, n_square: int, at_square: bool, cfg: ImprovedConfig
+) -> bool:
+    """Does the wall on the side opposite a found way end before the place, as an opening's
+    does, where a turn's outer wall runs on? It keeps at most ``cfg.opposite_wall_share`` of
+    the ``n_square`` returns the sides square to the way keep on the wall there (at least
+    ``hole_min_returns`` twice: the test needs a wall in view). Opposite a 45 deg way, the
+    turn's outer wall leans in towards the axis and returns nothing beyond it: where the
+    sensor sees no wall there at all (past its incidence limit), the returns beyond the wall
+    tell the opening alone."""
+    if n_square >= 2 * cfg.hole_min_returns:
+        return n_opposite <= cfg.opposite_wall_share * n_square
+    return not at_square and n_opposite <= cfg.opposite_wall_share * 2 * cfg.hole_min_returns
+
+
 def _with_opposite_way(
     cloud: PipeCloud, big_r: float, det: Detection, cfg: ImprovedConfig
 ) -> Detection:
@@ -1162,13 +1177,19 @@ def _with_opposite_way(
     the run's wall lies beyond the stem's all round), only returns deeper than the 95th
     percentile of theirs count (the baseline test then holds by construction; the wall test
     still tells a turn). The new way mirrors the found one: same place, deflection and
-    diameter."""
+    diameter. A single way at 45 deg (a Y entered from its branch, whose backward way at 135
+    deg shows only as returns beyond the wall through its opening) gains that way by the same
+    test, at the supplementary deflection (:func:`_opposite_wall_open`)."""
     if det.kind not in (Kind.JUNCTION, Kind.BEND) or det.diagnostics.get("model") == "torus":
         return det
     ways = [o for o in det.options if not o.is_straight_on]
-    if len(ways) != 1 or abs(ways[0].angle - 0.5 * math.pi) > cfg.opposite_max_off_square:
+    if len(ways) != 1:
         return det
     way = ways[0]
+    at_square = abs(way.angle - 0.5 * math.pi) <= cfg.opposite_max_off_square
+    oblique = abs(way.angle - 0.25 * math.pi) <= cfg.opposite_max_off_square
+    if not (at_square or oblique):
+        return det
     rho = 0.5 * way.diameter
     # (every count below is of returns within a branch radius of the place along the axis)
     u_all = cloud.xyz_v[0]
@@ -1222,12 +1243,15 @@ def _with_opposite_way(
             cfg.opposite_min_share * found[0],
             cfg.opposite_baseline_factor * (baseline + 1),
         )
-        and wall >= 2 * cfg.hole_min_returns
-        and opposite[1] <= cfg.opposite_wall_share * wall
+        and _opposite_wall_open(opposite[1], wall, at_square, cfg)
     ):
         return det
     options = [replace(o, kind="junction") for o in det.options]
-    options.append(replace(way, kind="junction", direction=wrap_angle(way.direction + math.pi)))
+    # (a Y entered from a branch: the run's other end leaves backwards, at the supplement)
+    angle = way.angle if at_square else math.pi - way.angle
+    options.append(
+        replace(way, kind="junction", direction=wrap_angle(way.direction + math.pi), angle=angle)
+    )
     options.sort(key=option_order)
     diag = dict(det.diagnostics)
     diag.update(opposite_way=True, replaced_kind=det.kind)

@@ -67,6 +67,10 @@ class ImprovedConfig:
             square to the way hold; and the wall on the opposite side ends before the place:
             it keeps at most ``opposite_wall_share`` of the returns the square sides keep on
             the wall there (a turn's outer side runs on to the far wall).
+            A single way within ``opposite_max_off_square`` of 45 deg (a Y entered from its
+            branch) gains its backward way at 135 deg by the same test; where the square
+            sides show no wall near the place (past the sensor's incidence limit), the
+            returns beyond the wall decide alone.
         all_round: a region of returns beyond the wall covering this fraction of the azimuth
             goes all round the axis (and is split into its deep parts).
         snap_within: a junction's branch fitted within this angle of a standard fitting angle
