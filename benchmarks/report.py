@@ -59,9 +59,9 @@ def threads() -> str:
 def load() -> str:
     """The machine's load averages over the last 1 and 5 minutes (runnable processes, the
     benchmark's own included) as ``"1.0 / 1.0"``, or ``"unknown"`` where the system does not
-    report them. Other processes
-    running beside a benchmark slow it, in CPU time too (they share the caches and memory):
-    a load above the benchmark's own thread count flags figures taken on a busy machine."""
+    report them. Other processes running beside a benchmark slow it, in CPU time too (they
+    share the caches and memory): a load above the benchmark's own thread count flags figures
+    taken on a busy machine."""
     try:
         one, five, _ = os.getloadavg()
         return f"{one:.1f} / {five:.1f}"

@@ -367,7 +367,8 @@ def _off_wall_entries(cell, g, k, wraps, u, r, tol, big_r, min_points):
     :func:`detector.grid.label_grid`) of at least ``min_points`` of them, where along the axis
     each entered the structure: ``min(u, u R / r)``, where its beam crossed the wall radius
     (sensor near the axis). The regions are found among the returns off the wall alone
-    (union-find over them, not over the whole grid)."""
+    (union-find over them, not over the whole grid); ``cell`` must strictly ascend (as a
+    :class:`~detector.pipe_cloud.PipeCloud`'s cells do)."""
     n = cell.size
     off = np.empty(n, dtype=np.bool_)
     n_off = 0

@@ -1148,18 +1148,23 @@ def _way_roll(cloud: PipeCloud, option: StructureOption) -> float:
 
 
 def _opposite_wall_open(
-    n_opposite: int, n_square: int, at_square: bool, cfg: ImprovedConfig
+    n_opposite: int, n_square: tuple[int, int], at_square: bool, cfg: ImprovedConfig
 ) -> bool:
     """Does the wall on the side opposite a found way end before the place, as an opening's
-    does, where a turn's outer wall runs on? It keeps at most ``cfg.opposite_wall_share`` of
-    the ``n_square`` returns the sides square to the way keep on the wall there (at least
-    ``hole_min_returns`` twice: the test needs a wall in view). Opposite a 45 deg way, the
-    turn's outer wall leans in towards the axis and returns nothing beyond it: where the
-    sensor sees no wall there at all (past its incidence limit), the returns beyond the wall
-    tell the opening alone."""
-    if n_square >= 2 * cfg.hole_min_returns:
-        return n_opposite <= cfg.opposite_wall_share * n_square
-    return not at_square and n_opposite <= cfg.opposite_wall_share * 2 * cfg.hole_min_returns
+    does, where a turn's outer wall runs on? ``n_opposite`` and ``n_square`` count the returns
+    on the wall just before the place on the opposite side and on each side square to the way.
+    The opposite side keeps at most ``cfg.opposite_wall_share`` of what the square sides keep
+    (the fewer of the two, at least ``hole_min_returns`` twice: the test needs a wall in view).
+    Opposite a 45 deg way the turn's outer wall leans in towards the axis and returns nothing
+    beyond it: where neither square side shows that much wall (the sensor's incidence limit),
+    the wall test is not made, and the opposite side only has to be as bare (at most
+    ``opposite_wall_share`` of ``hole_min_returns`` twice)."""
+    seen = 2 * cfg.hole_min_returns
+    if min(n_square) >= seen:
+        return n_opposite <= cfg.opposite_wall_share * min(n_square)
+    if at_square or max(n_square) >= seen:
+        return False
+    return n_opposite <= cfg.opposite_wall_share * seen
 
 
 def _with_opposite_way(
@@ -1187,7 +1192,7 @@ def _with_opposite_way(
         return det
     way = ways[0]
     at_square = abs(way.angle - 0.5 * math.pi) <= cfg.opposite_max_off_square
-    oblique = abs(way.angle - 0.25 * math.pi) <= cfg.opposite_max_off_square
+    oblique = abs(way.angle - 0.25 * math.pi) <= cfg.opposite_max_off_oblique
     if not (at_square or oblique):
         return det
     rho = 0.5 * way.diameter
@@ -1198,7 +1203,6 @@ def _with_opposite_way(
     phi = np.arctan2(cloud.xyz_v[2, near], cloud.xyz_v[1, near])
     e = cloud.r_v[near] - big_r
     noise = np.maximum(cfg.hole_min_step, cfg.opposite_noise_k * cloud.sigma_v[near])
-    at_place = np.ones(near.size, dtype=bool)
     on_wall_before = (u < way.distance) & (np.abs(e) <= noise)
     roll = _way_roll(cloud, way)
 
@@ -1213,14 +1217,14 @@ def _with_opposite_way(
     square_w = (square_ws[0] | square_ws[1]) & ~way_w & ~opposite_w  # (should they overlap)
     # (from a stem narrower than the run, the run's wall lies beyond the stem's all round:
     # the ways are what goes deeper than the sides square to them reach)
-    beyond_wall = at_place & (e > noise)
+    beyond_wall = e > noise
     square_beyond = beyond_wall & square_w
     n_way = int(np.count_nonzero(beyond_wall & way_w))
     n_square = int(np.count_nonzero(square_beyond))
     depth = noise
     if n_square >= 2 * cfg.hole_min_returns and n_square >= cfg.opposite_min_share * 2 * n_way:
         depth = np.maximum(noise, partial_percentile(e[square_beyond], 95.0))
-    beyond = at_place & (e > depth)
+    beyond = e > depth
 
     def side(window: NDArray[np.bool_]) -> tuple[int, int]:
         return int(np.count_nonzero(beyond & window)), int(
@@ -1230,7 +1234,6 @@ def _with_opposite_way(
     found, opposite = side(way_w), side(opposite_w)
     square = [side(w) for w in square_ws]
     baseline = max(s[0] for s in square)
-    wall = min(s[1] for s in square)
     det.diagnostics["opposite_way_counts"] = {
         "found": found,
         "opposite": opposite,
@@ -1243,7 +1246,7 @@ def _with_opposite_way(
             cfg.opposite_min_share * found[0],
             cfg.opposite_baseline_factor * (baseline + 1),
         )
-        and _opposite_wall_open(opposite[1], wall, at_square, cfg)
+        and _opposite_wall_open(opposite[1], (square[0][1], square[1][1]), at_square, cfg)
     ):
         return det
     options = [replace(o, kind="junction") for o in det.options]

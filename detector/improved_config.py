@@ -67,10 +67,11 @@ class ImprovedConfig:
             square to the way hold; and the wall on the opposite side ends before the place:
             it keeps at most ``opposite_wall_share`` of the returns the square sides keep on
             the wall there (a turn's outer side runs on to the far wall).
-            A single way within ``opposite_max_off_square`` of 45 deg (a Y entered from its
-            branch) gains its backward way at 135 deg by the same test; where the square
-            sides show no wall near the place (past the sensor's incidence limit), the
-            returns beyond the wall decide alone.
+        opposite_max_off_oblique: a single way within this angle (rad) of 45 deg (a Y
+            entered from its branch) gains its backward way, at the supplementary
+            deflection, by the same test; where neither square side shows a wall near the
+            place (past the sensor's incidence limit), the wall test is not made and the
+            opposite side only has to be as bare. A way within both windows counts as square.
         all_round: a region of returns beyond the wall covering this fraction of the azimuth
             goes all round the axis (and is split into its deep parts).
         snap_within: a junction's branch fitted within this angle of a standard fitting angle
@@ -233,6 +234,7 @@ class ImprovedConfig:
     across_wall_k: float = 3.0
     across_view_band: float = 2.5
     opposite_max_off_square: float = math.radians(15.0)
+    opposite_max_off_oblique: float = math.radians(15.0)
     opposite_side_roll: float = math.radians(30.0)
     opposite_noise_k: float = 3.0
     opposite_min_share: float = 0.5
@@ -351,6 +353,7 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "far_wall_fit_points": (int, 10, True, 100000, "an integer in [10, 100000]"),
     "across_min_curvature_lr": (float, 0.0, True, 1e6, "a number in [0, 1e6]"),
     "opposite_max_off_square": (float, 0.0, True, math.pi / 2, "an angle in [0, pi/2] rad"),
+    "opposite_max_off_oblique": (float, 0.0, True, math.pi / 8, "an angle in [0, pi/8] rad"),
     "opposite_side_roll": (float, 0.0, False, math.pi / 2, "an angle in (0, pi/2] rad"),
     "opposite_noise_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
     "opposite_min_share": (float, 0.0, True, 10.0, "a number in [0, 10]"),

@@ -29,7 +29,8 @@ class PipeCloud:
 
     The valid returns are kept compact, component-first (``(3, N)``), so a pose change is one
     dense ``(3, 3) @ (3, N)`` product; ``cell`` places each on the unrolled scan grid (cropped
-    to the beam-angle columns that hold returns), whose ``(G, K)`` views (:attr:`valid`,
+    to the beam-angle columns that hold returns) and strictly ascends (raster order: the
+    region labelling and :meth:`points_at` rely on it), whose ``(G, K)`` views (:attr:`valid`,
     :attr:`sigma_r`, :attr:`xyz`, :attr:`pts`) are built on demand for region labelling.
     """
 
@@ -137,8 +138,8 @@ class PipeCloud:
         return _masked_columns(np.ascontiguousarray(mask).reshape(-1), self.cell, self.xyz_v).T
 
     def points_at(self, flat_cells: NDArray[np.intp]) -> NDArray[np.float64]:
-        """(n, 3) pipe-frame points of the given flat grid cells (0 where a cell holds no
-        return)."""
+        """(n, 3) pipe-frame points of the given flat grid cells (valid cells of the grid,
+        ``0 <= c < G * K``; 0 where a cell holds no return)."""
         if self._xyz is not None or not self.n:
             return np.take(self.xyz.reshape(3, -1), flat_cells, axis=1).T
         # (the returns' cells ascend: each given cell's return found by bisection)

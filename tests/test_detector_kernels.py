@@ -385,14 +385,15 @@ def test_significant_regions_match_numpy(
 
 
 def off_wall_entries_np(cell, g, k, wraps, u, r, tol, big_r, min_points):
-    """Reference of :func:`detector.axis_fit._off_wall_entries`: the whole grid labelled."""
+    """Reference of :func:`detector.axis_fit._off_wall_entries`: the whole grid labelled by
+    scipy (independent of the compiled labelling both share)."""
     off = np.abs(r - big_r) > 2.0 * tol
     n_off = int(off.sum())
     if n_off < min_points:
         return n_off, np.empty(0)
     mask = np.zeros(g * k, dtype=bool)
     mask[cell[off]] = True
-    labels, n = label_regions(mask.reshape(g, k), wraps)
+    labels, n = label_regions_ndimage(mask.reshape(g, k), wraps)
     lab = labels.reshape(-1)[cell]
     counts = np.bincount(lab[off], minlength=n + 1)
     big = off & (counts[lab] >= min_points)

@@ -116,32 +116,35 @@ def test_ctrl_c_writes_every_finished_result_and_exits_130(tmp_path: Path) -> No
         env=env,
         start_new_session=True,  # (its own process group: a stuck run is killed with its workers)
     )
-    # (both pipes drained as the run writes them: a run blocked on a full stderr pipe would
-    # look like a run that ignores Ctrl-C)
-    lines: list[str] = []
-    errors: list[str] = []
-    readers = [
-        threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True),
-        threading.Thread(target=lambda: errors.extend(proc.stderr), daemon=True),
-    ]
-    for reader in readers:
-        reader.start()
-    deadline = time.monotonic() + 240
-    while sum("PASS" in ln for ln in lines) < 2 and time.monotonic() < deadline:
-        time.sleep(0.2)
-    assert sum("PASS" in ln for ln in lines) == 2, lines
-    time.sleep(1.0)  # c_hangs is running
-    proc.send_signal(signal.SIGINT)
     try:
-        code = proc.wait(timeout=60)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=10)
-        raise AssertionError(f"still running 60 s after Ctrl-C: {lines} {errors}") from None
-    assert code == 130
-    for reader in readers:
-        reader.join(timeout=10)
-    assert "Traceback" not in "".join(lines + errors)
+        # (both pipes drained as the run writes them: a run blocked on a full stderr pipe would
+        # look like a run that ignores Ctrl-C)
+        lines: list[str] = []
+        errors: list[str] = []
+        readers = [
+            threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True),
+            threading.Thread(target=lambda: errors.extend(proc.stderr), daemon=True),
+        ]
+        for reader in readers:
+            reader.start()
+        deadline = time.monotonic() + 240
+        while sum("PASS" in ln for ln in lines) < 2 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert sum("PASS" in ln for ln in lines) == 2, lines
+        time.sleep(1.0)  # c_hangs is running
+        proc.send_signal(signal.SIGINT)
+        try:
+            code = proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"still running 60 s after Ctrl-C: {lines} {errors}") from None
+        assert code == 130
+        for reader in readers:
+            reader.join(timeout=10)
+        assert "Traceback" not in "".join(lines + errors)
+    finally:
+        if proc.poll() is None:  # (a stuck run and its workers: never left behind)
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
     doc = json.loads(js.read_text())
     assert doc["interrupted"] is True
     assert [r["status"] for r in doc["results"]] == ["passed", "passed", "not_run", "not_run"]
