@@ -5,7 +5,9 @@ networks with loops, ``pool_network(config, EVAL_POOL_SEED, i)``) in full fideli
 run, episode by episode alternating: ``physics="contact"`` (straight drives away from fittings
 kinematic, see :meth:`primitives.executor.Executor.free_straight`) and
 ``physics="everywhere"`` (contact physics for every motion: the reference). Both use the same
-seeds, the same detector (``improved``), the same sweep cadence. Prints:
+seeds, the same detector (``improved``), the same sweep cadence. One untimed episode per mode
+on the next held-out network comes first (the process's one-off costs: compiling or loading
+the compiled kernels, first MuJoCo builds). Prints:
 
 - decisions/s of each (one core; resets, model builds included, and the steps alone) and their
   ratio; control ticks run with physics and driven kinematically;
@@ -593,7 +595,8 @@ def main() -> None:
     if args.networks < 1:
         parser.error(f"--networks = {args.networks}; allowed: >= 1")
     cfg = NetworkConfig.from_dict(NETWORK_CONFIG)
-    networks = held_out_networks(cfg, args.first + args.networks)[args.first :]
+    pool = held_out_networks(cfg, args.first + args.networks + 1)
+    networks, spare = pool[args.first : -1], pool[-1]
     envs = {
         mode: gym.make(
             "pipenav/PipeNav-v0",
@@ -604,6 +607,13 @@ def main() -> None:
         )
         for mode in MODES
     }
+    # untimed: one episode per mode on a network outside the run (the next held-out one),
+    # so the process's one-off costs (compiling or loading the compiled kernels of a fresh
+    # checkout, first MuJoCo builds) are not counted in whichever mode happens to go first
+    t_warm = time.perf_counter()
+    for mode in MODES:
+        run_episode(envs[mode], spare, EVAL_POOL_SEED + args.first + args.networks)
+    print(f"warm-up: {time.perf_counter() - t_warm:.1f} s (not counted)", flush=True)
     results: dict[str, list[dict[str, Any]]] = {m: [] for m in MODES}
     for i, net in enumerate(networks):
         seed = EVAL_POOL_SEED + args.first + i
