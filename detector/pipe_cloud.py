@@ -140,8 +140,8 @@ class PipeCloud:
     def points_at(self, flat_cells: NDArray[np.intp]) -> NDArray[np.float64]:
         """(n, 3) pipe-frame points of the given flat grid cells (valid cells of the grid,
         ``0 <= c < G * K``; 0 where a cell holds no return)."""
-        if self._xyz is not None or not self.n:
-            return np.take(self.xyz.reshape(3, -1), flat_cells, axis=1).T
+        if not self.n:
+            return np.zeros((np.size(flat_cells), 3))
         # (the returns' cells ascend: each given cell's return found by bisection)
         at = np.minimum(np.searchsorted(self.cell, flat_cells), self.n - 1)
         pts = self.xyz_v[:, at]
@@ -235,9 +235,9 @@ def _transform(pose: SensorInPipe, xyz: NDArray[np.float64]) -> NDArray[np.float
 @dataclass(frozen=True, eq=False)
 class ScanPattern:
     """A scan pattern's (plane and beam angles) unrolled grid and beam directions, computed once
-    per pattern, in two forms: small per-row, per-column, per-beam and per-plane tables, all
-    that a still sweep reads (:func:`_gather_cropped`: its memory traffic is the scan's own
-    ranges), and the per-cell arrays a moving sweep gathers from (:func:`_gather_returns`)."""
+    per pattern as small per-row, per-column, per-beam and per-plane tables: a gather over the
+    grid (:func:`_gather_cropped`, :func:`_gather_returns`) reads them and the scan's own
+    ranges, not per-cell arrays of the whole grid."""
 
     wraps: bool  # the grid's first and last rows are neighbours
     k_cols: int  # K, columns of the uncropped grid
@@ -249,10 +249,6 @@ class ScanPattern:
     sin_b: NDArray[np.float64]  # (B,) sin(beta)
     cos_a: NDArray[np.float64]  # (P,) cos(alpha), alpha the plane's servo angle
     sin_a: NDArray[np.float64]  # (P,) sin(alpha)
-    src: NDArray[np.intp]  # (G*K,) flat scan index of each grid cell
-    dirs: NDArray[np.float64]  # (3, G*K) unit beam direction of each cell
-    trig: NDArray[np.float64]  # (2, G*K) |sin beta| and |cos beta| of each cell
-    missing: NDArray[np.intp]  # the cells where the half-plane has no such beam
 
 
 #: Scan patterns by their plane and beam angles, reused.
@@ -279,9 +275,6 @@ def _pattern(scan: Scan) -> ScanPattern:
     steps = np.abs(np.diff(np.sort(scan.beam_angles)))
     steps = steps[steps > 1e-9]
     beam_step = float(np.median(steps)) if steps.size else 0.0
-    missing = grid.beam.reshape(-1) < 0
-    beam = np.maximum(grid.beam, 0).reshape(-1)
-    plane = grid.plane.reshape(-1)
     # (the tables hold the very numbers scan.directions() computes, numpy's sines and cosines
     # of the angles, so both forms give the same points to the last bit; the rows of one
     # half-plane kind share their columns' beams)
@@ -299,10 +292,6 @@ def _pattern(scan: Scan) -> ScanPattern:
         sin_b=np.sin(beta),
         cos_a=np.cos(alpha),
         sin_a=np.sin(alpha),
-        src=plane * scan.n_beams + beam,
-        dirs=np.ascontiguousarray(scan.directions()[plane, beam].T),
-        trig=np.stack([np.abs(np.sin(beta[beam])), np.abs(np.cos(beta[beam]))]),
-        missing=np.flatnonzero(missing),
     )
     if len(_PATTERNS) >= 16:
         _PATTERNS.pop(next(iter(_PATTERNS)))
@@ -318,11 +307,12 @@ def prepare_cloud(
     k_cols = pat.k_cols
     g = pat.row_plane.size
     valid, ranges_in = scan.valid.reshape(-1), scan.ranges.reshape(-1)
+    tables = (
+        scan.n_beams, pat.row_plane, pat.row_kind, pat.col_beam, pat.cos_b, pat.sin_b, pat.cos_a,
+        pat.sin_a,
+    )  # fmt: skip
     if _moves(scan):
-        # (missing cells point at a copy of a real one and are dropped)
-        cell, pb, ranges, local = _gather_returns(
-            valid, ranges_in, pat.src, pat.missing, pat.dirs, range_bias
-        )
+        cell, pb, ranges, local, trig = _gather_returns(valid, ranges_in, *tables, range_bias)
         # continuous sweep: express every plane in the last plane's sensor frame (odometry)
         plane = pb // scan.n_beams
         world = np.einsum("nij,jn->in", scan.nominal_rotations[plane], local)
@@ -330,13 +320,12 @@ def prepare_cloud(
         local = scan.nominal_rotations[-1].T @ (world - scan.nominal_positions[-1][:, None])
         # (the returns within the horizon, on the grid cropped to the columns that hold
         # returns)
-        cell, ranges, local, tr, k = _crop(cell, ranges, local, pat.trig, k_cols, cfg.horizon)
+        cell, ranges, local, tr, k = _crop(cell, ranges, local, trig, k_cols, cfg.horizon)
     else:
         # (both steps in one pass: the sensor frame is the one frame of the sweep)
         cell, ranges, local, tr, k = _gather_cropped(
-            valid, ranges_in, scan.n_beams, pat.row_plane, pat.row_kind, pat.col_beam,
-            pat.cos_b, pat.sin_b, pat.cos_a, pat.sin_a, range_bias, cfg.horizon,
-        )  # fmt: skip
+            valid, ranges_in, *tables, range_bias, cfg.horizon
+        )
     shape = (g, k)
     sigma_range, sigma_r = radial_noise(scan.spec, ranges, tr[0], tr[1])
     cloud = PipeCloud(
@@ -356,43 +345,61 @@ def prepare_cloud(
 
 
 @njit(cache=True)
-def _gather_returns(valid, ranges, src, missing, dirs, bias):
-    """The valid returns of the grid cells in raster order: their cells, scan indices, ranges
-    less ``bias`` (clamped at 0 m, as :func:`detector.scan.corrected_ranges`) and sensor-frame
-    points ``(3, n)``; ``missing``: cells without a beam."""
-    m = src.size
-    keep = np.ones(m, dtype=np.bool_)
-    for c in missing:
-        keep[c] = False
+def _gather_returns(
+    valid, ranges, n_beams, row_plane, row_kind, col_beam, cos_b, sin_b, cos_a, sin_a, bias
+):  # fmt: skip
+    """The valid returns of the grid cells in raster order (the pattern's tables,
+    :class:`ScanPattern`; cells without a beam are skipped): their cells, scan indices, ranges
+    less ``bias`` (clamped at 0 m, as :func:`detector.scan.corrected_ranges`), sensor-frame
+    points ``(3, n)`` and ``|sin|, |cos|`` of their beam angles ``(2, n)``."""
+    g = row_plane.size
+    k_cols = col_beam.shape[1]
     n = 0
-    for c in range(m):
-        if keep[c] and valid[src[c]]:
-            n += 1
-        else:
-            keep[c] = False
+    for row in range(g):
+        base = row_plane[row] * n_beams
+        for col in range(k_cols):
+            b = col_beam[row_kind[row], col]
+            if b >= 0 and valid[base + b]:
+                n += 1
     cell = np.empty(n, dtype=np.intp)
     pb = np.empty(n, dtype=np.intp)
     rng = np.empty(n)
     local = np.empty((3, n))
-    k = 0
-    for c in range(m):
-        if keep[c]:
-            r = max(ranges[src[c]] - bias, 0.0)
-            cell[k] = c
-            pb[k] = src[c]
-            rng[k] = r
-            local[0, k] = dirs[0, c] * r
-            local[1, k] = dirs[1, c] * r
-            local[2, k] = dirs[2, c] * r
-            k += 1
-    return cell, pb, rng, local
+    trig = np.empty((2, n))
+    j = 0
+    for row in range(g):
+        p = row_plane[row]
+        for col in range(k_cols):
+            b = col_beam[row_kind[row], col]
+            if b < 0 or not valid[p * n_beams + b]:
+                continue
+            r = max(ranges[p * n_beams + b] - bias, 0.0)
+            cell[j] = row * k_cols + col
+            pb[j] = p * n_beams + b
+            rng[j] = r
+            _put_point(local, trig, j, b, p, r, cos_b, sin_b, cos_a, sin_a)
+            j += 1
+    return cell, pb, rng, local, trig
+
+
+@njit(cache=True)
+def _put_point(local, trig, j, b, p, r, cos_b, sin_b, cos_a, sin_a):
+    """Column ``j`` of ``local`` ((3, n)): the point at range ``r`` of beam ``b`` of plane
+    ``p``, in the products' order of :func:`detector.scan.beam_directions` (the same numbers to
+    the last bit); of ``trig`` ((2, n)): ``|sin|, |cos|`` of the beam angle."""
+    local[0, j] = cos_b[b] * r
+    local[1, j] = (sin_b[b] * cos_a[p]) * r
+    local[2, j] = (sin_b[b] * sin_a[p]) * r
+    trig[0, j] = abs(sin_b[b])
+    trig[1, j] = abs(cos_b[b])
 
 
 @njit(cache=True)
 def _crop(cell, ranges, local, trig, k_cols, horizon):
-    """The returns nearer than ``horizon`` along the sensor's axis, with their cells on the
-    grid cropped to the beam-angle columns that hold returns, their ranges, points ``(3, n)``
-    and ``|sin|, |cos|`` of their beam angles ``(2, n)``; and the cropped grid's width."""
+    """The returns (cells on a grid ``k_cols`` wide, ranges, points ``(3, n)``, ``|sin|, |cos|``
+    of their beam angles ``(2, n)``) nearer than ``horizon`` along the sensor's axis, with
+    their cells on the grid cropped to the beam-angle columns that hold returns; and the
+    cropped grid's width."""
     n = cell.size
     m = 0
     k0 = k_cols
@@ -419,8 +426,8 @@ def _crop(cell, ranges, local, trig, k_cols, horizon):
             out_local[0, j] = local[0, i]
             out_local[1, j] = local[1, i]
             out_local[2, j] = local[2, i]
-            out_trig[0, j] = trig[0, cell[i]]
-            out_trig[1, j] = trig[1, cell[i]]
+            out_trig[0, j] = trig[0, i]
+            out_trig[1, j] = trig[1, i]
             j += 1
     return out_cell, out_range, out_local, out_trig, width
 
@@ -502,12 +509,7 @@ def _gather_cropped(
         p = row_plane[row]
         b = col_beam[row_kind[row], col]
         out_cell[j] = row * width + (col - k0)
-        # (the products in the order scan.directions() takes them, then the range)
-        out_local[0, j] = cos_b[b] * r
-        out_local[1, j] = (sin_b[b] * cos_a[p]) * r
-        out_local[2, j] = (sin_b[b] * sin_a[p]) * r
-        out_trig[0, j] = abs(sin_b[b])
-        out_trig[1, j] = abs(cos_b[b])
+        _put_point(out_local, out_trig, j, b, p, r, cos_b, sin_b, cos_a, sin_a)
     out_range = r_kept[:n].copy()
     return out_cell, out_range, out_local, out_trig, width
 

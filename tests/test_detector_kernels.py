@@ -15,7 +15,7 @@ from scipy import ndimage
 
 from detector import fit_kernels as fk
 from detector.axis_fit import _axis_returns, _off_wall_entries
-from detector.grid import label_regions
+from detector.grid import build_grid, label_regions
 from detector.pipe_cloud import (
     _crop,
     _gather_cropped,
@@ -448,21 +448,34 @@ def _random_sweep(rng: np.random.Generator) -> Scan:
 @settings(max_examples=60, deadline=None)
 @given(seeds, st.floats(0.0, 0.01), st.floats(0.05, 3.0))
 def test_gather_cropped_matches_gather_then_crop(seed: int, bias: float, horizon: float) -> None:
-    """The still sweep's one pass over the pattern's small tables gives the moving sweep's
-    two passes over the per-cell arrays, to the last bit, and its cells ascend."""
+    """The gather over the pattern's tables gives the scan's own beam directions times the
+    corrected ranges (numpy, over the unrolled grid: to the last bit), cells in raster order
+    without the cells that have no beam; and the still sweep's one pass gives the two passes
+    (gather, then crop to the horizon)."""
     scan = _random_sweep(np.random.default_rng(seed))
     pat = _pattern(scan)
-    valid, ranges = scan.valid.reshape(-1), scan.ranges.reshape(-1)
-    cell, _, rng_v, local = _gather_returns(valid, ranges, pat.src, pat.missing, pat.dirs, bias)
-    ref = _crop(cell, rng_v, local, pat.trig, pat.k_cols, horizon)
-    got = _gather_cropped(
-        valid, ranges, scan.n_beams, pat.row_plane, pat.row_kind, pat.col_beam,
-        pat.cos_b, pat.sin_b, pat.cos_a, pat.sin_a, bias, horizon,
+    tables = (
+        scan.n_beams, pat.row_plane, pat.row_kind, pat.col_beam, pat.cos_b, pat.sin_b,
+        pat.cos_a, pat.sin_a,
     )  # fmt: skip
+    valid, ranges = scan.valid.reshape(-1), scan.ranges.reshape(-1)
+    cell, pb, rng_v, local, trig = _gather_returns(valid, ranges, *tables, bias)
+    grid = build_grid(scan)
+    beam, plane = grid.beam.reshape(-1), grid.plane.reshape(-1)
+    kept = np.flatnonzero((beam >= 0) & scan.valid[plane, np.maximum(beam, 0)])
+    np.testing.assert_array_equal(cell, kept)
+    np.testing.assert_array_equal(pb, plane[kept] * scan.n_beams + beam[kept])
+    r_ref = np.maximum(scan.ranges[plane[kept], beam[kept]] - bias, 0.0)
+    np.testing.assert_array_equal(rng_v, r_ref)
+    np.testing.assert_array_equal(local, scan.directions()[plane[kept], beam[kept]].T * r_ref)
+    beta = scan.beam_angles[beam[kept]]
+    np.testing.assert_array_equal(trig, np.stack([np.abs(np.sin(beta)), np.abs(np.cos(beta))]))
+    ref = _crop(cell, rng_v, local, trig, pat.k_cols, horizon)
+    got = _gather_cropped(valid, ranges, *tables, bias, horizon)
     for a, b in zip(got[:4], ref[:4]):
         np.testing.assert_array_equal(a, b)
     assert got[4] == ref[4]
-    assert np.all(np.diff(got[0]) > 0) and np.all(np.diff(ref[0]) > 0)
+    assert np.all(np.diff(got[0]) > 0)
 
 
 @settings(max_examples=60, deadline=None)
