@@ -13,6 +13,8 @@ from hypothesis import strategies as st
 
 from detector import Detection, SensorInPipe, detect, detect_planar
 from detector.geometry import Pose
+from detector.improved import _opposite_wall_open
+from detector.improved_config import DEFAULT_CONFIG
 from detector.scan import Scan
 
 REPRESENTATIVE = [
@@ -243,3 +245,22 @@ def test_spread_along_axis_keeps_sparse_stretches(n_returns, n, seed, far_share)
     assert out.size == min(n, idx.size)
     if n_far <= n // 20:  # (within a stretch's fair share: the far returns are all kept)
         assert (u[out - 1000] >= 0.3).sum() == n_far
+
+
+def test_the_wall_test_of_the_opposite_way() -> None:
+    """Opposite a square way the wall test needs a wall in view on both square sides; opposite
+    a 45 deg way, where neither square side shows one, the test is not made (a bare opposite
+    side still required), and one square side with a wall in view makes it."""
+    seen = 2 * DEFAULT_CONFIG.hole_min_returns
+    share = DEFAULT_CONFIG.opposite_wall_share
+    for at_square in (True, False):
+        # both square sides in view: the opposite keeps at most a share of the fewer
+        assert _opposite_wall_open(int(share * seen), (seen, 3 * seen), at_square, DEFAULT_CONFIG)
+        assert not _opposite_wall_open(seen, (seen, 3 * seen), at_square, DEFAULT_CONFIG)
+        # one square side in view: no test, no way
+        assert not _opposite_wall_open(0, (seen - 1, 3 * seen), at_square, DEFAULT_CONFIG)
+    # neither side in view: square ways gain nothing, oblique ones need a bare opposite side
+    assert not _opposite_wall_open(0, (0, seen - 1), True, DEFAULT_CONFIG)
+    assert _opposite_wall_open(0, (0, seen - 1), False, DEFAULT_CONFIG)
+    assert _opposite_wall_open(int(share * seen), (0, 0), False, DEFAULT_CONFIG)
+    assert not _opposite_wall_open(int(share * seen) + 1, (0, 0), False, DEFAULT_CONFIG)

@@ -143,24 +143,3 @@ def test_points_at_finds_each_cell_with_or_without_the_grid(seed: int, n: int, n
     np.testing.assert_array_equal(bisected, grid)
     np.testing.assert_array_equal(cloud.points_at(ask), grid)
     np.testing.assert_array_equal(cloud.u_grid, cloud.xyz[0])
-
-
-def test_the_wall_test_of_the_opposite_way() -> None:
-    """Opposite a square way the wall test needs a wall in view on both square sides; opposite
-    a 45 deg way, where neither square side shows one, the test is not made (a bare opposite
-    side still required), and one square side with a wall in view makes it."""
-    from detector.improved import _opposite_wall_open
-
-    seen = 2 * DEFAULT_CONFIG.hole_min_returns
-    share = DEFAULT_CONFIG.opposite_wall_share
-    for at_square in (True, False):
-        # both square sides in view: the opposite keeps at most a share of the fewer
-        assert _opposite_wall_open(int(share * seen), (seen, 3 * seen), at_square, DEFAULT_CONFIG)
-        assert not _opposite_wall_open(seen, (seen, 3 * seen), at_square, DEFAULT_CONFIG)
-        # one square side in view: no test, no way
-        assert not _opposite_wall_open(0, (seen - 1, 3 * seen), at_square, DEFAULT_CONFIG)
-    # neither side in view: square ways gain nothing, oblique ones need a bare opposite side
-    assert not _opposite_wall_open(0, (0, seen - 1), True, DEFAULT_CONFIG)
-    assert _opposite_wall_open(0, (0, seen - 1), False, DEFAULT_CONFIG)
-    assert _opposite_wall_open(int(share * seen), (0, 0), False, DEFAULT_CONFIG)
-    assert not _opposite_wall_open(int(share * seen) + 1, (0, 0), False, DEFAULT_CONFIG)
