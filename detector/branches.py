@@ -106,23 +106,95 @@ def _split_all_round(
     parts when there are two or more: entering a wider run from a tee's stem, the run's wall
     lies a step beyond the stem's all round and joins the two ways on into one region; only
     along the run do the returns reach deep (beyond half the region's 90th-percentile depth).
-    Otherwise the region as it is (``(mask, n)``). Each part comes with its points
-    (:meth:`PipeCloud.points`) when they were gathered, else ``None``."""
+    Nearer the run, its wall also bulges out square to the run by up to the difference of the
+    two radii, and those returns can reach that depth too: the parts then still join all round,
+    and they are taken instead beyond the middle of the depth profile over the azimuth (see
+    :func:`_profile_depth`), each with the returns of the region nearest it in roll (see
+    :func:`_nearest_in_roll`). Otherwise the region as it is (``(mask, n)``). Each part comes
+    with its points (:meth:`PipeCloud.points`) when they were gathered, else ``None``."""
     p = cloud.points(mask)
     if azimuth_coverage(p) < cfg.all_round:
         return [(mask, n, p)]
-    depth = np.hypot(cloud.xyz[1][mask], cloud.xyz[2][mask]) - big_r
+    depth = np.hypot(p[:, 1], p[:, 2]) - big_r
+    parts = _deep_parts(cloud, mask, depth, 0.5 * float(partial_percentile(depth, 90.0)), cfg)
+    if parts is None:
+        middle = _profile_depth(p, depth, cfg.all_round_sectors)
+        parts = None if middle is None else _deep_parts(cloud, mask, depth, middle, cfg)
+        if parts is not None:
+            parts = _nearest_in_roll(mask, p, parts)
+    return [(mask, n, p)] if parts is None else parts
+
+
+def _deep_parts(
+    cloud: PipeCloud,
+    mask: NDArray[np.bool_],
+    depth: NDArray[np.float64],
+    threshold: float,
+    cfg: ImprovedConfig,
+) -> list[tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]] | None:
+    """The connected parts (``(mask, n, None)``) of the returns of ``mask`` deeper than
+    ``threshold`` m beyond the wall (``depth``, in the order of :meth:`PipeCloud.points`),
+    when two or more are large enough to be openings; else None."""
     deep = np.zeros_like(mask)
-    deep[mask] = depth > 0.5 * float(partial_percentile(depth, 90.0))
+    deep[mask] = depth > threshold
     labels, n_lab = label_regions(deep, cloud.wraps)
     if n_lab < 2:
-        return [(mask, n, p)]
+        return None
     counts, row_span = region_sizes(labels, n_lab)
     parts = np.flatnonzero((counts >= cfg.min_lobe_points) & (row_span >= cfg.min_region_rows))
     parts = parts[parts > 0]
     if parts.size < 2:
-        return [(mask, n, p)]
+        return None
     return [(labels == k, int(counts[k]), None) for k in parts.tolist()]
+
+
+def _nearest_in_roll(
+    mask: NDArray[np.bool_],
+    p: NDArray[np.float64],
+    parts: list[tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]],
+) -> list[tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]]:
+    """The whole region ``mask`` (its points ``p``, in grid order) shared out among its deep
+    ``parts``: each return to the part whose mean roll is nearest its own. The shallow returns
+    near the junction (the run's wall close to the stem) are what size the run and place the
+    reference point; the deep parts alone leave the fit to trade one against the other."""
+    roll = np.arctan2(p[:, 2], p[:, 1])
+    centres = np.empty(len(parts))
+    for j, (m, _, _) in enumerate(parts):
+        own = m[mask]
+        centres[j] = math.atan2(float(p[own, 2].sum()), float(p[own, 1].sum()))
+    owner = np.argmin(np.abs(wrap_angle(roll[:, None] - centres[None, :])), axis=1)
+    cells = np.flatnonzero(mask)
+    out: list[tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]] = []
+    for j in range(len(parts)):
+        part = np.zeros_like(mask)
+        part.flat[cells[owner == j]] = True
+        out.append((part, int(np.count_nonzero(owner == j)), p[owner == j]))
+    return out
+
+
+#: A sector of the depth profile counts with at least this many returns; the profile needs at
+#: least half its sectors counted.
+PROFILE_MIN_RETURNS = 3
+
+
+def _profile_depth(
+    p: NDArray[np.float64], depth: NDArray[np.float64], sectors: int
+) -> float | None:
+    """The middle (m) between the shallowest and the deepest of the deepest returns per
+    azimuth sector (``sectors`` of them) of the ``(n, 3)`` points ``p`` with their ``depth``
+    beyond the wall: from a narrower stem the ways along the run reach deepest, the bulge of
+    the run's wall square to it only the difference of the radii. None if fewer than half the
+    sectors hold :data:`PROFILE_MIN_RETURNS` returns."""
+    k = (np.floor((np.arctan2(p[:, 2], p[:, 1]) + math.pi) * (sectors / (2 * math.pi)))).astype(
+        np.intp
+    ) % sectors
+    counts = np.bincount(k, minlength=sectors)
+    deepest = np.full(sectors, -np.inf)
+    np.maximum.at(deepest, k, depth)
+    counted = counts >= PROFILE_MIN_RETURNS
+    if 2 * int(counted.sum()) < sectors:
+        return None
+    return 0.5 * (float(deepest[counted].min()) + float(deepest[counted].max()))
 
 
 # --------------------------------------------------------------------------- outgoing pipes

@@ -74,6 +74,9 @@ class ImprovedConfig:
             opposite side only has to be as bare. A way within both windows counts as square.
         all_round: a region of returns beyond the wall covering this fraction of the azimuth
             goes all round the axis (and is split into its deep parts).
+        all_round_sectors: ... when its deep parts (beyond half the region's 90th-percentile
+            depth) still join all round, the depth is profiled over this many azimuth sectors
+            and the parts are taken beyond the middle of the shallowest and deepest sector.
         snap_within: a junction's branch fitted within this angle of a standard fitting angle
             (tees and crosses 90 deg, laterals 45 or 135 deg) is tried held at it.
         snap_lr: ... and held when the returns allow it: likelihood ratio at most this per
@@ -241,6 +244,7 @@ class ImprovedConfig:
     opposite_baseline_factor: float = 4.0
     opposite_wall_share: float = 0.5
     all_round: float = 0.75
+    all_round_sectors: int = 24
     snap_within: float = math.radians(25.0)
     snap_lr: float = 10.0
     snap_max_turn: float = math.radians(3.0)
@@ -360,6 +364,7 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "opposite_baseline_factor": (float, 0.0, True, 1000.0, "a number in [0, 1000]"),
     "opposite_wall_share": (float, 0.0, True, 1.0, "a number in [0, 1]"),
     "all_round": (float, 0.0, False, 1.0, "a number in (0, 1]"),
+    "all_round_sectors": (int, 4, True, 360, "an integer in [4, 360]"),
     "snap_within": (float, 0.0, True, math.pi / 2, "a number in [0, pi/2] rad"),
     "snap_lr": (float, 0.0, True, math.inf, "a finite number >= 0"),
     "snap_max_turn": (float, 0.0, True, math.pi, "a number in [0, pi] rad"),
