@@ -6,7 +6,9 @@ a sensor along the incoming centreline of random single-structure layouts (every
 trigger distance, fuse the detections with ``detector.fusion.StructureTracker`` exactly as the
 full-fidelity closed loop does, and compare the estimate at the trigger distance with ground
 truth. The error statistics become :class:`pipe_env.envs.sensing_model.DetectionErrorModel` entries
-written to ``pipe_env/data/sensing_models.json`` (``--write``), which the fast fidelity loads.
+written to ``pipe_env/data/sensing_models.json`` (``--write``), which the fast fidelity loads. A
+long bend seen in part, whose angle the detector reads as a lower bound, is no error in the
+closed loop and is counted apart (see :func:`score_sample`).
 
 Usage: python benchmarks/calibrate_sensing.py [--samples 60] [--methods improved]
     [--presets ydlidar_x4] [--per-kind] [--failures] [--write]
@@ -127,7 +129,14 @@ def _nearest(det) -> float:
 
 def score_sample(kind: str, diameter: float, fused, truth) -> dict:
     """One structure's outcome: ways matched, missed and phantom, with the errors of the
-    matched ways (see :func:`aggregate`)."""
+    matched ways (see :func:`aggregate`).
+
+    A long bend seen in part (short of its arc's end) reads a lower bound of its angle, and
+    with it a reference point nearer by ``R (tan(angle / 2) - tan(read / 2))``: the arc's start
+    and radius are right. The turn primitive follows the arc's walls to its end (it complies
+    with them), so in the closed loop this is no error. Such a way (a long bend read more than
+    the thesis's 5 deg short) is scored at its arc's start, without its angle, and counted
+    apart (``lower_bound``): the fast fidelity does not draw it as an error."""
     rec: dict = {
         "kind": kind,
         "diameter": diameter,
@@ -136,7 +145,9 @@ def score_sample(kind: str, diameter: float, fused, truth) -> dict:
         "true_ways": len(truth),
         "matched": 0,
         "phantoms": 0,
-        "errors": [],  # (distance, diameter, angle, direction or None, gross, confidence)
+        "lower_bound": 0,
+        # (distance, diameter, angle or None, direction or None, gross, confidence)
+        "errors": [],
     }
     if rec["fused_kind"] is None:
         return rec
@@ -148,11 +159,17 @@ def score_sample(kind: str, diameter: float, fused, truth) -> dict:
             continue
         matched.add(k)
         t = truth[k]
-        e = (o.distance - t.distance, o.diameter - t.diameter, o.angle - t.angle)
+        e_ang: float | None = o.angle - t.angle
+        e_dist = o.distance - t.distance
+        if t.bend_radius > 0.0 and o.bend_radius > 0.0 and e_ang < -GROSS["angle"]:
+            rec["lower_bound"] += 1
+            e_dist = _arc_start(o) - _arc_start(t)
+            e_ang = None
+        e = (e_dist, o.diameter - t.diameter, e_ang)
         bad = (
             abs(e[0]) > GROSS["distance"]
             or abs(e[1]) > GROSS["diameter"]
-            or abs(e[2]) > GROSS["angle"]
+            or (e_ang is not None and abs(e_ang) > GROSS["angle"])
         )
         e_dir = None
         if t.angle > math.radians(10):
@@ -161,6 +178,11 @@ def score_sample(kind: str, diameter: float, fused, truth) -> dict:
         rec["errors"].append((*e, e_dir, bad, o.confidence))
     rec["matched"] = len(matched)
     return rec
+
+
+def _arc_start(o) -> float:
+    """How far ahead a bend's arc starts (its reference point less ``R tan(angle / 2)``), m."""
+    return o.distance - o.bend_radius * math.tan(0.5 * o.angle)
 
 
 def run_samples(
@@ -193,6 +215,7 @@ def aggregate(name: str, records: list[dict]) -> dict:
     """The error model of a set of sample records (the fields of ``DetectionErrorModel``)."""
     errs: dict[str, list[float]] = {"distance": [], "diameter": [], "angle": [], "direction": []}
     gross: list[bool] = []  # per matched way on: beyond the thesis requirements
+    gross_ang: list[bool] = []  # the same, for the ways whose angle is scored
     gross_dir: list[bool] = []  # the same, for the ways whose direction is defined
     confidences = []
     n_unconfirmed = sum(r["fused_kind"] is None for r in records)
@@ -201,9 +224,11 @@ def aggregate(name: str, records: list[dict]) -> dict:
         for e_dist, e_diam, e_ang, e_dir, bad, conf in r["errors"]:
             errs["distance"].append(e_dist)
             errs["diameter"].append(e_diam)
-            errs["angle"].append(e_ang)
             confidences.append(conf)
             gross.append(bad)
+            if e_ang is not None:
+                errs["angle"].append(e_ang)
+                gross_ang.append(bad)
             if e_dir is not None:
                 errs["direction"].append(e_dir)
                 gross_dir.append(bad)
@@ -217,17 +242,22 @@ def aggregate(name: str, records: list[dict]) -> dict:
         v = np.asarray(values, dtype=float)[flags == want] if values else np.zeros(0)
         return round(float(np.sqrt(np.mean(np.square(v)))), 5) if v.size else 0.0
 
+    ang_flags = np.array(gross_ang, dtype=bool)
     dir_flags = np.array(gross_dir, dtype=bool)
     return {
         "name": name,
         "distance_sigma": rms(errs["distance"], gross_flags, False),
         "diameter_sigma": rms(errs["diameter"], gross_flags, False),
-        "angle_sigma": rms(errs["angle"], gross_flags, False),
+        "angle_sigma": rms(errs["angle"], ang_flags, False),
         "direction_sigma": rms(errs["direction"], dir_flags, False),
         "gross_rate": round(float(gross_flags.mean()) if gross_flags.size else 0.0, 4),
+        # (not drawn by the fast fidelity: see :func:`score_sample`)
+        "lower_bound_rate": round(
+            sum(r["lower_bound"] for r in records) / max(gross_flags.size, 1), 4
+        ),
         "gross_distance_sigma": rms(errs["distance"], gross_flags, True),
         "gross_diameter_sigma": rms(errs["diameter"], gross_flags, True),
-        "gross_angle_sigma": rms(errs["angle"], gross_flags, True),
+        "gross_angle_sigma": rms(errs["angle"], ang_flags, True),
         "gross_direction_sigma": rms(errs["direction"], dir_flags, True),
         "miss_rate": round((n_missed_ways) / max(n_true_ways, 1), 4),
         "phantom_rate": round(n_phantoms / max(n_struct, 1), 4),
@@ -253,6 +283,7 @@ def row(m: dict, seconds: float | None = None) -> str:
         f"| {m['name']} | {m['distance_sigma'] * 100:.2f} | "
         f"{m['diameter_sigma'] * 1000:.1f} | {math.degrees(m['angle_sigma']):.2f} | "
         f"{math.degrees(m['direction_sigma']):.2f} | {m['gross_rate']:.3f} | "
+        f"{m['lower_bound_rate']:.3f} | "
         f"{m['miss_rate']:.3f} | {m['phantom_rate']:.3f} | {m['misclass_rate']:.3f} | "
         f"{m['unconfirmed']}/{m['structures']} |" + ("" if seconds is None else f" {seconds:.0f} |")
     )
@@ -327,8 +358,8 @@ def main() -> None:
     models = {}
     table = [
         "| detector/preset | dist rms cm | diam rms mm | angle rms deg | dir rms deg | gross | "
-        "miss | phantom | misclass | unconfirmed | s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "lower bound | miss | phantom | misclass | unconfirmed | s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     print("\n".join(table))
     for method in methods:
@@ -359,9 +390,12 @@ def main() -> None:
             f"`python benchmarks/calibrate_sensing.py {' '.join(given)}`\n\n"
             "The fused estimate at the decision point (sweeps as the full-fidelity loop "
             "makes them, rescans included; StructureTracker): rms of the ordinary errors, the "
-            "share of ways beyond 2 cm / 5 mm / 5 deg (gross), ways missed, phantom ways per "
-            "structure, structures of the wrong kind, structures never confirmed; seconds in "
-            "the last column.\n\n" + "\n".join(table),
+            "share of ways beyond 2 cm / 5 mm / 5 deg (gross), the share of ways that are long "
+            "bends seen in part (their angle a lower bound, more than 5 deg short; scored at "
+            "the arc's start without their angle, and not drawn as errors by the fast "
+            "fidelity: the turn follows the arc's walls to its end), ways missed, phantom ways "
+            "per structure, structures of the wrong kind, structures never confirmed; seconds "
+            "in the last column.\n\n" + "\n".join(table),
         )
     if args.write:
         OUT.parent.mkdir(parents=True, exist_ok=True)
