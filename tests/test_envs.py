@@ -463,7 +463,7 @@ def test_an_automatic_way_that_jams_is_sensed_again(monkeypatch: pytest.MonkeyPa
 
     monkeypatch.setattr(KinematicPlant, "resense", counting)
     env = gym.make("pipenav/PipeNav-v0", detector="improved", lidar="ydlidar_x4")
-    obs, info = env.reset(seed=0)
+    obs, info = env.reset(seed=1)  # (a seed whose first single way jams)
     assert info["auto_jammed"]
     assert len(resensed) == 1
     offered = env.unwrapped.decision

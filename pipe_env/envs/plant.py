@@ -40,6 +40,7 @@ from detector.geometry import (
 )
 from detector.options import StructureOption, match_option, option_vector
 from detector.scan import Scan
+from detector.validation import check_number
 from detector.vocab import DETECTORS, StrEnum
 from pipe_env.envs.fidelity import Fidelity
 from pipe_env.envs.sensing_model import DetectionErrorModel, error_model_for
@@ -52,6 +53,11 @@ if TYPE_CHECKING:
     from pipe_env.world import PipeWorld
 
 BACK_OUT = "back_out"
+
+#: The full fidelity's drives to a structure that stall, per structure approached: 3 of 729
+#: (``benchmarks/calibrate_fidelity.py --networks 200``, "drive jams per structure"; RoutePlanner
+#: on the held-out 6-fitting 3D networks). The fast fidelity draws them at this rate.
+DRIVE_JAM_RATE = 0.004
 
 
 class PlantStatus(StrEnum):
@@ -251,6 +257,9 @@ class KinematicPlant:
             independent N(0, (odometry_noise * sqrt(d))^2) error on each world axis (a random
             walk: the drift's std grows with the square root of the distance driven).
         jam_time: simulated seconds a jam costs (stall, detection of it, reversing).
+        drive_jam_rate: probability that the drive to a structure stalls (the robot then
+            decides where it stands, as the full fidelity does, after ``jam_time``); default
+            :data:`DRIVE_JAM_RATE`, the full fidelity's own rate.
     """
 
     fidelity = Fidelity.FAST.value
@@ -270,6 +279,7 @@ class KinematicPlant:
         odometry_noise: float = 0.01,
         error_model: DetectionErrorModel | None = None,
         jam_time: float = 10.0,
+        drive_jam_rate: float = DRIVE_JAM_RATE,
     ) -> None:
         if network.start_pose is None:
             raise ValueError("the network has no start_pose; the robot needs one")
@@ -284,6 +294,9 @@ class KinematicPlant:
         self.decision_time = float(decision_time)
         self.odometry_noise = float(odometry_noise)
         self.jam_time = float(jam_time)
+        self.drive_jam_rate = check_number(
+            "drive_jam_rate", drive_jam_rate, low=0.0, high=1.0, where="KinematicPlant"
+        )
         start = network.start_pose
         ep, towards = locate(network, start)
         self._start_state = EdgeState(ep.run_id, ep.s, towards)
@@ -406,6 +419,14 @@ class KinematicPlant:
         self._record_motion(move, out, st, end)
         self._forward(end, move)
         self.state = end
+        if self.rng.random() < self.drive_jam_rate:
+            # stalled on the way (the full loop's drive jams: a module pushed off its path,
+            # the front lagging its target): it costs the jam, and the robot senses where it
+            # stands, here
+            out.status = PlantStatus.JAMMED
+            out.note = "jammed while driving (modelled, see DRIVE_JAM_RATE)"
+            out.sim_time += self.jam_time
+            self.sim_time += self.jam_time
         self.decision = self._sense(node, st.run_id, out)
         return self.decision, out
 
