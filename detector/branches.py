@@ -99,9 +99,14 @@ def find_lobes(
     return merged
 
 
+#: A part of a region of returns beyond the wall: its grid mask, its number of returns and its
+#: points (``(n, 3)``, in grid order) when they were gathered, else None.
+RegionPart = tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]
+
+
 def _split_all_round(
     cloud: PipeCloud, mask: NDArray[np.bool_], n: int, big_r: float, cfg: ImprovedConfig
-) -> list[tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]]:
+) -> list[RegionPart]:
     """A region of returns beyond the wall that goes all round the axis, split into its deep
     parts when there are two or more: entering a wider run from a tee's stem, the run's wall
     lies a step beyond the stem's all round and joins the two ways on into one region; only
@@ -111,14 +116,16 @@ def _split_all_round(
     and they are taken instead beyond the middle of the depth profile over the azimuth (see
     :func:`_profile_depth`), each with the returns of the region nearest it in roll (see
     :func:`_nearest_in_roll`). Otherwise the region as it is (``(mask, n)``). Each part comes
-    with its points (:meth:`PipeCloud.points`) when they were gathered, else ``None``."""
+    with its points (:meth:`PipeCloud.points`) when they were gathered, else ``None``.
+    ``mask`` holds only cells with a return (a labelled region of them)."""
     p = cloud.points(mask)
     if azimuth_coverage(p) < cfg.all_round:
         return [(mask, n, p)]
     depth = np.hypot(p[:, 1], p[:, 2]) - big_r
     parts = _deep_parts(cloud, mask, depth, 0.5 * float(partial_percentile(depth, 90.0)), cfg)
     if parts is None:
-        middle = _profile_depth(p, depth, cfg.all_round_sectors)
+        floor = cfg.tol_floor if cloud.floor is None else cloud.floor
+        middle = _profile_depth(p, depth, cfg.all_round_sectors, floor)
         parts = None if middle is None else _deep_parts(cloud, mask, depth, middle, cfg)
         if parts is not None:
             parts = _nearest_in_roll(mask, p, parts)
@@ -131,7 +138,7 @@ def _deep_parts(
     depth: NDArray[np.float64],
     threshold: float,
     cfg: ImprovedConfig,
-) -> list[tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]] | None:
+) -> list[RegionPart] | None:
     """The connected parts (``(mask, n, None)``) of the returns of ``mask`` deeper than
     ``threshold`` m beyond the wall (``depth``, in the order of :meth:`PipeCloud.points`),
     when two or more are large enough to be openings; else None."""
@@ -151,8 +158,8 @@ def _deep_parts(
 def _nearest_in_roll(
     mask: NDArray[np.bool_],
     p: NDArray[np.float64],
-    parts: list[tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]],
-) -> list[tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]]:
+    parts: list[RegionPart],
+) -> list[RegionPart]:
     """The whole region ``mask`` (its points ``p``, in grid order) shared out among its deep
     ``parts``: each return to the part whose mean roll is nearest its own. The shallow returns
     near the junction (the run's wall close to the stem) are what size the run and place the
@@ -164,7 +171,7 @@ def _nearest_in_roll(
         centres[j] = math.atan2(float(p[own, 2].sum()), float(p[own, 1].sum()))
     owner = np.argmin(np.abs(wrap_angle(roll[:, None] - centres[None, :])), axis=1)
     cells = np.flatnonzero(mask)
-    out: list[tuple[NDArray[np.bool_], int, NDArray[np.float64] | None]] = []
+    out: list[RegionPart] = []
     for j in range(len(parts)):
         part = np.zeros_like(mask)
         part.flat[cells[owner == j]] = True
@@ -178,13 +185,14 @@ PROFILE_MIN_RETURNS = 3
 
 
 def _profile_depth(
-    p: NDArray[np.float64], depth: NDArray[np.float64], sectors: int
+    p: NDArray[np.float64], depth: NDArray[np.float64], sectors: int, contrast: float
 ) -> float | None:
     """The middle (m) between the shallowest and the deepest of the deepest returns per
     azimuth sector (``sectors`` of them) of the ``(n, 3)`` points ``p`` with their ``depth``
     beyond the wall: from a narrower stem the ways along the run reach deepest, the bulge of
     the run's wall square to it only the difference of the radii. None if fewer than half the
-    sectors hold :data:`PROFILE_MIN_RETURNS` returns."""
+    sectors hold :data:`PROFILE_MIN_RETURNS` returns, or if the deepest and the shallowest
+    sector differ by no more than ``contrast`` m (an even region: no way stands out)."""
     k = (np.floor((np.arctan2(p[:, 2], p[:, 1]) + math.pi) * (sectors / (2 * math.pi)))).astype(
         np.intp
     ) % sectors
@@ -194,7 +202,8 @@ def _profile_depth(
     counted = counts >= PROFILE_MIN_RETURNS
     if 2 * int(counted.sum()) < sectors:
         return None
-    return 0.5 * (float(deepest[counted].min()) + float(deepest[counted].max()))
+    lo, hi = float(deepest[counted].min()), float(deepest[counted].max())
+    return 0.5 * (lo + hi) if hi - lo > contrast else None
 
 
 # --------------------------------------------------------------------------- outgoing pipes

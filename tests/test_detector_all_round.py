@@ -22,9 +22,9 @@ def test_the_profile_middle_lies_between_the_bulge_and_the_ways_along_the_run() 
     # a run along roll 0 / pi reaching 29 mm beyond the wall, its wall bulging 16 mm square to it
     rolls = np.linspace(-math.pi, math.pi, 720, endpoint=False)
     depth = 0.0225 + 0.0065 * np.cos(2.0 * rolls)
-    middle = _profile_depth(_ring(rolls, 0.05), depth, 24)
+    middle = _profile_depth(_ring(rolls, 0.05), depth, 24, 0.0024)
     assert middle is not None
-    # the deepest return per 15 deg sector: from 16.2 mm (square) to 29 mm (along the run)
+    # the deepest return per 15 deg sector: from 16.8 mm (square) to 29 mm (along the run)
     assert 0.0220 < middle < 0.0230
     deep = depth > middle
     # beyond it, two parts: one about each way along the run
@@ -36,7 +36,15 @@ def test_the_profile_middle_lies_between_the_bulge_and_the_ways_along_the_run() 
 def test_a_sparse_profile_gives_no_middle() -> None:
     # returns in fewer than half the sectors: no profile to split by
     rolls = np.linspace(-0.5, 0.5, 200)
-    assert _profile_depth(_ring(rolls, 0.05), np.full(rolls.size, 0.01), 24) is None
+    assert _profile_depth(_ring(rolls, 0.05), np.full(rolls.size, 0.01), 24, 0.0) is None
+
+
+def test_an_even_region_gives_no_middle() -> None:
+    # all round, its depth varying by 2 mm: no way stands out beyond a 2.4 mm contrast
+    rolls = np.linspace(-math.pi, math.pi, 720, endpoint=False)
+    depth = 0.010 + 0.001 * np.cos(2.0 * rolls)
+    assert _profile_depth(_ring(rolls, 0.05), depth, 24, 0.0024) is None
+    assert _profile_depth(_ring(rolls, 0.05), depth, 24, 0.001) is not None
 
 
 @settings(max_examples=50, deadline=None)

@@ -165,8 +165,9 @@ def attempted_way(choice: StructureOption | str, truth: list[StructureOption]) -
 @dataclass
 class OutcomeLog:
     """One episode's :class:`SensedStructure` and :class:`Attempt` records, in order, and
-    ``drive_jams``: drives to a structure that ended jammed (full fidelity: the robot stalled
-    while driving; no attempt of a way)."""
+    ``drive_jams``: drives to a structure that ended jammed (the robot stalled while driving;
+    no attempt of a way), in the full fidelity physically, in the fast one drawn at
+    :data:`pipe_env.envs.plant.DRIVE_JAM_RATE`."""
 
     sensed: list[SensedStructure] = field(default_factory=list)
     attempts: list[Attempt] = field(default_factory=list)

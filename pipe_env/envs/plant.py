@@ -419,7 +419,9 @@ class KinematicPlant:
         self._record_motion(move, out, st, end)
         self._forward(end, move)
         self.state = end
-        if self.rng.random() < self.drive_jam_rate:
+        # (no draw at rate 0, nor for a robot already at its decision point: seeded episodes
+        # without drive jams keep the draws they had before the model)
+        if self.drive_jam_rate > 0.0 and move > 0.0 and self.rng.random() < self.drive_jam_rate:
             # stalled on the way (the full loop's drive jams: a module pushed off its path,
             # the front lagging its target): it costs the jam, and the robot senses where it
             # stands, here

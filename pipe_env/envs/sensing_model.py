@@ -48,6 +48,11 @@ class DetectionErrorModel:
         phantom_rate: probability that a structure gets an extra, non-existent way on.
         misclass_rate: probability that the structure's kind is reported wrongly.
         confidence: confidence reported with the options.
+        lower_bound_rate: probability that a long bend's way (``bend_radius > 0``) reads a
+            lower bound of its angle (seen short of its arc's end): the angle read short by
+            ``|N(0, lower_bound_sigma)|`` and the reference point nearer with it (the arc's
+            start and radius kept), before the ordinary or gross error.
+        lower_bound_sigma: std of that shortfall, rad.
     """
 
     name: str
@@ -64,11 +69,20 @@ class DetectionErrorModel:
     gross_diameter_sigma: float = 0.0
     gross_angle_sigma: float = 0.0
     gross_direction_sigma: float = 0.0
+    lower_bound_rate: float = 0.0
+    lower_bound_sigma: float = 0.0
 
     def __post_init__(self) -> None:
-        for key in _SIGMAS + tuple(f"gross_{k}" for k in _SIGMAS):
+        for key in _SIGMAS + tuple(f"gross_{k}" for k in _SIGMAS) + ("lower_bound_sigma",):
             check_number(f"{_WHERE}.{key}", getattr(self, key), 0.0, math.pi, "m or rad")
-        for key in ("miss_rate", "phantom_rate", "misclass_rate", "confidence", "gross_rate"):
+        for key in (
+            "miss_rate",
+            "phantom_rate",
+            "misclass_rate",
+            "confidence",
+            "gross_rate",
+            "lower_bound_rate",
+        ):
             check_number(f"{_WHERE}.{key}", getattr(self, key), 0.0, 1.0)
 
     @property
@@ -84,6 +98,7 @@ class DetectionErrorModel:
                 "phantom_rate",
                 "misclass_rate",
                 "gross_rate",
+                "lower_bound_rate",
             )
         )
 
@@ -98,6 +113,12 @@ class DetectionErrorModel:
         noise = rng.normal(size=(n, 4))
         coin = rng.random(size=(n + 3,))
         gross = rng.random(size=n) < self.gross_rate
+        # (drawn only by models that have lower bounds: the others' seeded draws stay as they
+        # were before the field existed)
+        shortfall = np.zeros(n)
+        if self.lower_bound_rate > 0.0:
+            short = rng.random(size=n) < self.lower_bound_rate
+            shortfall = np.where(short, np.abs(rng.normal(0.0, self.lower_bound_sigma, n)), 0.0)
         out: list[StructureOption] = []
         kind = truth[0].kind
         if coin[n] < self.misclass_rate:
@@ -105,7 +126,8 @@ class DetectionErrorModel:
         for i, o in enumerate(truth):
             if i > 0 and coin[i] < self.miss_rate:
                 continue
-            out.append(self._perturb(o, kind, noise[i], bool(gross[i])))
+            read = o if o.bend_radius <= 0.0 else _read_short(o, float(shortfall[i]))
+            out.append(self._perturb(read, kind, noise[i], bool(gross[i])))
         if coin[n + 2] < self.phantom_rate and truth[0].kind not in (Kind.CLOSURE, Kind.REDUCER):
             ref = out[-1]
             phantom_dir = ref.direction + math.pi / 2 + rng.normal(0.0, 0.3)
@@ -137,6 +159,21 @@ class DetectionErrorModel:
             confidence=self.confidence,
             bend_radius=o.bend_radius if kind == Kind.BEND else 0.0,
         )
+
+
+#: A long bend read as a lower bound keeps at least this angle, rad.
+MIN_LOWER_BOUND_ANGLE = math.radians(5.0)
+
+
+def _read_short(o: StructureOption, shortfall: float) -> StructureOption:
+    """The long bend ``o`` read ``shortfall`` rad short of its angle (a lower bound, at least
+    :data:`MIN_LOWER_BOUND_ANGLE`), its reference point nearer with it: the arc's start
+    (``distance - R tan(angle / 2)``) and radius stay."""
+    if shortfall <= 0.0:
+        return o
+    angle = max(o.angle - shortfall, min(o.angle, MIN_LOWER_BOUND_ANGLE))
+    nearer = o.bend_radius * (math.tan(0.5 * o.angle) - math.tan(0.5 * angle))
+    return replace(o, angle=angle, distance=o.distance - nearer)
 
 
 def _confuse(kind: str, u: float) -> str:
