@@ -463,8 +463,13 @@ def test_an_automatic_way_that_jams_is_sensed_again(monkeypatch: pytest.MonkeyPa
 
     monkeypatch.setattr(KinematicPlant, "resense", counting)
     env = gym.make("pipenav/PipeNav-v0", detector="improved", lidar="ydlidar_x4")
-    obs, info = env.reset(seed=1)  # (a seed whose first single way jams)
-    assert info["auto_jammed"]
+    # (the first seed whose first single way jams: which one depends on the error models)
+    for seed in range(100):
+        resensed.clear()
+        obs, info = env.reset(seed=seed)
+        if info.get("auto_jammed"):
+            break
+    assert info.get("auto_jammed"), "no seed in 0-99 jams on its first single way"
     assert len(resensed) == 1
     offered = env.unwrapped.decision
     assert offered is not resensed[0] and offered.options
