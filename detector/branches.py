@@ -29,6 +29,7 @@ from detector.pipe_cloud import (
     PipeCloud,
     axis_direction,
     azimuth_coverage,
+    azimuth_sectors,
     even_indices,
     even_subsample,
     fit_confidence,
@@ -77,7 +78,7 @@ def find_lobes(
         floor = cfg.tol_floor if cloud.floor is None else cloud.floor
         if depth < max(3.0 * floor, 0.1 * big_r):
             continue  # a shallow sliver (seam leaks, noise), not an opening
-        roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
+        roll = _mean_roll(p)
         lobes.append(Lobe(m, roll, n))
     # merge lobes within 45 deg of roll (an opening split by dropouts)
     lobes.sort(key=lambda lb: -lb.n)
@@ -87,7 +88,7 @@ def find_lobes(
             if abs(wrap_angle(lb.roll - mg.roll)) < math.radians(45.0):
                 mg.mask = mg.mask | lb.mask
                 p = cloud.points(mg.mask)
-                mg.roll = math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
+                mg.roll = _mean_roll(p)
                 mg.n += lb.n
                 break
         else:
@@ -97,6 +98,11 @@ def find_lobes(
         biggest = max(m.n for m in merged)
         merged = [m for m in merged if m.n >= max(cfg.min_lobe_points, 0.05 * biggest)]
     return merged
+
+
+def _mean_roll(p: NDArray[np.float64]) -> float:
+    """The roll (rad) of the mean cross-section direction of the ``(n, 3)`` points ``p``."""
+    return math.atan2(float(p[:, 2].sum()), float(p[:, 1].sum()))
 
 
 #: A part of a region of returns beyond the wall: its grid mask, its number of returns and its
@@ -168,7 +174,7 @@ def _nearest_in_roll(
     centres = np.empty(len(parts))
     for j, (m, _, _) in enumerate(parts):
         own = m[mask]
-        centres[j] = math.atan2(float(p[own, 2].sum()), float(p[own, 1].sum()))
+        centres[j] = _mean_roll(p[own])
     owner = np.argmin(np.abs(wrap_angle(roll[:, None] - centres[None, :])), axis=1)
     cells = np.flatnonzero(mask)
     out: list[RegionPart] = []
@@ -193,9 +199,7 @@ def _profile_depth(
     the run's wall square to it only the difference of the radii. None if fewer than half the
     sectors hold :data:`PROFILE_MIN_RETURNS` returns, or if the deepest and the shallowest
     sector differ by no more than ``contrast`` m (an even region: no way stands out)."""
-    k = (np.floor((np.arctan2(p[:, 2], p[:, 1]) + math.pi) * (sectors / (2 * math.pi)))).astype(
-        np.intp
-    ) % sectors
+    k = azimuth_sectors(p, sectors)
     counts = np.bincount(k, minlength=sectors)
     deepest = np.full(sectors, -np.inf)
     np.maximum.at(deepest, k, depth)

@@ -768,13 +768,18 @@ def azimuth_coverage(p: NDArray, bins: int = 36) -> float:
     return _yz_coverage(p[:, 1], p[:, 2], bins)
 
 
+def azimuth_sectors(p: NDArray, bins: int) -> NDArray[np.intp]:
+    """The azimuth sector (``0 .. bins - 1``, sector 0 from -pi) of each of the ``(n, 3)``
+    pipe-frame points, by the roll of its cross-section ``(y, z)``."""
+    phi = np.arctan2(p[:, 2], p[:, 1])
+    return np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(np.intp) % bins
+
+
 def azimuth_uniformity(p: NDArray, bins: int = 12) -> float:
     """Smallest azimuth-bin count relative to the median bin count (1: even all around)."""
     if p.shape[0] == 0:
         return 0.0
-    phi = np.arctan2(p[:, 2], p[:, 1])
-    k = np.floor((phi + math.pi) / (2 * math.pi) * bins).astype(int) % bins
-    cnt = np.bincount(k, minlength=bins)
+    cnt = np.bincount(azimuth_sectors(p, bins), minlength=bins)
     med = float(partial_percentile(cnt.astype(np.float64), 50.0))
     return float(cnt.min()) / med if med > 0 else 0.0
 
