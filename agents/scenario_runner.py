@@ -29,6 +29,7 @@ import os
 import platform
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from datetime import datetime, timezone
@@ -238,6 +239,52 @@ class _Worker:
         self.conn.close()
 
 
+class _CtrlCAtTheWait:
+    """Ctrl-C (SIGINT) turned into a flag and a byte on a pipe the pool's wait watches: the
+    interrupt is raised (:meth:`check`) where the loop checks for it, never inside whatever
+    the main thread happened to be running (a lock taken by the progress display, a pipe to
+    a worker), which could leave that half done. Off the main thread (where signal handlers
+    cannot be set) Ctrl-C stays Python's default."""
+
+    def __init__(self) -> None:
+        self.hit = False
+        self._fds: tuple[int, int] | None = None
+        self._saved: tuple[Any, int] | None = None
+
+    def __enter__(self) -> _CtrlCAtTheWait:
+        if threading.current_thread() is threading.main_thread():
+            r, w = os.pipe()
+            os.set_blocking(r, False)
+            os.set_blocking(w, False)
+            self._fds = (r, w)
+            old_fd = signal.set_wakeup_fd(w)
+            self._saved = (signal.signal(signal.SIGINT, self._on_sigint), old_fd)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._saved is not None:
+            handler, old_fd = self._saved
+            signal.signal(signal.SIGINT, handler)
+            signal.set_wakeup_fd(old_fd)
+            self._saved = None
+        if self._fds is not None:
+            for fd in self._fds:
+                os.close(fd)
+            self._fds = None
+
+    def _on_sigint(self, signum: int, frame: Any) -> None:
+        self.hit = True
+
+    def fds(self) -> list[int]:
+        """The pipe's read end, to wait on with the workers (none off the main thread)."""
+        return [] if self._fds is None else [self._fds[0]]
+
+    def check(self) -> None:
+        """Raise ``KeyboardInterrupt`` if Ctrl-C came."""
+        if self.hit:
+            raise KeyboardInterrupt
+
+
 class _LocalPool:
     """The local backend: up to ``jobs`` worker processes, each running one task at a time
     under its deadline. A worker that dies or misses its deadline is replaced, and its task
@@ -256,27 +303,37 @@ class _LocalPool:
         self.workers: list[_Worker] = []
 
     def run(self) -> None:
-        """Run every task; on any exception (Ctrl-C) the workers are killed."""
+        """Run every task; on any exception (Ctrl-C) the workers are killed. Ctrl-C is taken
+        at the wait for the workers (see :class:`_CtrlCAtTheWait`), not wherever the loop
+        happens to be."""
         try:
-            while self.todo or any(w.task is not None for w in self.workers):
-                self._start_and_assign()
-                watched = [w for w in self.workers if w.task is not None or not w.ready]
-                wait_s = max(0.0, min(w.deadline for w in watched) - time.monotonic())
-                ready = set(
-                    mp_connection.wait(
-                        [w.conn for w in watched] + [w.process.sentinel for w in watched],
-                        timeout=wait_s,
-                    )
-                )
-                for w in watched:
-                    if w.conn in ready or w.process.sentinel in ready:
-                        self._receive(w)
-                    elif time.monotonic() >= w.deadline:
-                        self._overdue(w)
+            with _CtrlCAtTheWait() as ctrl_c:
+                self._loop(ctrl_c)
         finally:
             interrupted = sys.exc_info()[0] is not None
             for w in self.workers:
                 w.stop(force=interrupted)
+
+    def _loop(self, ctrl_c: _CtrlCAtTheWait) -> None:
+        while self.todo or any(w.task is not None for w in self.workers):
+            ctrl_c.check()
+            self._start_and_assign()
+            watched = [w for w in self.workers if w.task is not None or not w.ready]
+            wait_s = max(0.0, min(w.deadline for w in watched) - time.monotonic())
+            ready = set(
+                mp_connection.wait(
+                    [w.conn for w in watched]
+                    + [w.process.sentinel for w in watched]
+                    + ctrl_c.fds(),
+                    timeout=wait_s,
+                )
+            )
+            ctrl_c.check()
+            for w in watched:
+                if w.conn in ready or w.process.sentinel in ready:
+                    self._receive(w)
+                elif time.monotonic() >= w.deadline:
+                    self._overdue(w)
 
     def _start_and_assign(self) -> None:
         busy = sum(w.task is not None for w in self.workers)

@@ -234,3 +234,21 @@ def test_ray_backend_dead_worker_and_timeout(tmp_path: Path) -> None:
     assert by["a_ok"]["status"] == by["c_ok"]["status"] == "passed"
     assert by["b_dies"]["status"] == "error" and "Ray worker failed" in by["b_dies"]["error"]
     assert by["d_hangs"]["status"] == "error" and "timed out" in by["d_hangs"]["error"]
+
+
+def test_ctrl_c_during_a_run_is_taken_at_the_wait() -> None:
+    """SIGINT while the pool runs sets a flag and wakes its wait; the interrupt is raised by
+    ``check``, not where the signal landed; the handler before the run is restored after."""
+    from multiprocessing import connection as mp_connection
+
+    from agents.scenario_runner import _CtrlCAtTheWait
+
+    before = signal.getsignal(signal.SIGINT)
+    with _CtrlCAtTheWait() as ctrl_c:
+        ctrl_c.check()  # nothing yet
+        assert mp_connection.wait(ctrl_c.fds(), timeout=0.0) == []
+        os.kill(os.getpid(), signal.SIGINT)  # (handled here: no KeyboardInterrupt raised)
+        assert mp_connection.wait(ctrl_c.fds(), timeout=5.0) == ctrl_c.fds()
+        with pytest.raises(KeyboardInterrupt):
+            ctrl_c.check()
+    assert signal.getsignal(signal.SIGINT) is before
