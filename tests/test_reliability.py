@@ -290,3 +290,63 @@ def test_full_fidelity_episodes_keep_one_world_and_renderer() -> None:
     for worlds, plants, renderers, lidars in counts:
         assert plants == 1 and lidars == 1 and renderers <= 1 and worlds <= 2, counts
     assert counts[-1] == counts[0], counts
+
+
+def _spawned_children(pid: int) -> list[int]:
+    """The pids of ``pid``'s living children that are multiprocessing spawn workers (Linux)."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+            cmdline = (entry / "cmdline").read_bytes()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2 :].split()
+        if int(fields[1]) == pid and fields[0] != "Z" and b"spawn_main" in cmdline:
+            out.append(int(entry.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2 :].split()[0] != "Z"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal: Linux")
+def test_benchmark_workers_end_when_the_benchmark_is_killed() -> None:
+    """A benchmark's worker pool (``benchmarks.workers.run_plan``) killed with SIGKILL, as a
+    stopped job is: its spawned workers end too, rather than living on idle with their
+    worlds."""
+    import signal
+    import time
+
+    root = str(Path(__file__).resolve().parents[1])
+    code = (
+        f"import sys, time; sys.path.insert(0, {root!r}); "
+        "from benchmarks.workers import run_plan; "
+        "run_plan(time.sleep, [(120,)] * 4, jobs=2)"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", code], start_new_session=True)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 120
+        while len(workers) < 2 and time.monotonic() < deadline:
+            time.sleep(0.2)
+            workers = _spawned_children(proc.pid)
+        assert len(workers) == 2, workers
+        time.sleep(3.0)  # (each has run its initializer and taken a task)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+        deadline = time.monotonic() + 20
+        while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not any(_alive(w) for w in workers), "workers outlived the killed benchmark"
+    finally:
+        for w in [proc.pid, *workers]:
+            if _alive(w):
+                os.kill(w, signal.SIGKILL)
