@@ -32,7 +32,7 @@ import numpy as np
 import detector
 from detector.atomic import atomic_write_text
 from detector.fusion import StructureTracker
-from detector.options import StructureOption, match_option
+from detector.options import arc_start, match_option
 from detector.validation import check_choice
 from pipe_env import layouts
 from pipe_env.envs.plant_full import CONFIRM_RESCANS
@@ -181,7 +181,7 @@ def score_sample(kind: str, diameter: float, fused, truth) -> dict:
         if t.bend_radius > 0.0:
             rec["long_bend_ways"] += 1
         if short:
-            e_dist = _arc_start(o) - _arc_start(t)
+            e_dist = arc_start(o) - arc_start(t)
             e_ang = None
         e = (e_dist, o.diameter - t.diameter, e_ang)
         bad = (
@@ -199,11 +199,6 @@ def score_sample(kind: str, diameter: float, fused, truth) -> dict:
         rec["errors"].append((*e, e_dir, bad, o.confidence))
     rec["matched"] = len(matched)
     return rec
-
-
-def _arc_start(o: StructureOption) -> float:
-    """How far ahead a bend's arc starts (its reference point less ``R tan(angle / 2)``), m."""
-    return o.distance - o.bend_radius * math.tan(0.5 * o.angle)
 
 
 def run_samples(

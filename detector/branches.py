@@ -34,6 +34,7 @@ from detector.pipe_cloud import (
     even_subsample,
     fit_confidence,
     partial_percentile,
+    region_floor,
     region_sizes,
 )
 from detector.robust import robust_fit, tukey_cost, tukey_weights
@@ -75,7 +76,7 @@ def find_lobes(
         depth = (
             float(partial_percentile(np.sqrt(np.square(p[:, 1]) + np.square(p[:, 2])), 90)) - big_r
         )
-        floor = cfg.tol_floor if cloud.floor is None else cloud.floor
+        floor = region_floor(cloud, cfg)
         if depth < max(3.0 * floor, 0.1 * big_r):
             continue  # a shallow sliver (seam leaks, noise), not an opening
         roll = _mean_roll(p)
@@ -130,8 +131,7 @@ def _split_all_round(
     depth = np.hypot(p[:, 1], p[:, 2]) - big_r
     parts = _deep_parts(cloud, mask, depth, 0.5 * float(partial_percentile(depth, 90.0)), cfg)
     if parts is None:
-        floor = cfg.tol_floor if cloud.floor is None else cloud.floor
-        middle = _profile_depth(p, depth, cfg.all_round_sectors, floor)
+        middle = _profile_depth(p, depth, cfg.all_round_sectors, region_floor(cloud, cfg))
         parts = None if middle is None else _deep_parts(cloud, mask, depth, middle, cfg)
         if parts is not None:
             parts = _nearest_in_roll(mask, p, parts)

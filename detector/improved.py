@@ -157,7 +157,7 @@ from detector.detection import Detection
 from detector.geometry import wrap_angle
 from detector.grazing import find_ring_holes
 from detector.improved_config import DEFAULT_CONFIG, ImprovedConfig
-from detector.options import StructureOption, option_order
+from detector.options import StructureOption, arc_start, option_order
 from detector.pipe_cloud import (
     PipeCloud,
     axis_direction,
@@ -590,8 +590,7 @@ def _gentle_start(det: Detection) -> float | None:
     if det.kind == Kind.REDUCER and det.options:
         return det.options[0].distance
     if det.kind == Kind.BEND and len(det.options) == 1 and det.options[0].bend_radius > 0.0:
-        opt = det.options[0]
-        return opt.distance - opt.bend_radius * math.tan(0.5 * opt.angle)
+        return arc_start(det.options[0])
     return None
 
 

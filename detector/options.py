@@ -126,6 +126,13 @@ def direction_name(direction: float) -> str:
     return f"{names[k]} ({deg + 0:+d} deg)"
 
 
+def arc_start(option: StructureOption) -> float:
+    """How far ahead a bend's arc starts, m: its reference point (``distance``, where the
+    centrelines meet) less ``bend_radius x tan(angle / 2)``; the reference point itself for a
+    mitre (``bend_radius`` 0)."""
+    return option.distance - option.bend_radius * math.tan(0.5 * option.angle)
+
+
 def option_vector(option: StructureOption) -> NDArray[np.float64]:
     """Outgoing axis of an option in the sensor frame."""
     return direction_from_angles(option.angle, option.direction)

@@ -526,6 +526,12 @@ def classify_returns(
     return classify_counted(cloud, big_r, cfg)[:4]
 
 
+def region_floor(cloud: PipeCloud, cfg: ImprovedConfig) -> float:
+    """The tolerance floor of the regions beyond the wall, m: the cloud's lowered one
+    (:attr:`PipeCloud.floor`) when set, else ``cfg.tol_floor``."""
+    return cfg.tol_floor if cloud.floor is None else cloud.floor
+
+
 def classify_counted(
     cloud: PipeCloud, big_r: float, cfg: ImprovedConfig
 ) -> tuple[
@@ -533,7 +539,7 @@ def classify_counted(
 ]:
     """:func:`classify_returns` and how many returns lie on the wall, beyond it and inside it:
     ``(tol, wall, beyond, inside, n_wall, n_beyond, n_inside)``."""
-    floor = cfg.tol_floor if cloud.floor is None else cloud.floor
+    floor = region_floor(cloud, cfg)
     lift = 0.0 if cloud.floor is None else cfg.tol_floor - cloud.floor
     g, k = cloud.shape
     return _classify_kernel(

@@ -38,7 +38,7 @@ from detector.geometry import (
     norm3,
     wrap_angle,
 )
-from detector.options import StructureOption, match_option, option_vector
+from detector.options import StructureOption, arc_start, match_option, option_vector
 from detector.scan import Scan
 from detector.validation import check_number
 from detector.vocab import DETECTORS, StrEnum
@@ -101,11 +101,6 @@ class ExecutionTolerance:
     def at(self, diameter: float) -> dict[str, float]:
         """The tolerances in a pipe of ``diameter`` metres."""
         return dict(_tolerances_at(self, float(diameter)))
-
-
-def _arc_start(o: StructureOption) -> float:
-    """How far ahead a bend's arc starts (its reference point less ``R tan(angle / 2)``), m."""
-    return o.distance - o.bend_radius * math.tan(0.5 * o.angle)
 
 
 @lru_cache(maxsize=256)
@@ -520,7 +515,7 @@ class KinematicPlant:
             # turn starts where the arc does and follows its walls to its end (it complies
             # with them), so an angle read short (a lower bound, seen short of the arc's end)
             # is no error; where the arc starts is what must be right
-            d_err = (_arc_start(choice) - _arc_start(true)) / max(diameter, 1e-3)
+            d_err = (arc_start(choice) - arc_start(true)) / max(diameter, 1e-3)
             a_err = max(a_err, 0.0)
         checks = (
             ("distance (early, fraction of D)", -d_err, lim["distance_early"]),
