@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from statistics import NormalDist
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -98,6 +98,9 @@ def _closure(
                 seen_through = _end_wall_seen_through(cloud, big_r, dist, tol_u, conf, cfg, diag)
                 if seen_through is not None:
                     return seen_through
+                profiled = _wall_profile_reducer(cloud, big_r, dist, tol_u, conf, cfg, diag)
+                if profiled is not None:
+                    return profiled
             opt = StructureOption("closure", dist, 0.0, 0.0, 0.0, conf)
             # (curved only by the quadratic test: an end wall unless the returns show a
             # turn; the caller decides)
@@ -205,8 +208,12 @@ def _end_wall_seen_through(
         return None
     if wider:
         r2 = _wider_rim(shares, radii, sigmas, cap_share_out, wide, round_ring, big_r, cloud, cfg)
-        # (the beams beyond the rim crossed the wall radius before the widening ended)
+        # (the beams beyond the rim crossed the wall radius before the widening ended; where
+        # the wider pipe's own wall returns, its rings show where the wall left the radius)
         start = min(start, dist * big_r / r2)
+        prof = wall_profile(cloud, big_r, dist, tol_u, cfg, diag)
+        if prof is not None and prof.step > 0.0:
+            start = min(start, prof.start)
     else:
         r2 = min(float(radii[returning].max()) + 0.5 * dist * cloud.beam_step, big_r)
         # (where the cone returns, within the wall's tolerance, the rings' medians show the
@@ -218,6 +225,123 @@ def _end_wall_seen_through(
             start = hinge
     diag.update(end_wall_seen_through="wider" if wider else "narrower", reducer_r2=r2)
     opt = StructureOption("reducer", max(start, 0.0), 2.0 * r2, 0.0, 0.0, 0.5 * conf)
+    return Detection("reducer", [opt], 0.5 * conf, diag)
+
+
+class WallProfile(NamedTuple):
+    """The wall's radial profile before an end wall (see :func:`wall_profile`), m: where it
+    leaves the wall (``start``), the wall's own offset from the radius it was measured
+    against (``offset``) and the step off it the rings show (``step``: > 0 wider)."""
+
+    start: float
+    offset: float
+    step: float
+
+
+def wall_profile(
+    cloud: PipeCloud, big_r: float, dist: float, tol_u: float, cfg: ImprovedConfig, diag: dict
+) -> WallProfile | None:
+    """The step of the wall's radial profile before an end wall ``dist`` m ahead (flat to
+    within ``tol_u`` m), when the rings of beams show one; else None.
+
+    Under range noise a gentle cone and a pipe a few millimetres narrower or wider lie within
+    the incoming wall's tolerance return by return. The median offset from the wall radius
+    ``big_r`` of a ring of beams (one beam angle in every plane of the sweep: about a hundred
+    returns, half a ring round the axis, those within ``cfg.profile_band`` radii of the wall;
+    rings with returns from at least ``cfg.cone_ring_coverage`` of the planes) is good to a
+    fraction of a millimetre: flat up to the end wall for a cap, off it past a reducer's
+    start. The profile ``e(u) = e0 + s clip((u - L) / T, 0, 1)`` is fitted to the rings'
+    median ``u`` and offset: a coarse-to-fine grid over the start
+    ``L`` and the taper's length ``T``, the offset ``e0`` and the step ``s`` by weighted least
+    squares (each ring weighted by its median's scatter, at least ``cfg.profile_ring_floor``;
+    a taper running past the last ring counts the step seen up to it). A step when it is at
+    least ``cfg.profile_min_step``, explains the rings better than a flat wall by
+    ``cfg.profile_min_lr`` (chi-square) and at least ``cfg.profile_min_rings`` rings lie
+    beyond half ``cfg.profile_min_step`` on its side."""
+    u_all = cloud.xyz_v[0]
+    e_all = cloud.r_v - big_r
+    sel = (u_all < dist - tol_u) & (np.abs(e_all) < cfg.profile_band * big_r)
+    g, k = cloud.shape
+    if np.count_nonzero(sel) < 4 * cfg.cone_min_returns or k == 0:
+        return None
+    # (a ring of beams: one beam angle in every plane of the sweep, half a ring round the
+    # axis; per ring the share of planes returning, the median offset and the median u)
+    shares, _, ea, _, ua = column_stats(cloud.cell[sel] % k, e_all[sel], u_all[sel], k, g)
+    keep = shares >= cfg.cone_ring_coverage
+    ua, ea, na = ua[keep], ea[keep], shares[keep] * max(g, 1)
+    if ua.size < cfg.profile_min_rings + 2 or float(np.ptp(ea)) < cfg.profile_min_step:
+        return None
+    noise = float(partial_percentile(cloud.sigma_v, 50.0))
+    sig = np.maximum(1.25 * max(noise, 1e-5) / np.sqrt(na), cfg.profile_ring_floor)
+    w = 1.0 / np.square(sig)
+    # (the flat wall, at its own radius: the wall radius measured near the sensor may take
+    # in the start of a cone the sensor stands at)
+    sw, se, see = float(np.sum(w)), float(np.sum(w * ea)), float(np.sum(w * ea * ea))
+    chi0 = see - se * se / sw
+    u_lo, u_hi = float(ua.min()), float(ua.max())
+    lengths = np.geomspace(0.005, max(u_hi - u_lo, 0.006), 25)
+    # a coarse grid (starts every centimetre, every other length), then around its best
+    # (starts every 2 mm, every length)
+    best = _profile_grid(ua, ea, w, np.arange(u_lo - 0.02, u_hi, 0.01), lengths[::2])
+    j = 2 * best[2]
+    around = lengths[max(j - 2, 0) : j + 3]
+    best = _profile_grid(ua, ea, w, np.arange(best[1] - 0.01, best[1] + 0.0101, 0.002), around)
+    chi, start, jj, e0, step = best
+    length = float(around[jj])
+    # (the step the rings show: a taper running past the last ring is seen only so far)
+    s = step * min(1.0, max(u_hi - start, 0.0) / length)
+    lr = chi0 - chi
+    side = np.sign(s) * (ea - e0)
+    beyond = int(np.count_nonzero((ua > start) & (side >= 0.5 * cfg.profile_min_step)))
+    diag.update(profile_step=s, profile_start=start, profile_lr=lr, profile_rings_beyond=beyond)
+    if abs(s) < cfg.profile_min_step or lr < cfg.profile_min_lr or beyond < cfg.profile_min_rings:
+        return None
+    return WallProfile(start, e0, s)
+
+
+def _profile_grid(
+    ua: NDArray[np.float64],
+    ea: NDArray[np.float64],
+    w: NDArray[np.float64],
+    starts: NDArray[np.float64],
+    lengths: NDArray[np.float64],
+) -> tuple[float, float, int, float, float]:
+    """The best of the profiles ``e0 + s clip((u - L) / T, 0, 1)`` over the grid of starts
+    ``L`` and lengths ``T`` (m) for the rings at ``ua`` (m) with offsets ``ea`` (m) and weights
+    ``w``: ``(chi-square, L, index of T, e0, s)``; ``e0`` and ``s`` by weighted least squares."""
+    sw, se, see = float(np.sum(w)), float(np.sum(w * ea)), float(np.sum(w * ea * ea))
+    bb = np.clip((ua[None, None, :] - starts[:, None, None]) / lengths[None, :, None], 0.0, 1.0)
+    wb = w * bb
+    sb, sbb, sbe = np.sum(wb, axis=2), np.sum(wb * bb, axis=2), np.sum(wb * ea, axis=2)
+    det = sw * sbb - sb * sb
+    ok = det > 1e-9 * sw * np.maximum(sbb, 1e-30)
+    det = np.where(ok, det, 1.0)
+    off = (sbb * se - sb * sbe) / det
+    step = (sw * sbe - sb * se) / det
+    chi = np.where(ok, see - off * se - step * sbe, np.inf)
+    i, j = np.unravel_index(int(np.argmin(chi)), chi.shape)
+    return float(chi[i, j]), float(starts[i]), int(j), float(off[i, j]), float(step[i, j])
+
+
+def _wall_profile_reducer(
+    cloud: PipeCloud,
+    big_r: float,
+    dist: float,
+    tol_u: float,
+    conf: float,
+    cfg: ImprovedConfig,
+    diag: dict[str, Any],
+) -> Detection | None:
+    """A reducer whose far end wall (``dist`` m ahead, flat to within ``tol_u`` m) is seen
+    past it, found by the wall's radial profile (:func:`wall_profile`): the structure looked
+    like a cap of the incoming pipe (radius ``big_r``, m), as the end wall beyond outnumbers
+    the returns off the wall. Its confidence is ``conf`` halved; None without a step."""
+    prof = wall_profile(cloud, big_r, dist, tol_u, cfg, diag)
+    if prof is None:
+        return None
+    r2 = big_r + prof.offset + prof.step
+    diag.update(end_wall_profile="wider" if prof.step > 0.0 else "narrower", reducer_r2=r2)
+    opt = StructureOption("reducer", max(prof.start, 0.0), 2.0 * r2, 0.0, 0.0, 0.5 * conf)
     return Detection("reducer", [opt], 0.5 * conf, diag)
 
 

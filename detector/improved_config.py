@@ -183,6 +183,16 @@ class ImprovedConfig:
             count: a tilted or offset sensor's rings straddle the rim; and only when the last
             return on the incoming wall lies at least ``rim_wall_gap`` radii before the end
             wall (a wall in view up to it shows a cap or a reducer directly).
+        profile_band, profile_ring_floor, profile_min_step, profile_min_lr, profile_min_rings:
+            an end wall that passes for a cap (or is seen through a widening) is the far end
+            of a reducer when the wall before it shows a step in its radial profile
+            (:func:`detector.axisymmetric.wall_profile`): the median offset from the wall
+            radius of each ring of beams (returns within ``profile_band`` radii of the wall;
+            each ring's scatter taken as at least ``profile_ring_floor``, m: the medians of
+            far rings wander by a few tenths of a millimetre) fitted with a step along a
+            cone; a step of at least ``profile_min_step`` (m), better than a flat wall by
+            ``profile_min_lr`` (chi-square), with at least ``profile_min_rings`` rings past
+            half ``profile_min_step`` on its side.
         hole_min_step, hole_noise_k: a return enters a side hole that one ring of beams sees
             (:mod:`detector.grazing`) when it lies this far (m) beyond the wall line through
             the rings on either side, and at least ``hole_noise_k`` times its radial noise.
@@ -293,6 +303,11 @@ class ImprovedConfig:
     rim_cap_share: float = 0.25
     rim_share_excess: float = 0.2
     rim_margin: float = 0.0005
+    profile_band: float = 0.4
+    profile_ring_floor: float = 0.0003
+    profile_min_step: float = 0.002
+    profile_min_lr: float = 25.0
+    profile_min_rings: int = 3
     rim_ring_spread: float = 0.5
     rim_wall_gap: float = 1.0
     hole_min_step: float = 0.00035
@@ -413,6 +428,11 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "rim_cap_share": (float, 0.0, True, 0.5, "a number in [0, 0.5]"),
     "rim_share_excess": (float, 0.0, False, 1.0, "a number in (0, 1]"),
     "rim_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "profile_band": (float, 0.0, False, 1.0, "a number in (0, 1] (radii)"),
+    "profile_ring_floor": (float, 0.0, False, 1.0, "a number in (0, 1] m"),
+    "profile_min_step": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "profile_min_lr": (float, 0.0, True, math.inf, "a finite number >= 0"),
+    "profile_min_rings": (int, 1, True, math.inf, "an integer >= 1"),
     "rim_ring_spread": (float, 0.0, True, 100.0, "a number in [0, 100] (beam spacings)"),
     "rim_wall_gap": (float, 0.0, True, 1000.0, "a number in [0, 1000] (radii)"),
     "hole_min_step": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
