@@ -151,7 +151,7 @@ from detector.axis_fit import (
     wall_consistent,
     wall_intact,
 )
-from detector.axisymmetric import detect_axisymmetric
+from detector.axisymmetric import detect_axisymmetric, wall_profile
 from detector.branches import Lobe, detect_branches, find_lobes
 from detector.detection import Detection
 from detector.geometry import wrap_angle
@@ -1075,6 +1075,8 @@ def _detect_in_pipe_frame(
         inside_near = inside_k & (u_grid <= u_start + 4.0 * big_r)
         if uniform >= 0.3 and np.count_nonzero(inside_near) < 0.3 * np.count_nonzero(beyond_k):
             return detect_axisymmetric(cloud, big_r, inside_near, beyond_k, wall, tol, cfg, diag)
+        if _shallow_widening(cloud, big_r, lobes, inside_k, cfg, diag):
+            return detect_axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
         return detect_branches(cloud, big_r, lobes, keep, wall, tol, cfg, diag)
     det = detect_axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
     if det.diagnostics.get("axisymmetric_support", 1.0) >= 0.6:
@@ -1103,6 +1105,37 @@ def _detect_in_pipe_frame(
     if alt.kind != Kind.STRAIGHT and alt.confidence > det.confidence:
         return alt
     return det
+
+
+def _shallow_widening(
+    cloud: PipeCloud,
+    big_r: float,
+    lobes: list[Lobe],
+    inside: NDArray[np.bool_],
+    cfg: ImprovedConfig,
+    diag: dict[str, Any],
+) -> bool:
+    """Are the ``lobes`` beyond the wall patches of a wider pipe's wall rather than branch
+    openings? Under range noise a pipe a few millimetres wider lies mostly within the wall
+    tolerance and the noise pushes patches of it past: lobes no deeper than the widening, on
+    a wall whose radial profile (:func:`detector.axisymmetric.wall_profile`, up to the end
+    wall the ``inside`` returns show, if any) steps out all round. A branch opening moves
+    no ring's median by millimetres, and its returns reach deeper than such a step: the
+    lobes' 90th percentile beyond the wall must stay within ``cfg.profile_min_step`` of the
+    step."""
+    u_inside = cloud.values(inside, cloud.xyz_v[0])
+    dist = float(partial_percentile(u_inside, 5.0)) if u_inside.size else math.inf
+    prof = wall_profile(cloud, big_r, dist, 0.0, cfg, {})
+    if prof is None or prof.step <= 0.0:
+        return False
+    mask = np.zeros_like(lobes[0].mask)
+    for lobe in lobes:
+        mask |= lobe.mask
+    p = cloud.points(mask)
+    depth = float(partial_percentile(np.hypot(p[:, 1], p[:, 2]) - big_r, 90.0))
+    shallow = depth <= prof.offset + prof.step + cfg.profile_min_step
+    diag["lobes_shallow_widening"] = shallow
+    return shallow
 
 
 def _across_sides_open(cloud: PipeCloud, big_r: float, alt: Detection, cfg: ImprovedConfig) -> bool:
