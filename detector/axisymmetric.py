@@ -218,7 +218,7 @@ def _end_wall_seen_through(
         r2 = min(float(radii[returning].max()) + 0.5 * dist * cloud.beam_step, big_r)
         # (where the cone returns, within the wall's tolerance, the rings' medians show the
         # kink where it leaves the wall, as for a widening's cone, mirrored)
-        noise = float(partial_percentile(cloud.sigma_v, 50.0))
+        noise = cloud.sigma_percentile(50.0)
         hinge = _ring_hinge_start(xyz, big_r - r_all, noise, start, dist - tol_u, big_r - r2, cfg)
         diag["end_wall_cone_hinge"] = hinge is not None
         if hinge is not None:
@@ -271,7 +271,7 @@ def wall_profile(
     ua, ea, na = ua[keep], ea[keep], shares[keep] * max(g, 1)
     if ua.size < cfg.profile_min_rings + 2 or float(np.ptp(ea)) < cfg.profile_min_step:
         return None
-    noise = float(partial_percentile(cloud.sigma_v, 50.0))
+    noise = cloud.sigma_percentile(50.0)
     sig = np.maximum(1.25 * max(noise, 1e-5) / np.sqrt(na), cfg.profile_ring_floor)
     w = 1.0 / np.square(sig)
     # (the flat wall, at its own radius: the wall radius measured near the sensor may take

@@ -1125,14 +1125,26 @@ def _shallow_widening(
     step."""
     u_inside = cloud.values(inside, cloud.xyz_v[0])
     dist = float(partial_percentile(u_inside, 5.0)) if u_inside.size else math.inf
-    prof = wall_profile(cloud, big_r, dist, 0.0, cfg, {})
-    if prof is None or prof.step <= 0.0:
-        return False
     mask = np.zeros_like(lobes[0].mask)
     for lobe in lobes:
         mask |= lobe.mask
     p = cloud.points(mask)
     depth = float(partial_percentile(np.hypot(p[:, 1], p[:, 2]) - big_r, 90.0))
+    # (first a cheap look: past the lobes' start the wall's returns, lobes and all, must lie
+    # out by half a step or more, where the run goes on past a branch's opening)
+    u, e = cloud.xyz_v[0], cloud.r_v - big_r
+    near_wall = np.abs(e) < cfg.profile_band * big_r
+    u_lobes = float(partial_percentile(p[:, 0], 5.0))
+    past = near_wall & (u >= u_lobes) & (u < dist)
+    before = near_wall & (u < u_lobes)
+    if np.count_nonzero(past) < 4 * cfg.cone_min_returns or not np.any(before):
+        return False
+    rise = float(partial_percentile(e[past], 50.0)) - float(partial_percentile(e[before], 50.0))
+    if rise < 0.5 * cfg.profile_min_step:
+        return False
+    prof = wall_profile(cloud, big_r, dist, 0.0, cfg, {})
+    if prof is None or prof.step <= 0.0:
+        return False
     shallow = depth <= prof.offset + prof.step + cfg.profile_min_step
     diag["lobes_shallow_widening"] = shallow
     return shallow
