@@ -22,6 +22,7 @@ from detector.options import StructureOption
 from detector.pipe_cloud import (
     PipeCloud,
     azimuth_coverage,
+    column_medians,
     column_stats,
     even_indices,
     fit_confidence,
@@ -266,9 +267,9 @@ def wall_profile(
         return None
     # (a ring of beams: one beam angle in every plane of the sweep, half a ring round the
     # axis; per ring the share of planes returning, the median offset and the median u)
-    shares, _, ea, _, ua = column_stats(cloud.cell[sel] % k, e_all[sel], u_all[sel], k, g)
-    keep = shares >= cfg.cone_ring_coverage
-    ua, ea, na = ua[keep], ea[keep], shares[keep] * max(g, 1)
+    counts, ea, ua = column_medians(cloud.cell[sel] % k, e_all[sel], u_all[sel], k)
+    keep = counts >= cfg.cone_ring_coverage * max(g, 1)
+    ua, ea, na = ua[keep], ea[keep], counts[keep].astype(float)
     if ua.size < cfg.profile_min_rings + 2 or float(np.ptp(ea)) < cfg.profile_min_step:
         return None
     noise = cloud.sigma_percentile(50.0)

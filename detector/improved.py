@@ -1129,25 +1129,45 @@ def _shallow_widening(
     for lobe in lobes:
         mask |= lobe.mask
     p = cloud.points(mask)
-    depth = float(partial_percentile(np.hypot(p[:, 1], p[:, 2]) - big_r, 90.0))
     # (first a cheap look: past the lobes' start the wall's returns, lobes and all, must lie
     # out by half a step or more, where the run goes on past a branch's opening)
-    u, e = cloud.xyz_v[0], cloud.r_v - big_r
-    near_wall = np.abs(e) < cfg.profile_band * big_r
     u_lobes = float(partial_percentile(p[:, 0], 5.0))
-    past = near_wall & (u >= u_lobes) & (u < dist)
-    before = near_wall & (u < u_lobes)
-    if np.count_nonzero(past) < 4 * cfg.cone_min_returns or not np.any(before):
+    n_past, rise = _median_rise(
+        cloud.xyz_v[0], cloud.r_v, big_r, cfg.profile_band * big_r, u_lobes, dist
+    )
+    if n_past < 4 * cfg.cone_min_returns or rise < 0.5 * cfg.profile_min_step:
         return False
-    rise = float(partial_percentile(e[past], 50.0)) - float(partial_percentile(e[before], 50.0))
-    if rise < 0.5 * cfg.profile_min_step:
-        return False
+    depth = float(partial_percentile(np.hypot(p[:, 1], p[:, 2]) - big_r, 90.0))
     prof = wall_profile(cloud, big_r, dist, 0.0, cfg, {})
     if prof is None or prof.step <= 0.0:
         return False
     shallow = depth <= prof.offset + prof.step + cfg.profile_min_step
     diag["lobes_shallow_widening"] = shallow
     return shallow
+
+
+@njit(cache=True)
+def _median_rise(u, r, big_r, band, u_from, u_to):
+    """Of the returns within ``band`` (m) of the wall radius ``big_r`` (m; ``u`` along the
+    axis, ``r`` from it): how many lie in ``[u_from, u_to)`` and how far their median offset
+    from ``big_r`` lies out from that of those before ``u_from`` (m; 0 when either is empty)."""
+    past = np.empty(u.size)
+    before = np.empty(u.size)
+    n_p = 0
+    n_b = 0
+    for i in range(u.size):
+        e = r[i] - big_r
+        if abs(e) >= band:
+            continue
+        if u[i] < u_from:
+            before[n_b] = e
+            n_b += 1
+        elif u[i] < u_to:
+            past[n_p] = e
+            n_p += 1
+    if n_p == 0 or n_b == 0:
+        return n_p, 0.0
+    return n_p, np.median(past[:n_p]) - np.median(before[:n_b])
 
 
 def _across_sides_open(cloud: PipeCloud, big_r: float, alt: Detection, cfg: ImprovedConfig) -> bool:

@@ -881,6 +881,48 @@ def _sorted_median(s):
 
 
 @njit(cache=True)
+def _median_in_place(x, lo, hi):
+    """The median of ``x[lo:hi]`` (as ``np.median`` gives it; a selection, not a sort)."""
+    return np.median(x[lo:hi])
+
+
+@njit(cache=True)
+def column_medians(cols, a, b, k):
+    """Per column of the scan grid (``0 <= cols < k``) that holds values, in increasing
+    order: how many it holds and the medians of its ``a`` and of its ``b`` (as ``np.median``
+    gives them). Returns ``(counts, a50, b50)``."""
+    count = np.zeros(k, dtype=np.int64)
+    for i in range(cols.size):
+        count[cols[i]] += 1
+    start = np.zeros(k + 1, dtype=np.int64)
+    m = 0
+    for c in range(k):
+        start[c + 1] = start[c] + count[c]
+        if count[c] > 0:
+            m += 1
+    fill = start[:k].copy()
+    a_by = np.empty(cols.size)
+    b_by = np.empty(cols.size)
+    for i in range(cols.size):
+        c = cols[i]
+        a_by[fill[c]] = a[i]
+        b_by[fill[c]] = b[i]
+        fill[c] += 1
+    counts = np.empty(m, dtype=np.int64)
+    a50 = np.empty(m)
+    b50 = np.empty(m)
+    j = 0
+    for c in range(k):
+        if count[c] == 0:
+            continue
+        counts[j] = count[c]
+        a50[j] = _median_in_place(a_by, start[c], start[c + 1])
+        b50[j] = _median_in_place(b_by, start[c], start[c + 1])
+        j += 1
+    return counts, a50, b50
+
+
+@njit(cache=True)
 def column_stats(cols, r, sigma, k, g):
     """Per column of the scan grid (``0 <= cols < k``) that holds values, in increasing
     order: the share of the grid's ``g`` rows it holds, the 10th, 50th and 90th percentiles

@@ -27,6 +27,7 @@ from detector.pipe_cloud import (
     _sloped_tolerance,
     _spread_exceeds,
     azimuth_coverage,
+    column_medians,
     column_stats,
     even_indices,
     partial_percentile,
@@ -572,6 +573,20 @@ def test_column_stats_are_numpys(seed: int, n: int, k: int, decimals: int) -> No
     got = column_stats(cols, r, sigma, k, g)
     for a, b in zip(got, column_stats_np(cols, r, sigma, g)):
         np.testing.assert_array_equal(a, b)
+
+
+@settings(max_examples=80, deadline=None)
+@given(seeds, st.integers(0, 400), st.integers(1, 40), st.integers(0, 6))
+def test_column_medians_are_numpys(seed: int, n: int, k: int, decimals: int) -> None:
+    rng = np.random.default_rng(seed)
+    cols = rng.integers(0, k, n).astype(np.intp)
+    a = np.round(rng.normal(size=n), decimals)  # (ties)
+    b = rng.random(n)
+    counts, a50, b50 = column_medians(cols, a, b, k)
+    present = np.unique(cols)
+    np.testing.assert_array_equal(counts, [np.count_nonzero(cols == c) for c in present])
+    np.testing.assert_array_equal(a50, [np.median(a[cols == c]) for c in present])
+    np.testing.assert_array_equal(b50, [np.median(b[cols == c]) for c in present])
 
 
 @settings(max_examples=60, deadline=None)
