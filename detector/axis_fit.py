@@ -180,11 +180,51 @@ def measure_wall_radius(
     if not covers_azimuth(xyz, idx, 0.75):
         return big_r
     spread = float(mad_sigma(e_sel - de))
-    if spread > straight_wall_rms(cloud):  # not a straight wall about this axis
-        return big_r
+    limit = straight_wall_rms(cloud)
+    if spread > limit:
+        # (a pose a few tenths of a degree or a millimetre off the axis spreads the wall
+        # about it as a first harmonic in the azimuth, growing along the axis: the radius is
+        # what is left without it, when the wall is straight about the axis that explains)
+        fitted = _radius_under_pose_error(xyz, idx, e_sel, big_r, cfg)
+        if fitted is None:
+            return big_r
+        de, spread = fitted
+        if spread > limit or not abs(de) <= cfg.max_radius_correction:
+            return big_r
+        diag["wall_radius_pose_error"] = True
+        if abs(de) < cfg.radius_dead_band:
+            return big_r
     diag["wall_radius"] = big_r + de
     diag["wall_radius_rms"] = spread
     return big_r + de
+
+
+def _radius_under_pose_error(
+    xyz: NDArray[np.float64],
+    idx: NDArray[np.intp],
+    e: NDArray[np.float64],
+    big_r: float,
+    cfg: ImprovedConfig,
+) -> tuple[float, float] | None:
+    """The wall returns ``idx`` of the ``(3, n)`` points, ``e`` (m) from the wall radius
+    ``big_r`` (m), fitted as ``e = de + (a + b u) cos(phi) + (c + d u) sin(phi)`` (an axis off
+    by a small offset ``(a, c)`` and tilt ``(b, d)``, to first order; ``u`` along the axis,
+    ``phi`` the azimuth): ``de`` (median of what the harmonic leaves, m) and the scatter about
+    it (1.4826 MAD, m); None when the fit needs a tilt beyond ``cfg.radius_pose_tilt`` (rad)
+    or an offset beyond ``cfg.radius_pose_offset`` radii (returns of a structure, or too
+    short a stretch of wall to tell a tilt from an offset)."""
+    u = xyz[0, idx]
+    phi = np.arctan2(xyz[2, idx], xyz[1, idx])
+    c, s = np.cos(phi), np.sin(phi)
+    design = np.stack([np.ones(u.size), c, s, u * c, u * s], axis=1)
+    coef = np.linalg.lstsq(design, e, rcond=None)[0]
+    if math.hypot(coef[3], coef[4]) > cfg.radius_pose_tilt:
+        return None
+    if math.hypot(coef[1], coef[2]) > cfg.radius_pose_offset * big_r:
+        return None
+    left = e - design[:, 1:] @ coef[1:]
+    de = median(left)
+    return de, float(mad_sigma(left - de))
 
 
 @njit(cache=True)

@@ -183,6 +183,12 @@ class ImprovedConfig:
             count: a tilted or offset sensor's rings straddle the rim; and only when the last
             return on the incoming wall lies at least ``rim_wall_gap`` radii before the end
             wall (a wall in view up to it shows a cap or a reducer directly).
+        radius_pose_tilt, radius_pose_offset: the wall radius is measured about the pose in
+            use; when the wall returns scatter about it more than a straight wall's noise
+            explains, the pose may be off by a little: the first harmonic of the scatter in
+            the azimuth (an offset, and a tilt growing along the axis) is fitted and left out,
+            if it needs no more tilt than ``radius_pose_tilt`` (rad) and no more offset than
+            ``radius_pose_offset`` radii (:func:`detector.axis_fit.measure_wall_radius`).
         profile_band, profile_ring_floor, profile_min_step, profile_min_lr, profile_min_rings:
             an end wall that passes for a cap (or is seen through a widening) is the far end
             of a reducer when the wall before it shows a step in its radial profile
@@ -303,6 +309,8 @@ class ImprovedConfig:
     rim_cap_share: float = 0.25
     rim_share_excess: float = 0.2
     rim_margin: float = 0.0005
+    radius_pose_tilt: float = math.radians(2.0)
+    radius_pose_offset: float = 0.05
     profile_band: float = 0.4
     profile_ring_floor: float = 0.0003
     profile_min_step: float = 0.002
@@ -428,6 +436,8 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "rim_cap_share": (float, 0.0, True, 0.5, "a number in [0, 0.5]"),
     "rim_share_excess": (float, 0.0, False, 1.0, "a number in (0, 1]"),
     "rim_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "radius_pose_tilt": (float, 0.0, True, 0.5 * math.pi, "a number in [0, pi/2] rad"),
+    "radius_pose_offset": (float, 0.0, True, 1.0, "a number in [0, 1] (radii)"),
     "profile_band": (float, 0.0, False, 1.0, "a number in (0, 1] (radii)"),
     "profile_ring_floor": (float, 0.0, False, 1.0, "a number in (0, 1] m"),
     "profile_min_step": (float, 0.0, True, 1.0, "a number in [0, 1] m"),

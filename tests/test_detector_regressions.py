@@ -33,6 +33,7 @@ CASE_KEYS = {
     "seed",
     "params",
     "misalignment",
+    "clamp_error",
     "expect",
 }
 EXPECT_KEYS = {"kind", "ways", "same_kind", "within", "diagnostics"}
@@ -142,7 +143,7 @@ def test_regression_case(case: dict[str, Any]) -> None:
         misalignment=_misalignment(case.get("misalignment")),
         **_radians(case.get("params", {})),
     )
-    check_expectations(detect(scan, d), truth, case["expect"])
+    check_expectations(detect(scan, d + case.get("clamp_error", 0.0)), truth, case["expect"])
 
 
 def test_corpus_checks_can_fail() -> None:
