@@ -164,10 +164,15 @@ def measure_wall_radius(
     """The pipe radius (m) the wall returns before ``u_max`` give under the current pose: their
     median distance from the axis, when at least 100 returns within ``max_radius_correction``
     (plus their tolerance) of the clamped radius ``big_r`` cover most of the circumference;
-    ``big_r`` otherwise, and when they scatter about it by more than their noise explains (a
-    curved wall: no straight pipe in view). Records ``wall_radius`` and the returns' scatter
-    about it (``wall_radius_rms``, 1.4826 MAD, m) in ``diag``. Corrections below
-    ``cfg.radius_dead_band`` are not made (the clamp reading is as good as the fit there)."""
+    ``big_r`` otherwise. When they scatter about it by more than a straight wall's noise
+    explains, the pose may be a little off the axis: the radius is then their median distance
+    with the pose error's first harmonic left out (:func:`_radius_under_pose_error`; recorded
+    as ``wall_radius_pose_error``), if the harmonic is a small pose error and explains the
+    scatter; ``big_r`` if not (a curved wall: no straight pipe in view). Records
+    ``wall_radius`` and the returns' scatter about it (``wall_radius_rms``, 1.4826 MAD, m;
+    with a pose error, about the axis that explains the wall, the pose the axis refinement
+    goes on to fit) in ``diag``. Corrections below ``cfg.radius_dead_band`` are not made (the
+    clamp reading is as good as the fit there)."""
     xyz = cloud.xyz_v
     idx, e_sel = _wall_returns(
         xyz[0], cloud.r_v, wall_tolerance(cloud, cfg), big_r, u_max, cfg.max_radius_correction
@@ -186,14 +191,12 @@ def measure_wall_radius(
         # about it as a first harmonic in the azimuth, growing along the axis: the radius is
         # what is left without it, when the wall is straight about the axis that explains)
         fitted = _radius_under_pose_error(xyz, idx, e_sel, big_r, cfg)
-        if fitted is None:
+        if fitted is None or fitted[1] > limit:
             return big_r
         de, spread = fitted
-        if spread > limit or not abs(de) <= cfg.max_radius_correction:
+        if not cfg.radius_dead_band <= abs(de) <= cfg.max_radius_correction:
             return big_r
         diag["wall_radius_pose_error"] = True
-        if abs(de) < cfg.radius_dead_band:
-            return big_r
     diag["wall_radius"] = big_r + de
     diag["wall_radius_rms"] = spread
     return big_r + de

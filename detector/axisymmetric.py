@@ -258,7 +258,9 @@ def wall_profile(
     a taper running past the last ring counts the step seen up to it). A step when it is at
     least ``cfg.profile_min_step``, explains the rings better than a flat wall by
     ``cfg.profile_min_lr`` (chi-square) and at least ``cfg.profile_min_rings`` rings lie
-    beyond half ``cfg.profile_min_step`` on its side."""
+    beyond half ``cfg.profile_min_step`` on its side. Records ``profile_step``,
+    ``profile_start``, ``profile_lr`` and ``profile_rings_beyond`` in ``diag`` once fitted.
+    ``start`` may lie before the first ring (a cone the sensor stands at)."""
     u_all = cloud.xyz_v[0]
     e_all = cloud.r_v - big_r
     sel = (u_all < dist - tol_u) & (np.abs(e_all) < cfg.profile_band * big_r)
@@ -288,6 +290,8 @@ def wall_profile(
     around = lengths[max(j - 2, 0) : j + 3]
     best = _profile_grid(ua, ea, w, np.arange(best[1] - 0.01, best[1] + 0.0101, 0.002), around)
     chi, start, jj, e0, step = best
+    if not math.isfinite(chi):  # (no start and length separates a step from the wall)
+        return None
     length = float(around[jj])
     # (the step the rings show: a taper running past the last ring is seen only so far)
     s = step * min(1.0, max(u_hi - start, 0.0) / length)
@@ -336,7 +340,8 @@ def _wall_profile_reducer(
     """A reducer whose far end wall (``dist`` m ahead, flat to within ``tol_u`` m) is seen
     past it, found by the wall's radial profile (:func:`wall_profile`): the structure looked
     like a cap of the incoming pipe (radius ``big_r``, m), as the end wall beyond outnumbers
-    the returns off the wall. Its confidence is ``conf`` halved; None without a step."""
+    the returns off the wall. Its confidence is ``conf`` halved; None without a step. Records
+    ``end_wall_profile`` (``wider`` or ``narrower``) and ``reducer_r2`` (m)."""
     prof = wall_profile(cloud, big_r, dist, tol_u, cfg, diag)
     if prof is None:
         return None

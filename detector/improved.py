@@ -166,6 +166,7 @@ from detector.pipe_cloud import (
     classify_counted,
     even_indices,
     fit_confidence,
+    median_rise,
     partial_percentile,
     prepare_cloud,
     significant_regions,
@@ -1076,6 +1077,8 @@ def _detect_in_pipe_frame(
         if uniform >= 0.3 and np.count_nonzero(inside_near) < 0.3 * np.count_nonzero(beyond_k):
             return detect_axisymmetric(cloud, big_r, inside_near, beyond_k, wall, tol, cfg, diag)
         if _shallow_widening(cloud, big_r, lobes, inside_k, cfg, diag):
+            # (with every inside return: the wider pipe's end wall, far down it, is what
+            # takes the structure to the end wall's test and the wall's profile there)
             return detect_axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
         return detect_branches(cloud, big_r, lobes, keep, wall, tol, cfg, diag)
     det = detect_axisymmetric(cloud, big_r, inside_k, beyond_k, wall, tol, cfg, diag)
@@ -1122,7 +1125,9 @@ def _shallow_widening(
     wall the ``inside`` returns show, if any) steps out all round. A branch opening moves
     no ring's median by millimetres, and its returns reach deeper than such a step: the
     lobes' 90th percentile beyond the wall must stay within ``cfg.profile_min_step`` of the
-    step."""
+    step. A cheap look comes first: past the lobes' start, the median offset of the returns
+    within ``cfg.profile_band`` radii of the wall must lie out by half ``cfg.profile_min_step``
+    from the one before it. Records ``lobes_shallow_widening`` when the profile was fitted."""
     u_inside = cloud.values(inside, cloud.xyz_v[0])
     dist = float(partial_percentile(u_inside, 5.0)) if u_inside.size else math.inf
     mask = np.zeros_like(lobes[0].mask)
@@ -1132,7 +1137,7 @@ def _shallow_widening(
     # (first a cheap look: past the lobes' start the wall's returns, lobes and all, must lie
     # out by half a step or more, where the run goes on past a branch's opening)
     u_lobes = float(partial_percentile(p[:, 0], 5.0))
-    n_past, rise = _median_rise(
+    n_past, rise = median_rise(
         cloud.xyz_v[0], cloud.r_v, big_r, cfg.profile_band * big_r, u_lobes, dist
     )
     if n_past < 4 * cfg.cone_min_returns or rise < 0.5 * cfg.profile_min_step:
@@ -1144,30 +1149,6 @@ def _shallow_widening(
     shallow = depth <= prof.offset + prof.step + cfg.profile_min_step
     diag["lobes_shallow_widening"] = shallow
     return shallow
-
-
-@njit(cache=True)
-def _median_rise(u, r, big_r, band, u_from, u_to):
-    """Of the returns within ``band`` (m) of the wall radius ``big_r`` (m; ``u`` along the
-    axis, ``r`` from it): how many lie in ``[u_from, u_to)`` and how far their median offset
-    from ``big_r`` lies out from that of those before ``u_from`` (m; 0 when either is empty)."""
-    past = np.empty(u.size)
-    before = np.empty(u.size)
-    n_p = 0
-    n_b = 0
-    for i in range(u.size):
-        e = r[i] - big_r
-        if abs(e) >= band:
-            continue
-        if u[i] < u_from:
-            before[n_b] = e
-            n_b += 1
-        elif u[i] < u_to:
-            past[n_p] = e
-            n_p += 1
-    if n_p == 0 or n_b == 0:
-        return n_p, 0.0
-    return n_p, np.median(past[:n_p]) - np.median(before[:n_b])
 
 
 def _across_sides_open(cloud: PipeCloud, big_r: float, alt: Detection, cfg: ImprovedConfig) -> bool:

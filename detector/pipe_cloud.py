@@ -881,33 +881,35 @@ def _sorted_median(s):
 
 
 @njit(cache=True)
-def _median_in_place(x, lo, hi):
-    """The median of ``x[lo:hi]`` (as ``np.median`` gives it; a selection, not a sort)."""
-    return np.median(x[lo:hi])
-
-
-@njit(cache=True)
-def column_medians(cols, a, b, k):
-    """Per column of the scan grid (``0 <= cols < k``) that holds values, in increasing
-    order: how many it holds and the medians of its ``a`` and of its ``b`` (as ``np.median``
-    gives them). Returns ``(counts, a50, b50)``."""
+def _by_column(cols, k):
+    """The values' order grouped by column of the scan grid (``0 <= cols < k``; no bounds
+    check), stable within a column: ``(count per column, start of each column's group in the
+    order, order)``."""
     count = np.zeros(k, dtype=np.int64)
     for i in range(cols.size):
         count[cols[i]] += 1
     start = np.zeros(k + 1, dtype=np.int64)
-    m = 0
     for c in range(k):
         start[c + 1] = start[c] + count[c]
-        if count[c] > 0:
-            m += 1
     fill = start[:k].copy()
-    a_by = np.empty(cols.size)
-    b_by = np.empty(cols.size)
+    order = np.empty(cols.size, dtype=np.int64)
     for i in range(cols.size):
         c = cols[i]
-        a_by[fill[c]] = a[i]
-        b_by[fill[c]] = b[i]
+        order[fill[c]] = i
         fill[c] += 1
+    return count, start, order
+
+
+@njit(cache=True)
+def column_medians(cols, a, b, k):
+    """Per column of the scan grid (``0 <= cols < k``, not checked) that holds values, in
+    increasing order: how many it holds and the medians of its ``a`` and of its ``b`` (as
+    ``np.median`` gives them: a selection per column, no sort). Returns
+    ``(counts, a50, b50)``."""
+    count, start, order = _by_column(cols, k)
+    a_by = a[order]
+    b_by = b[order]
+    m = np.count_nonzero(count)
     counts = np.empty(m, dtype=np.int64)
     a50 = np.empty(m)
     b50 = np.empty(m)
@@ -916,35 +918,22 @@ def column_medians(cols, a, b, k):
         if count[c] == 0:
             continue
         counts[j] = count[c]
-        a50[j] = _median_in_place(a_by, start[c], start[c + 1])
-        b50[j] = _median_in_place(b_by, start[c], start[c + 1])
+        a50[j] = np.median(a_by[start[c] : start[c + 1]])
+        b50[j] = np.median(b_by[start[c] : start[c + 1]])
         j += 1
     return counts, a50, b50
 
 
 @njit(cache=True)
 def column_stats(cols, r, sigma, k, g):
-    """Per column of the scan grid (``0 <= cols < k``) that holds values, in increasing
-    order: the share of the grid's ``g`` rows it holds, the 10th, 50th and 90th percentiles
-    of its ``r`` and the median of its ``sigma`` (as ``np.percentile`` and ``np.median`` give
-    them). Returns ``(shares, r10, r50, r90, sigma50)``."""
-    count = np.zeros(k, dtype=np.int64)
-    for i in range(cols.size):
-        count[cols[i]] += 1
-    start = np.zeros(k + 1, dtype=np.int64)
-    m = 0
-    for c in range(k):
-        start[c + 1] = start[c] + count[c]
-        if count[c] > 0:
-            m += 1
-    fill = start[:k].copy()
-    r_by = np.empty(cols.size)
-    s_by = np.empty(cols.size)
-    for i in range(cols.size):
-        c = cols[i]
-        r_by[fill[c]] = r[i]
-        s_by[fill[c]] = sigma[i]
-        fill[c] += 1
+    """Per column of the scan grid (``0 <= cols < k``, not checked) that holds values, in
+    increasing order: the share of the grid's ``g`` rows it holds, the 10th, 50th and 90th
+    percentiles of its ``r`` and the median of its ``sigma`` (as ``np.percentile`` and
+    ``np.median`` give them). Returns ``(shares, r10, r50, r90, sigma50)``."""
+    count, start, order = _by_column(cols, k)
+    r_by = r[order]
+    s_by = sigma[order]
+    m = np.count_nonzero(count)
     shares = np.empty(m)
     r10 = np.empty(m)
     r50 = np.empty(m)
@@ -964,3 +953,28 @@ def column_stats(cols, r, sigma, k, g):
         sig50[j] = _sorted_median(ss)
         j += 1
     return shares, r10, r50, r90, sig50
+
+
+@njit(cache=True)
+def median_rise(u, r, big_r, band, u_from, u_to):
+    """Of the returns within ``band`` (m) of the wall radius ``big_r`` (m; ``u`` along the
+    axis, ``r`` from it, m): how many lie in ``[u_from, u_to)`` and how far the median offset
+    from ``big_r`` of those lies out from that of the ones before ``u_from`` (m; 0 when either
+    group is empty). Returns ``(count, rise)``."""
+    past = np.empty(u.size)
+    before = np.empty(u.size)
+    n_p = 0
+    n_b = 0
+    for i in range(u.size):
+        e = r[i] - big_r
+        if abs(e) >= band:
+            continue
+        if u[i] < u_from:
+            before[n_b] = e
+            n_b += 1
+        elif u[i] < u_to:
+            past[n_p] = e
+            n_p += 1
+    if n_p == 0 or n_b == 0:
+        return n_p, 0.0
+    return n_p, np.median(past[:n_p]) - np.median(before[:n_b])

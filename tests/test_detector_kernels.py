@@ -6,6 +6,7 @@ and the small linear solve against numpy's."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,8 +15,9 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from detector import fit_kernels as fk
-from detector.axis_fit import _axis_returns, _off_wall_entries
+from detector.axis_fit import _axis_returns, _off_wall_entries, _radius_under_pose_error
 from detector.grid import build_grid, label_regions
+from detector.improved_config import DEFAULT_CONFIG
 from detector.pipe_cloud import (
     _crop,
     _gather_cropped,
@@ -30,6 +32,7 @@ from detector.pipe_cloud import (
     column_medians,
     column_stats,
     even_indices,
+    median_rise,
     partial_percentile,
     partial_percentiles,
     region_sizes,
@@ -587,6 +590,46 @@ def test_column_medians_are_numpys(seed: int, n: int, k: int, decimals: int) -> 
     np.testing.assert_array_equal(counts, [np.count_nonzero(cols == c) for c in present])
     np.testing.assert_array_equal(a50, [np.median(a[cols == c]) for c in present])
     np.testing.assert_array_equal(b50, [np.median(b[cols == c]) for c in present])
+
+
+@settings(max_examples=80, deadline=None)
+@given(seeds, st.integers(0, 400), st.floats(-0.1, 0.6), st.floats(0.0, 0.8))
+def test_median_rise_is_numpys(seed: int, n: int, u_from: float, extent: float) -> None:
+    rng = np.random.default_rng(seed)
+    u = rng.random(n) * 0.8
+    r = 0.05 + rng.normal(0.0, 0.004, n)
+    band = 0.006
+    u_to = u_from + extent
+    count, rise = median_rise(u, r, 0.05, band, u_from, u_to)
+    e = r - 0.05
+    near = np.abs(e) < band
+    past = near & (u >= u_from) & (u < u_to)
+    before = near & (u < u_from)
+    assert count == np.count_nonzero(past)
+    want = np.median(e[past]) - np.median(e[before]) if past.any() and before.any() else 0.0
+    assert rise == pytest.approx(want, abs=1e-15)
+
+
+@pytest.mark.parametrize("tilt", [0.0, 0.003, 0.006])
+def test_radius_under_pose_error_leaves_out_a_small_tilt_and_offset(tilt: float) -> None:
+    # returns on a 50 mm wall about an axis offset by 0.4 mm and tilted by ``tilt`` (rad)
+    # from the pose they are measured under, the pipe 0.6 mm wider than the clamp's reading
+    rng = np.random.default_rng(1)
+    u = rng.uniform(0.08, 0.4, 3000)
+    phi = rng.uniform(-np.pi, np.pi, 3000)
+    centre = np.stack([0.0004 + tilt * u, -0.0002 + 0.5 * tilt * u])
+    yz = centre + 0.0506 * np.stack([np.cos(phi), np.sin(phi)])
+    xyz = np.vstack([u, yz])
+    e = np.hypot(yz[0], yz[1]) - 0.05
+    fitted = _radius_under_pose_error(xyz, np.arange(u.size), e, 0.05, DEFAULT_CONFIG)
+    assert fitted is not None
+    de, spread = fitted
+    # (to first order: the offset's square over the diameter, 0.05 mm at 2.4 mm, is left)
+    assert de == pytest.approx(0.0006, abs=1e-4)
+    assert spread < 1e-4
+    # a tilt beyond radius_pose_tilt is no small pose error
+    steep = replace(DEFAULT_CONFIG, radius_pose_tilt=0.5 * max(tilt, 1e-4))
+    assert (_radius_under_pose_error(xyz, np.arange(u.size), e, 0.05, steep) is None) == (tilt > 0)
 
 
 @settings(max_examples=60, deadline=None)
