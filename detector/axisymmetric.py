@@ -285,10 +285,12 @@ def wall_profile(
     lengths = np.geomspace(0.005, max(u_hi - u_lo, 0.006), 25)
     # a coarse grid (starts every centimetre, every other length), then around its best
     # (starts every 2 mm, every length)
-    best = _profile_grid(ua, ea, w, np.arange(u_lo - 0.02, u_hi, 0.01), lengths[::2])
+    n_min = cfg.profile_min_rings
+    best = _profile_grid(ua, ea, w, np.arange(u_lo - 0.02, u_hi, 0.01), lengths[::2], n_min)
     j = 2 * best[2]
     around = lengths[max(j - 2, 0) : j + 3]
-    best = _profile_grid(ua, ea, w, np.arange(best[1] - 0.01, best[1] + 0.0101, 0.002), around)
+    starts = np.arange(best[1] - 0.01, best[1] + 0.0101, 0.002)
+    best = _profile_grid(ua, ea, w, starts, around, n_min)
     chi, start, jj, e0, step = best
     if not math.isfinite(chi):  # (no start and length separates a step from the wall)
         return None
@@ -310,10 +312,13 @@ def _profile_grid(
     w: NDArray[np.float64],
     starts: NDArray[np.float64],
     lengths: NDArray[np.float64],
+    min_past: int,
 ) -> tuple[float, float, int, float, float]:
     """The best of the profiles ``e0 + s clip((u - L) / T, 0, 1)`` over the grid of starts
     ``L`` and lengths ``T`` (m) for the rings at ``ua`` (m) with offsets ``ea`` (m) and weights
-    ``w``: ``(chi-square, L, index of T, e0, s)``; ``e0`` and ``s`` by weighted least squares."""
+    ``w``: ``(chi-square, L, index of T, e0, s)``; ``e0`` and ``s`` by weighted least squares;
+    only starts with at least ``min_past`` rings past them count (chi-square inf when none
+    does)."""
     sw, se, see = float(np.sum(w)), float(np.sum(w * ea)), float(np.sum(w * ea * ea))
     bb = np.clip((ua[None, None, :] - starts[:, None, None]) / lengths[None, :, None], 0.0, 1.0)
     wb = w * bb
@@ -323,7 +328,9 @@ def _profile_grid(
     det = np.where(ok, det, 1.0)
     off = (sbb * se - sb * sbe) / det
     step = (sw * sbe - sb * se) / det
-    chi = np.where(ok, see - off * se - step * sbe, np.inf)
+    # (a step needs ``min_past`` rings past its start: fewer are fitted exactly by any step)
+    past = np.count_nonzero(ua[None, :] > starts[:, None], axis=1) >= min_past
+    chi = np.where(ok & past[:, None], see - off * se - step * sbe, np.inf)
     i, j = np.unravel_index(int(np.argmin(chi)), chi.shape)
     return float(chi[i, j]), float(starts[i]), int(j), float(off[i, j]), float(step[i, j])
 
