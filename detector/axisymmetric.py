@@ -224,9 +224,8 @@ def _end_wall_seen_through(
         diag["end_wall_cone_hinge"] = hinge is not None
         if hinge is not None:
             start = hinge
-    diag.update(end_wall_seen_through="wider" if wider else "narrower", reducer_r2=r2)
-    opt = StructureOption("reducer", max(start, 0.0), 2.0 * r2, 0.0, 0.0, 0.5 * conf)
-    return Detection("reducer", [opt], 0.5 * conf, diag)
+    diag["end_wall_seen_through"] = "wider" if wider else "narrower"
+    return _reducer_beyond(start, r2, conf, diag)
 
 
 class WallProfile(NamedTuple):
@@ -275,7 +274,7 @@ def wall_profile(
     if ua.size < cfg.profile_min_rings + 2 or float(np.ptp(ea)) < cfg.profile_min_step:
         return None
     noise = cloud.sigma_percentile(50.0)
-    sig = np.maximum(1.25 * max(noise, 1e-5) / np.sqrt(na), cfg.profile_ring_floor)
+    sig = np.maximum(_median_scatter(noise, na), cfg.profile_ring_floor)
     w = 1.0 / np.square(sig)
     # (the flat wall, at its own radius: the wall radius measured near the sensor may take
     # in the start of a cone the sensor stands at)
@@ -352,10 +351,23 @@ def _wall_profile_reducer(
     prof = wall_profile(cloud, big_r, dist, tol_u, cfg, diag)
     if prof is None:
         return None
-    r2 = big_r + prof.offset + prof.step
-    diag.update(end_wall_profile="wider" if prof.step > 0.0 else "narrower", reducer_r2=r2)
-    opt = StructureOption("reducer", max(prof.start, 0.0), 2.0 * r2, 0.0, 0.0, 0.5 * conf)
+    diag["end_wall_profile"] = "wider" if prof.step > 0.0 else "narrower"
+    return _reducer_beyond(prof.start, big_r + prof.offset + prof.step, conf, diag)
+
+
+def _reducer_beyond(start: float, r2: float, conf: float, diag: dict[str, Any]) -> Detection:
+    """A reducer starting ``start`` m ahead (0 if behind) to radius ``r2`` (m, recorded as
+    ``reducer_r2``), found past an end wall that passed for a cap: the end wall's confidence
+    ``conf`` halved."""
+    diag["reducer_r2"] = r2
+    opt = StructureOption("reducer", max(start, 0.0), 2.0 * r2, 0.0, 0.0, 0.5 * conf)
     return Detection("reducer", [opt], 0.5 * conf, diag)
+
+
+def _median_scatter(noise: float, n: NDArray[np.float64]) -> NDArray[np.float64]:
+    """How much the median of ``n`` returns of radial noise ``noise`` (m) scatters, m: about
+    1.25 noise / sqrt(n)."""
+    return 1.25 * max(noise, 1e-5) / np.sqrt(n)
 
 
 def _wider_rim(
@@ -713,8 +725,7 @@ def _ring_hinge_start(
     ua = np.array([float(np.median(p[0, sel])) for sel in rings])
     ea = np.array([float(np.median(ew[sel])) for sel in rings])
     na = np.array([float(np.count_nonzero(sel)) for sel in rings])
-    # (the median of n returns scatters by about 1.25 noise / sqrt(n))
-    sig_b = 1.25 * max(noise, 1e-5) / np.sqrt(na)
+    sig_b = _median_scatter(noise, na)
     wts = 1.0 / np.square(sig_b)
     # the hinge's kink on a 1 mm grid: for each, the weighted least-squares slope of the rings
     # past it, and the misfit (a kink no ring rises past, or that falls, is no hinge)

@@ -1133,16 +1133,15 @@ def _shallow_widening(
     mask = np.zeros_like(lobes[0].mask)
     for lobe in lobes:
         mask |= lobe.mask
-    p = cloud.points(mask)
     # (first a cheap look: past the lobes' start the wall's returns, lobes and all, must lie
     # out by half a step or more, where the run goes on past a branch's opening)
-    u_lobes = float(partial_percentile(p[:, 0], 5.0))
+    u_lobes = float(partial_percentile(cloud.values(mask, cloud.xyz_v[0]), 5.0))
     n_past, rise = median_rise(
         cloud.xyz_v[0], cloud.r_v, big_r, cfg.profile_band * big_r, u_lobes, dist
     )
     if n_past < 4 * cfg.cone_min_returns or rise < 0.5 * cfg.profile_min_step:
         return False
-    depth = float(partial_percentile(np.hypot(p[:, 1], p[:, 2]) - big_r, 90.0))
+    depth = float(partial_percentile(cloud.values(mask, cloud.r_v), 90.0)) - big_r
     prof = wall_profile(cloud, big_r, dist, 0.0, cfg, {})
     if prof is None or prof.step <= 0.0:
         return False

@@ -309,6 +309,8 @@ class ImprovedConfig:
     rim_cap_share: float = 0.25
     rim_share_excess: float = 0.2
     rim_margin: float = 0.0005
+    rim_ring_spread: float = 0.5
+    rim_wall_gap: float = 1.0
     radius_pose_tilt: float = math.radians(2.0)
     radius_pose_offset: float = 0.05
     profile_band: float = 0.4
@@ -316,8 +318,6 @@ class ImprovedConfig:
     profile_min_step: float = 0.002
     profile_min_lr: float = 25.0
     profile_min_rings: int = 3
-    rim_ring_spread: float = 0.5
-    rim_wall_gap: float = 1.0
     hole_min_step: float = 0.00035
     hole_noise_k: float = 3.0
     hole_wall_band: float = 0.002
@@ -436,6 +436,8 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "rim_cap_share": (float, 0.0, True, 0.5, "a number in [0, 0.5]"),
     "rim_share_excess": (float, 0.0, False, 1.0, "a number in (0, 1]"),
     "rim_margin": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
+    "rim_ring_spread": (float, 0.0, True, 100.0, "a number in [0, 100] (beam spacings)"),
+    "rim_wall_gap": (float, 0.0, True, 1000.0, "a number in [0, 1000] (radii)"),
     "radius_pose_tilt": (float, 0.0, True, 0.5 * math.pi, "a number in [0, pi/2] rad"),
     "radius_pose_offset": (float, 0.0, True, 1.0, "a number in [0, 1] (radii)"),
     "profile_band": (float, 0.0, False, 1.0, "a number in (0, 1] (radii)"),
@@ -443,8 +445,6 @@ _ALLOWED: dict[str, tuple[type, float, bool, float, str]] = {
     "profile_min_step": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
     "profile_min_lr": (float, 0.0, True, math.inf, "a finite number >= 0"),
     "profile_min_rings": (int, 1, True, math.inf, "an integer >= 1"),
-    "rim_ring_spread": (float, 0.0, True, 100.0, "a number in [0, 100] (beam spacings)"),
-    "rim_wall_gap": (float, 0.0, True, 1000.0, "a number in [0, 1000] (radii)"),
     "hole_min_step": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
     "hole_noise_k": (float, 0.0, True, 100.0, "a number in [0, 100]"),
     "hole_wall_band": (float, 0.0, True, 1.0, "a number in [0, 1] m"),
